@@ -1,0 +1,241 @@
+"""The driver: run any integrator on a model, on NumPy step by step or as a compiled JAX loop."""
+
+from __future__ import annotations
+
+import dataclasses
+import time
+
+import numpy as np
+
+from .base import Solver, Stepper
+
+#: default step budget of one run; a larger run must ask for it explicitly
+MAX_STEPS = 10_000_000
+#: a state this many times larger than the initial one (or than 1) has diverged
+DIVERGENCE_FACTOR = 1e12
+#: relative slack when dividing the interval by dt, so 0.2 / 0.2 is one step, not zero
+STEP_COUNT_SLACK = 1e-9
+
+
+class DivergenceError(ArithmeticError):
+    """The state became non-finite or absurdly large.
+
+    Attributes name what a study needs to record "unstable": ``integrator``, ``dt``,
+    ``step`` (1-based index of the first bad step) and ``t`` (its end time).
+    """
+
+    def __init__(self, integrator: str, dt: float, step: int, t: float):
+        self.integrator, self.dt, self.step, self.t = integrator, dt, step, t
+        super().__init__(f"integrator '{integrator}' diverged with dt = {dt:g} s: the state is "
+                         f"non-finite or beyond the divergence limit at step {step} (t = {t:g} s)")
+
+
+@dataclasses.dataclass(frozen=True)
+class Trajectory:
+    """Saved states of a run.
+
+    Attributes
+    ----------
+    t : ndarray, shape (K,)
+    y : ndarray, shape (K, 2, N, 3)
+        Positions ``y[:, 0]`` and velocities ``y[:, 1]`` at the saved times.
+    steps : int
+        Fixed steps taken (0 for a solver).
+    wall_time : float
+        Seconds spent integrating (for JAX: compilation excluded, see ``compile_time``).
+    """
+
+    t: np.ndarray
+    y: np.ndarray
+    integrator: str
+    dt: float
+    steps: int
+    backend: str
+    wall_time: float
+    compile_time: float = 0.0
+
+    @property
+    def positions(self) -> np.ndarray:
+        return self.y[:, 0]
+
+    @property
+    def velocities(self) -> np.ndarray:
+        return self.y[:, 1]
+
+
+def step_count(t_start: float, t_end: float, dt: float) -> int:
+    """Whole fixed steps of ``dt`` in [t_start, t_end]; the run ends at t_start + n dt."""
+    return int(np.floor((t_end - t_start) / dt * (1 + STEP_COUNT_SLACK)))
+
+
+def saved_steps(n: int, save_every: int) -> np.ndarray:
+    """Indices of the saved states: every ``save_every``-th step, and always the last."""
+    idx = np.arange(0, n + 1, save_every)
+    return idx if idx[-1] == n else np.append(idx, n)
+
+
+def divergence_limit(y0, dtype) -> float:
+    """The largest |component| a sane state reaches: DIVERGENCE_FACTOR x max(1, |y0|).
+
+    No game-physics scene legitimately grows a trillion-fold; an unstable integrator
+    does so within a few hundred steps. The limit never exceeds sqrt(max float), beyond
+    which squaring (energies) overflows.
+    """
+    scale = max(1.0, float(np.max(np.abs(y0))))
+    return min(DIVERGENCE_FACTOR * scale, float(np.sqrt(np.finfo(dtype).max)))
+
+
+def simulate(model, integrator, y0, t_start: float, t_end: float, dt: float, *,
+             backend: str = "numpy", dtype=None, save_every: int = 1, max_steps: int = MAX_STEPS,
+             progress: bool = False) -> Trajectory:
+    """Integrate ``model`` from ``y0`` over [t_start, t_end] with fixed steps of ``dt``.
+
+    Parameters
+    ----------
+    model : physics.Model
+    integrator : str or Integrator
+        A registry name or an integrator object.
+    y0 : array, shape (2, N, 3)
+    backend : {"numpy", "jax"}
+        ``numpy`` steps in Python (readable, for teaching); ``jax`` compiles the whole
+        loop (jit + lax.scan). Solvers use the backend they need.
+    dtype : float64 (default: the model's) or float32
+    save_every : int
+        Keep every ``save_every``-th state (the last state is always kept).
+    max_steps : int
+        Refuse runs longer than this (a guard against typos such as dt = 1e-9).
+    progress : bool
+        Show a progress bar (NumPy steppers).
+
+    Raises
+    ------
+    DivergenceError
+        When the state becomes non-finite or absurdly large.
+    """
+    from . import get_integrator
+
+    integrator = get_integrator(integrator)
+    if backend not in ("numpy", "jax"):
+        raise ValueError(f"backend must be 'numpy' or 'jax', got {backend!r}")
+    n = step_count(t_start, t_end, dt)
+    if n > max_steps:
+        raise ValueError(f"{n} steps of dt = {dt:g} s exceed the limit of {max_steps} "
+                         f"(raise it with max_steps / --max-steps)")
+    if n < 1:
+        raise ValueError(f"t_end - t_start = {t_end - t_start:g} s is shorter than one step dt = {dt:g} s")
+    dtype = np.dtype(dtype or model.dtype)
+    saves = saved_steps(n, save_every)
+    ts = t_start + saves * dt
+    limit = divergence_limit(y0, dtype)
+
+    if isinstance(integrator, Solver):
+        backend = integrator.backend
+        model = _on_backend(model, backend, dtype)
+        start = time.perf_counter()
+        ys = np.asarray(integrator.solve(model, ts, np.asarray(y0, dtype=dtype)), dtype=dtype)
+        wall = time.perf_counter() - start
+        bad = np.flatnonzero(~np.all(np.abs(ys) <= limit, axis=(1, 2, 3)))
+        if bad.size:
+            raise DivergenceError(integrator.name, dt, int(saves[bad[0]]), float(ts[bad[0]]))
+        return Trajectory(ts, ys, integrator.name, dt, 0, backend, wall)
+
+    assert isinstance(integrator, Stepper)
+    model = _on_backend(model, backend, dtype)
+    run = _run_numpy if backend == "numpy" else _run_jax
+    return run(model, integrator, np.asarray(y0, dtype=dtype), t_start, dt, n, save_every,
+               saves, ts, limit, progress)
+
+
+def _on_backend(model, backend, dtype):
+    if backend == "jax":
+        import jax.numpy as jnp
+
+        xp = jnp
+    else:
+        xp = np
+    if model.xp is xp and model.dtype == dtype:
+        return model
+    return model.cast(xp, dtype)
+
+
+def _run_numpy(model, integrator, y, t_start, dt, n, save_every, saves, ts, limit, progress):
+    out = np.empty((len(saves),) + y.shape, dtype=y.dtype)
+    out[0] = y
+    saved = 1
+    bar = _progress_bar(n, progress)
+    start = time.perf_counter()
+    carry = integrator.init(model, t_start, y)
+    for k in range(n):
+        y, carry = integrator.step(model, t_start + k * dt, y, dt, carry)
+        # one reduction: NaN fails the comparison, so this also catches non-finite states
+        if not np.abs(y).max() <= limit:
+            raise DivergenceError(integrator.name, dt, k + 1, t_start + (k + 1) * dt)
+        if saved < len(saves) and saves[saved] == k + 1:
+            out[saved] = y
+            saved += 1
+        if bar is not None and (k + 1) % 1000 == 0:
+            bar.update(1000)
+    wall = time.perf_counter() - start
+    if bar is not None:
+        bar.close()
+    return Trajectory(ts, out, integrator.name, dt, n, "numpy", wall)
+
+
+def _progress_bar(n, enabled):
+    if not enabled or n < 100_000:
+        return None
+    from tqdm import tqdm
+
+    return tqdm(total=n, unit="step", unit_scale=True, leave=False)
+
+
+def compile_run(model, integrator, save_every: int, chunks: int):
+    """A jitted ``run(y0, t_start, dt, n) -> (saved states, first bad step)``.
+
+    The loop is ``chunks`` scan iterations of up to ``save_every`` fixed steps each
+    (fori_loop), saving the state after every chunk, so memory grows with the number of
+    saved states only. ``first bad step`` is the 1-based index of the first non-finite or
+    diverged state, or -1.
+    """
+    import jax
+    import jax.numpy as jnp
+    from jax import lax
+
+    def run(y0, t_start, dt, n, limit):
+        def one_step(k, state):
+            y, carry, bad = state
+            y, carry = integrator.step(model, t_start + k * dt, y, dt, carry)
+            ok = jnp.all(jnp.abs(y) <= limit)
+            return y, carry, jnp.where((bad < 0) & ~ok, k + 1, bad)
+
+        def chunk(state, c):
+            first = c * save_every
+            state = lax.fori_loop(first, jnp.minimum(first + save_every, n), one_step, state)
+            return state, state[0]
+
+        state = (y0, integrator.init(model, t_start, y0), jnp.asarray(-1))
+        (_, _, bad), ys = lax.scan(chunk, state, jnp.arange(chunks))
+        return ys, bad
+
+    return jax.jit(run)
+
+
+def _run_jax(model, integrator, y, t_start, dt, n, save_every, saves, ts, limit, progress):
+    import jax.numpy as jnp
+
+    chunks = len(saves) - 1
+    run = compile_run(model, integrator, save_every, chunks)
+    args = (jnp.asarray(y), jnp.asarray(t_start, y.dtype), jnp.asarray(dt, y.dtype), n,
+            jnp.asarray(limit, y.dtype))
+    start = time.perf_counter()
+    compiled = run.lower(*args).compile()
+    compile_time = time.perf_counter() - start
+    start = time.perf_counter()
+    ys, bad = compiled(*args)
+    ys.block_until_ready()
+    wall = time.perf_counter() - start
+    bad = int(bad)
+    if bad >= 0:
+        raise DivergenceError(integrator.name, dt, bad, t_start + bad * dt)
+    out = np.concatenate([y[None], np.asarray(ys)])
+    return Trajectory(ts, out, integrator.name, dt, n, "jax", wall, compile_time)

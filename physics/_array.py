@@ -1,0 +1,64 @@
+"""Small array helpers that let one force formula run on NumPy and on JAX.
+
+Every model function takes the array namespace ``xp`` (``numpy`` or ``jax.numpy``)
+explicitly; the only operations that differ between the two are scatter-adds, which
+NumPy does with ``bincount``/``add.at`` and JAX with ``.at[].add``.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+
+def is_numpy(xp) -> bool:
+    return xp is np
+
+
+def scatter_pairs(xp, n: int, i, j, f):
+    """Net force on ``n`` bodies from pair forces: ``+f`` on body ``i``, ``-f`` on body ``j``.
+
+    Parameters
+    ----------
+    i, j : int array, shape (P,)
+    f : array, shape (P, 3)
+        Force on the first body of each pair (Newton's third law gives the second).
+    """
+    if is_numpy(xp):
+        # bincount is the fastest deterministic scatter-add NumPy has.
+        out = np.empty((n, 3), dtype=f.dtype)
+        for c in range(3):
+            out[:, c] = np.bincount(i, f[:, c], n) - np.bincount(j, f[:, c], n)
+        return out
+    return xp.zeros((n, 3), dtype=f.dtype).at[i].add(f).at[j].add(-f)
+
+
+def scatter_pair_blocks(xp, n: int, i, j, block):
+    """Jacobian (N, 3, N, 3) of pair forces whose block ``d f_i / d x_j`` is ``block``.
+
+    For a pair force ``f_i = f(x_j - x_i)``, ``f_j = -f_i``: the four 3x3 blocks are
+    ``(i, j): +B``, ``(i, i): -B``, ``(j, i): +B``, ``(j, j): -B``.
+    """
+    rows = xp.concatenate([i, i, j, j])
+    cols = xp.concatenate([j, i, i, j])
+    blocks = xp.concatenate([block, -block, block, -block])
+    if is_numpy(xp):
+        out = np.zeros((n, n, 3, 3), dtype=block.dtype)
+        np.add.at(out, (rows, cols), blocks)
+    else:
+        out = xp.zeros((n, n, 3, 3), dtype=block.dtype).at[rows, cols].add(blocks)
+    return xp.transpose(out, (0, 2, 1, 3))
+
+
+def safe_unit(xp, x, length):
+    """``x / length`` row-wise, and the zero vector where ``length`` is zero.
+
+    A spring of zero length or a body at rest has no direction; the force models
+    choose zero force there rather than a NaN.
+    """
+    positive = length > 0
+    return xp.where(positive[:, None], x / xp.where(positive, length, 1)[:, None], 0)
+
+
+def norm(xp, x):
+    """Row-wise Euclidean length of an (M, 3) array."""
+    return xp.sqrt(xp.sum(x * x, axis=-1))

@@ -1,0 +1,63 @@
+"""Viscous dampers (dashpots) acting along the axis between two bodies."""
+
+from __future__ import annotations
+
+import dataclasses
+from typing import ClassVar
+
+import numpy as np
+
+from ._array import norm, safe_unit, scatter_pair_blocks, scatter_pairs
+from .force import Force
+
+
+@dataclasses.dataclass(frozen=True)
+class Dampers(Force):
+    """Dampers: F = c ((V_2 - V_1) . d) d on the first body, -F on the second.
+
+    Only the relative velocity along the axis ``d`` (unit vector from body 1 to body 2)
+    is resisted: if body 2 moves away, body 1 is drawn after it. Dissipative, so no
+    potential. Coincident bodies have no axis and feel no damping force.
+
+    Parameters
+    ----------
+    i, j : int ndarray, shape (P,)
+    damping : ndarray, shape (P,)
+        c, N s/m.
+    """
+
+    i: np.ndarray
+    j: np.ndarray
+    damping: np.ndarray
+
+    name: ClassVar[str] = "dampers"
+
+    def _terms(self, xp, q, v):
+        delta = q[self.j] - q[self.i]
+        length = norm(xp, delta)
+        d = safe_unit(xp, delta, length)
+        u = v[self.j] - v[self.i]
+        return d, length, u
+
+    def force(self, xp, q, v, m):
+        d, _, u = self._terms(xp, q, v)
+        f = (self.damping * xp.sum(u * d, axis=1))[:, None] * d
+        return scatter_pairs(xp, q.shape[0], self.i, self.j, f)
+
+    def jacobian(self, xp, q, v, m):
+        d, length, u = self._terms(xp, q, v)
+        c = self.damping[:, None, None]
+        ddT = d[:, :, None] * d[:, None, :]
+        dv_block = c * ddT
+        # d/d delta of (d . u) d, with d d / d delta = P / l and P = I - d d^T:
+        # [ (d . u) P + d u^T P ] / l
+        eye = xp.eye(3, dtype=q.dtype)
+        proj = eye - ddT
+        du = xp.sum(d * u, axis=1)[:, None, None]
+        inv_l = xp.where(length > 0, 1 / xp.where(length > 0, length, 1), 0)[:, None, None]
+        dq_block = c * inv_l * (du * proj + d[:, :, None] * (u[:, None, :] @ proj))
+        n = q.shape[0]
+        return (
+            scatter_pair_blocks(xp, n, self.i, self.j, dq_block),
+            scatter_pair_blocks(xp, n, self.i, self.j, dv_block),
+        )

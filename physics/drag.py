@@ -1,0 +1,63 @@
+"""Aerodynamic (quadratic) drag."""
+
+from __future__ import annotations
+
+import dataclasses
+from typing import ClassVar
+
+import numpy as np
+
+from ._array import norm
+from .force import Force
+
+#: density of air at sea level and 15 C, kg/m^3
+AIR_DENSITY = 1.225
+
+
+@dataclasses.dataclass(frozen=True)
+class Drag(Force):
+    """Quadratic drag: F = -1/2 rho |V|^2 C_D S_ref V/|V|.
+
+    ``S_ref`` is the cross-section of the bounding sphere, pi r^2. Written as
+    ``-beta |V| V`` with ``beta = 1/2 rho C_D S_ref`` the formula has no division, so a
+    body at rest (|V| = 0) feels exactly zero drag instead of 0/0.
+
+    Parameters
+    ----------
+    beta : ndarray, shape (N,)
+        1/2 rho C_D S_ref per body, kg/m (zero for bodies the drag does not act on).
+    """
+
+    beta: np.ndarray
+
+    name: ClassVar[str] = "drag"
+
+    @classmethod
+    def from_coefficients(cls, radii, density=AIR_DENSITY, drag_coefficient=0.4, mask=None):
+        """Drag on spheres of the given radii in a fluid of ``density`` (kg/m^3)."""
+        radii = np.asarray(radii, dtype=float)
+        beta = 0.5 * density * drag_coefficient * np.pi * radii**2
+        if mask is not None:
+            beta = np.where(mask, beta, 0.0)
+        return cls(beta=beta)
+
+    def force(self, xp, q, v, m):
+        return -(self.beta * norm(xp, v))[:, None] * v
+
+    def jacobian(self, xp, q, v, m):
+        # d(-beta |v| v)/dv = -beta (|v| I + v v^T / |v|), which tends to 0 as v -> 0.
+        speed = norm(xp, v)
+        vhat_v = xp.where(
+            (speed > 0)[:, None, None],
+            v[:, :, None] * v[:, None, :] / xp.where(speed > 0, speed, 1)[:, None, None],
+            0,
+        )
+        block = -self.beta[:, None, None] * (speed[:, None, None] * xp.eye(3, dtype=v.dtype) + vhat_v)
+        n = v.shape[0]
+        idx = xp.arange(n)
+        dense = xp.zeros((n, 3, n, 3), dtype=v.dtype)
+        if xp is np:
+            dense[idx, :, idx, :] = block
+        else:
+            dense = dense.at[idx, :, idx, :].set(block)
+        return None, dense

@@ -1,0 +1,154 @@
+"""The model: bodies plus the forces a scene declares, as the right-hand side of
+Newton's second law that every integrator sees.
+
+``a(t, q, v) = F_net(t, q, v) / m``. Only declared forces are evaluated: a gravity-only
+model's acceleration is the constant g, with no spring arrays and no branches for
+absent forces (the force sum is assembled once, when the model is built).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+
+import numpy as np
+
+from .force import Force
+from .gravity import Gravity
+
+
+class Model:
+    """Bodies and forces on one array backend and precision.
+
+    Parameters
+    ----------
+    masses : array, shape (N,)
+        kg, positive.
+    radii : array, shape (N,)
+        m, positive (bounding spheres; drag and collisions use them).
+    forces : sequence of Force
+    pinned : bool array, shape (N,), optional
+        Pinned bodies never move (infinite inertia): cloth corners, anchors.
+    names : sequence of str, optional
+    xp : module
+        ``numpy`` or ``jax.numpy``.
+    dtype : numpy dtype
+        ``float64`` (default) or ``float32``.
+    """
+
+    def __init__(self, masses, radii, forces: Sequence[Force] = (), pinned=None, names=None,
+                 xp=np, dtype=np.float64):
+        masses = np.asarray(masses, dtype=float)
+        n = masses.shape[0]
+        pinned = np.zeros(n, bool) if pinned is None else np.asarray(pinned, bool)
+        self.xp = xp
+        self.dtype = np.dtype(dtype)
+        self.names = tuple(names) if names is not None else tuple(f"body{i}" for i in range(n))
+        self.pinned = pinned
+        self.masses = xp.asarray(masses, dtype=self.dtype)
+        self.radii = xp.asarray(np.asarray(radii, dtype=float), dtype=self.dtype)
+        self.inverse_masses = xp.asarray(np.where(pinned, 0.0, 1.0 / masses), dtype=self.dtype)
+        self._source_forces = tuple(forces)  # float64 NumPy originals, for cast()
+        self.forces = tuple(f.cast(xp, self.dtype) for f in forces)
+
+        self._applied = tuple(f for f in self.forces if not f.reactive)
+        self._reactive = tuple(f for f in self.forces if f.reactive)
+        gravity = [f for f in self._applied if isinstance(f, Gravity)]
+        self._field_forces = tuple(f for f in self._applied if not isinstance(f, Gravity))
+        # Gravity is an acceleration field: add g directly instead of m g / m.
+        # Pinned bodies must not fall, so there the field is masked per body.
+        field = sum((np.asarray(f.g, dtype=float) for f in gravity), np.zeros(3))
+        if pinned.any():
+            field = np.where(pinned[:, None], 0.0, np.broadcast_to(field, (n, 3)))
+        self._field = xp.asarray(field, dtype=self.dtype) if gravity else None
+        self.acceleration = self._assemble_acceleration()
+
+    @property
+    def n_bodies(self) -> int:
+        return self.masses.shape[0]
+
+    def cast(self, xp=None, dtype=None) -> Model:
+        """The same model on another backend and/or precision."""
+        return Model(np.asarray(self.masses, dtype=float), np.asarray(self.radii, dtype=float),
+                     self._source_forces, self.pinned, self.names,
+                     xp or self.xp, dtype or self.dtype)
+
+    # --- forces --------------------------------------------------------------------------
+
+    def net_force(self, t, q, v):
+        """Net force on each body, shape (N, 3), N."""
+        xp, m = self.xp, self.masses
+        f = xp.zeros_like(q)
+        for term in self._applied:
+            f = f + term.force(xp, q, v, m)
+        for term in self._reactive:
+            f = f + term.force(xp, q, v, m, f)
+        return f
+
+    def _assemble_acceleration(self):
+        xp, m, inv_m, field = self.xp, self.masses, self.inverse_masses, self._field
+        terms = self._field_forces
+        if self._reactive:
+            # Ground contact needs the sum of all other forces, gravity included.
+            return lambda t, q, v: self.net_force(t, q, v) * inv_m[:, None]
+        if not terms:
+            if field is None:
+                return lambda t, q, v: xp.zeros_like(q)
+            return lambda t, q, v: xp.broadcast_to(field, q.shape)
+
+        def acceleration(t, q, v):
+            f = terms[0].force(xp, q, v, m)
+            for term in terms[1:]:
+                f = f + term.force(xp, q, v, m)
+            a = f * inv_m[:, None]
+            return a if field is None else a + field
+
+        return acceleration
+
+    def vector_field(self, t, y):
+        """The first-order system y' = f(t, y) with y = (q, v), shape (2, N, 3)."""
+        return self.xp.stack([y[1], self.acceleration(t, y[0], y[1])])
+
+    @property
+    def constant_acceleration(self):
+        """The acceleration (N, 3) when the total force is constant, else ``None``."""
+        if any(not f.constant for f in self.forces):
+            return None
+        if self._field is None:
+            return self.xp.zeros((self.n_bodies, 3), dtype=self.dtype)
+        return self.xp.broadcast_to(self._field, (self.n_bodies, 3))
+
+    def jacobian(self, t, q, v):
+        """``(da/dq, da/dv)``, each of shape (3N, 3N).
+
+        Built from the forces' analytic Jacobians; reactive forces (ground contact) are
+        held fixed, which implicit integrators tolerate as a quasi-Newton iteration.
+        """
+        xp, n = self.xp, self.n_bodies
+        dq = xp.zeros((n, 3, n, 3), dtype=self.dtype)
+        dv = xp.zeros((n, 3, n, 3), dtype=self.dtype)
+        for term in self._applied:
+            jq, jv = term.jacobian(xp, q, v, self.masses)
+            if jq is not None:
+                dq = dq + jq
+            if jv is not None:
+                dv = dv + jv
+        scale = self.inverse_masses[:, None, None, None]
+        return (dq * scale).reshape(3 * n, 3 * n), (dv * scale).reshape(3 * n, 3 * n)
+
+    # --- energy --------------------------------------------------------------------------
+
+    def kinetic_energy(self, v):
+        return 0.5 * self.xp.sum(self.masses[:, None] * v * v)
+
+    def potential_energy(self, q):
+        """Sum of the potentials of the conservative forces (gravity, springs), J."""
+        total = 0.0
+        for term in self.forces:
+            u = term.potential(self.xp, q, self.masses)
+            if u is not None:
+                total = total + u
+        return total
+
+    def energy(self, y):
+        """Mechanical energy, kinetic plus potential, J."""
+        return self.kinetic_energy(y[1]) + self.potential_energy(y[0])

@@ -1,0 +1,64 @@
+"""Linear springs between body pairs (Hooke's law)."""
+
+from __future__ import annotations
+
+import dataclasses
+from typing import ClassVar
+
+import numpy as np
+
+from ._array import norm, safe_unit, scatter_pair_blocks, scatter_pairs
+from .force import Force
+
+
+@dataclasses.dataclass(frozen=True)
+class Springs(Force):
+    """Hooke springs: F = k (l - l_rest) d on the first body, -F on the second.
+
+    ``d`` is the unit vector from the first body to the second, ``l`` the current length.
+    A stretched spring (l > l_rest) pulls the bodies together, a compressed one pushes
+    them apart.
+
+    A spring of zero length has no direction: it exerts no force (an unstable
+    equilibrium when ``rest_length > 0``) instead of producing a NaN.
+
+    Parameters
+    ----------
+    i, j : int ndarray, shape (P,)
+        The two bodies of each spring.
+    stiffness : ndarray, shape (P,)
+        k, N/m.
+    rest_length : ndarray, shape (P,)
+        l_rest, m.
+    """
+
+    i: np.ndarray
+    j: np.ndarray
+    stiffness: np.ndarray
+    rest_length: np.ndarray
+
+    name: ClassVar[str] = "springs"
+
+    def _geometry(self, xp, q):
+        delta = q[self.j] - q[self.i]
+        length = norm(xp, delta)
+        return safe_unit(xp, delta, length), length
+
+    def force(self, xp, q, v, m):
+        d, length = self._geometry(xp, q)
+        f = (self.stiffness * (length - self.rest_length))[:, None] * d
+        return scatter_pairs(xp, q.shape[0], self.i, self.j, f)
+
+    def jacobian(self, xp, q, v, m):
+        # f_i = k (l - L) d with d = delta / l, delta = q_j - q_i:
+        # d f_i / d q_j = k [ d d^T + (1 - L / l) (I - d d^T) ]  (the geometric stiffness)
+        d, length = self._geometry(xp, q)
+        ddT = d[:, :, None] * d[:, None, :]
+        eye = xp.eye(3, dtype=q.dtype)
+        ratio = xp.where(length > 0, self.rest_length / xp.where(length > 0, length, 1), 0)
+        block = self.stiffness[:, None, None] * (ddT + (1 - ratio)[:, None, None] * (eye - ddT))
+        return scatter_pair_blocks(xp, q.shape[0], self.i, self.j, block), None
+
+    def potential(self, xp, q, m):
+        _, length = self._geometry(xp, q)
+        return 0.5 * xp.sum(self.stiffness * (length - self.rest_length) ** 2)

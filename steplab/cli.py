@@ -1,0 +1,281 @@
+"""The ``steplab`` command line.
+
+Bad input (an unknown integrator, a malformed scene, a non-positive dt...) ends with
+one line on stderr and exit status 2; a simulation that diverges ends with one line and
+status 1. Never a traceback.
+"""
+
+from __future__ import annotations
+
+import argparse
+import datetime
+import json
+import math
+import platform
+import sys
+from pathlib import Path
+
+EXIT_BAD_INPUT = 2
+EXIT_DIVERGED = 1
+
+
+class _Parser(argparse.ArgumentParser):
+    """argparse, but errors are one line (usage stays in --help)."""
+
+    def error(self, message):
+        self.exit(EXIT_BAD_INPUT, f"{self.prog}: error: {message} (see {self.prog} --help)\n")
+
+
+def _positive(text: str) -> float:
+    value = _finite(text)
+    if not value > 0:
+        raise argparse.ArgumentTypeError(f"must be > 0, got {text}")
+    return value
+
+
+def _finite(text: str) -> float:
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"must be a number, got {text!r}") from None
+    if not math.isfinite(value):
+        raise argparse.ArgumentTypeError(f"must be finite, got {text}")
+    return value
+
+
+def _count(text: str) -> int:
+    try:
+        value = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"must be a positive integer, got {text!r}") from None
+    if value < 1:
+        raise argparse.ArgumentTypeError(f"must be a positive integer, got {text}")
+    return value
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = _Parser(prog="steplab", description="How wrong, how unstable and how slow is a "
+                     "game-physics step? Integrators, scenes and studies.")
+    parser.add_argument("--version", action="version", version=f"steplab {_version()}")
+    sub = parser.add_subparsers(dest="command", required=True, parser_class=_Parser)
+
+    p = sub.add_parser("integrators", help="list the integrators with their properties")
+    p.add_argument("--json", action="store_true", help="print machine-readable JSON")
+
+    p = sub.add_parser("scenes", help="list the built-in scenes")
+    p.add_argument("--json", action="store_true", help="print machine-readable JSON")
+
+    p = sub.add_parser("run", help="simulate a scene and write its trajectory")
+    p.add_argument("scene", help="built-in scene name (see `steplab scenes`) or path to a TOML file")
+    p.add_argument("--integrator", help="integrator name (default: the scene's)")
+    p.add_argument("--dt", type=_positive, help="time step, s (default: the scene's)")
+    p.add_argument("--t-end", type=_finite, help="end time, s (default: the scene's)")
+    p.add_argument("--backend", choices=("numpy", "jax"), default="numpy",
+                   help="numpy: step by step; jax: compiled loop (default: numpy)")
+    p.add_argument("--precision", choices=("float64", "float32"), default="float64",
+                   help="floating-point precision (default: float64)")
+    p.add_argument("--save-every", type=_count, default=1, metavar="K",
+                   help="keep every K-th state in the trajectory (default: 1)")
+    p.add_argument("--max-steps", type=_count, default=None, metavar="N",
+                   help="refuse runs of more than N steps (default: 10,000,000)")
+    p.add_argument("--out", type=Path, help="write the trajectory to FILE.npz or FILE.csv")
+    p.add_argument("--json", action="store_true", help="print the summary as JSON")
+
+    p = sub.add_parser("reproduce", help="run every study and write the results")
+    p.add_argument("--quick", action="store_true", help="a short version of every study (for CI)")
+    p.add_argument("--out", type=Path, default=Path("results"), help="results folder (default: results/)")
+    return parser
+
+
+def main(argv=None) -> int:
+    args = build_parser().parse_args(argv)
+    from integrators import UnknownIntegratorError
+    from integrators.exact import NotConstantForceError
+    from integrators.references import ReferenceFailedError
+    from integrators.simulate import DivergenceError
+    from physics.scene import SceneError
+
+    command = {"integrators": cmd_integrators, "scenes": cmd_scenes, "run": cmd_run,
+               "reproduce": cmd_reproduce}[args.command]
+    try:
+        return command(args) or 0
+    except (SceneError, UnknownIntegratorError, NotConstantForceError, ValueError) as err:
+        return _fail(args.command, str(err), EXIT_BAD_INPUT)
+    except (DivergenceError, ReferenceFailedError) as err:
+        return _fail(args.command, str(err), EXIT_DIVERGED)
+    except KeyboardInterrupt:
+        return _fail(args.command, "interrupted", 130)
+
+
+def _fail(command: str, message: str, status: int) -> int:
+    print(f"steplab {command}: error: {message}", file=sys.stderr)
+    return status
+
+
+def _version() -> str:
+    import steplab
+
+    return steplab.__version__
+
+
+# --- integrators / scenes -------------------------------------------------------------
+
+
+def cmd_integrators(args) -> int:
+    from integrators import INTEGRATORS
+
+    rows = [method.describe() for method in INTEGRATORS.values()]
+    if args.json:
+        print(json.dumps(rows, indent=2))
+        return 0
+    print(f"{'name':<20} {'kind':<11} {'order':>5} {'evals/step':>10}  {'symplectic':<10} {'implicit':<8} "
+          "description")
+    for r in rows:
+        order = "-" if r["order"] is None else str(r["order"])
+        evals = "adaptive" if r["evaluations_per_step"] is None else str(r["evaluations_per_step"])
+        if r["implicit"] and r["kind"] == "fixed-step":
+            evals += "/iter"
+        print(f"{r['name']:<20} {r['kind']:<11} {order:>5} {evals:>10}  {_yes(r['symplectic']):<10} "
+              f"{_yes(r['implicit']):<8} {r['description']}")
+    return 0
+
+
+def _yes(flag: bool) -> str:
+    return "yes" if flag else "no"
+
+
+def cmd_scenes(args) -> int:
+    from physics.scene import builtin_scenes, load_scene
+
+    rows = []
+    for name in builtin_scenes():
+        scene = load_scene(name)
+        rows.append({"name": name, "bodies": scene.model.n_bodies,
+                     "forces": [f.name for f in scene.model.forces], "integrator": scene.integrator,
+                     "dt": scene.dt, "t_start": scene.t_start, "t_end": scene.t_end,
+                     "description": scene.description})
+    if args.json:
+        print(json.dumps(rows, indent=2))
+        return 0
+    for r in rows:
+        print(f"{r['name']:<16} {r['bodies']:>4} bodies  {', '.join(r['forces']) or 'no forces':<24} "
+              f"{r['description']}")
+    return 0
+
+
+# --- run ------------------------------------------------------------------------------
+
+
+def cmd_run(args) -> int:
+    import numpy as np
+
+    from integrators import get_integrator, simulate
+    from integrators.simulate import MAX_STEPS
+    from physics.scene import load_scene
+    from steplab.io import check_trajectory_path, save_trajectory
+
+    if args.out is not None:
+        check_trajectory_path(args.out)  # before the run, not after it
+    scene = load_scene(args.scene)
+    integrator = get_integrator(args.integrator or scene.integrator)
+    dt = args.dt if args.dt is not None else scene.dt
+    t_end = args.t_end if args.t_end is not None else scene.t_end
+    if not t_end > scene.t_start:
+        raise ValueError(f"--t-end {t_end:g} must be later than the scene's t_start = {scene.t_start:g}")
+    dtype = np.dtype(args.precision)
+    traj = simulate(scene.model, integrator, scene.y0, scene.t_start, t_end, dt, backend=args.backend,
+                    dtype=dtype, save_every=args.save_every, max_steps=args.max_steps or MAX_STEPS,
+                    progress=not args.json and sys.stderr.isatty())
+    energy_start = float(scene.model.energy(scene.y0))
+    energy_end = float(scene.model.energy(traj.y[-1].astype(float)))
+    summary = {
+        "scene": scene.name, "integrator": integrator.name, "dt": dt, "steps": traj.steps,
+        "t_start": scene.t_start, "t_end": float(traj.t[-1]), "backend": traj.backend,
+        "precision": args.precision, "bodies": list(scene.model.names),
+        "final_positions": traj.positions[-1].tolist(), "final_velocities": traj.velocities[-1].tolist(),
+        "energy_start": energy_start, "energy_end": energy_end,
+        "energy_change": energy_end - energy_start, "wall_time": traj.wall_time,
+    }
+    if args.out is not None:
+        save_trajectory(args.out, traj, scene.model, {k: summary[k] for k in (
+            "scene", "integrator", "dt", "steps", "t_start", "t_end", "backend", "precision")})
+        summary["out"] = str(args.out)
+    if args.json:
+        print(json.dumps(summary, indent=2))
+    else:
+        _print_run(summary)
+    return 0
+
+
+def _print_run(s: dict) -> None:
+    steps = f"{s['steps']} step{'s' if s['steps'] != 1 else ''}" if s["steps"] else "reference solve"
+    print(f"{s['scene']}: {s['integrator']}, dt = {s['dt']:g} s, {steps}, "
+          f"t = {s['t_start']:g} -> {s['t_end']:g} s ({s['backend']}, {s['precision']})")
+    shown = list(zip(s["bodies"], s["final_positions"], s["final_velocities"]))
+    print(f"  {'body':<14} {'position (m)':>36}   {'velocity (m/s)':>36}")
+    for name, p, v in shown[:8]:
+        print(f"  {name:<14} {_vec(p):>36}   {_vec(v):>36}")
+    if len(shown) > 8:
+        print(f"  ... and {len(shown) - 8} more bodies")
+    change = s["energy_change"]
+    rel = f" ({100 * change / abs(s['energy_start']):+.3g} %)" if s["energy_start"] else ""
+    print(f"  energy: {s['energy_start']:.6g} J -> {s['energy_end']:.6g} J, change {change:+.4g} J{rel}")
+    print(f"  wall time: {s['wall_time'] * 1e3:.3g} ms")
+    if "out" in s:
+        print(f"  trajectory written to {s['out']}")
+
+
+def _vec(v) -> str:
+    return "(" + ", ".join(f"{x:10.5g}" for x in v) + ")"
+
+
+# --- reproduce ------------------------------------------------------------------------
+
+
+def cmd_reproduce(args) -> int:
+    from tqdm import tqdm
+
+    from steplab.io import write_json
+    from studies import STUDIES
+    from studies.scene_tour import count
+
+    provenance = _provenance({"quick": args.quick})
+    with tqdm(total=count(args.quick), desc="reproduce", unit="run", disable=None) as bar:
+        for name, study in STUDIES.items():
+            record = study(quick=args.quick, progress=lambda: bar.update(1))
+            record["provenance"] = provenance
+            write_json(args.out / f"{name}.json", record)
+            _print_table(record)
+    print(f"results written to {args.out}/")
+    return 0
+
+
+def _print_table(record: dict) -> None:
+    print(f"{'scene':<16} {'integrator':<20} {'backend':<7} {'steps':>7} {'energy change':>14} "
+          f"{'numpy-jax':>10} {'wall':>9}")
+    for r in record["rows"]:
+        change = r["energy_end"] - r["energy_start"]
+        print(f"{r['scene']:<16} {r['integrator']:<20} {r['backend']:<7} {r['steps']:>7} {change:>+14.4g} "
+              f"{r['backend_difference']:>10.2g} {r['wall_time'] * 1e3:>7.1f}ms")
+
+
+def _provenance(parameters: dict) -> dict:
+    import subprocess
+    from importlib.metadata import version
+
+    try:
+        commit = subprocess.run(["git", "rev-parse", "HEAD"], capture_output=True, text=True,
+                                cwd=Path(__file__).parent, timeout=5).stdout.strip() or None
+    except (OSError, subprocess.SubprocessError):
+        commit = None
+    return {
+        "steplab": _version(), "git_commit": commit,
+        "packages": {p: version(p) for p in ("numpy", "scipy", "jax", "diffrax", "matplotlib")},
+        "python": platform.python_version(), "cpu": platform.processor() or platform.machine(),
+        "date": datetime.datetime.now(datetime.UTC).isoformat(timespec="seconds"),
+        "parameters": parameters,
+    }
+
+
+if __name__ == "__main__":
+    sys.exit(main())
