@@ -8,10 +8,8 @@ status 1. Never a traceback.
 from __future__ import annotations
 
 import argparse
-import datetime
 import json
 import math
-import platform
 import sys
 from pathlib import Path
 
@@ -81,10 +79,20 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--out", type=Path, help="write the trajectory to FILE.npz or FILE.csv")
     p.add_argument("--json", action="store_true", help="print the summary as JSON")
 
+    p = sub.add_parser("study", help="run one study (see --list)")
+    p.add_argument("name", nargs="?", help="study name")
+    p.add_argument("--list", action="store_true", help="list the studies")
+    _study_options(p)
+
     p = sub.add_parser("reproduce", help="run every study and write the results")
-    p.add_argument("--quick", action="store_true", help="a short version of every study (for CI)")
-    p.add_argument("--out", type=Path, default=Path("results"), help="results folder (default: results/)")
+    _study_options(p)
     return parser
+
+
+def _study_options(p) -> None:
+    p.add_argument("--quick", action="store_true", help="a short version (under a minute, for CI)")
+    p.add_argument("--out", type=Path, default=Path("results"), help="results folder (default: results/)")
+    p.add_argument("--force", action="store_true", help="re-run even if the cached result is current")
 
 
 def main(argv=None) -> int:
@@ -96,7 +104,7 @@ def main(argv=None) -> int:
     from physics.scene import SceneError
 
     command = {"integrators": cmd_integrators, "scenes": cmd_scenes, "run": cmd_run,
-               "reproduce": cmd_reproduce}[args.command]
+               "study": cmd_study, "reproduce": cmd_reproduce}[args.command]
     try:
         return command(args) or 0
     except (SceneError, UnknownIntegratorError, NotConstantForceError, ValueError) as err:
@@ -229,52 +237,49 @@ def _vec(v) -> str:
     return "(" + ", ".join(f"{x:10.5g}" for x in v) + ")"
 
 
-# --- reproduce ------------------------------------------------------------------------
+# --- studies ------------------------------------------------------------------------
+
+
+def cmd_study(args) -> int:
+    from studies import STUDIES, run_study
+
+    if args.list or args.name is None:
+        for study in STUDIES.values():
+            print(f"{study.name:<16} {study.title}")
+        return 0
+    if args.name not in STUDIES:
+        raise ValueError(f"unknown study {args.name!r}; valid: {', '.join(STUDIES)}")
+    record = run_study(STUDIES[args.name], args.out, quick=args.quick, force=args.force)
+    _print_summary([record])
+    return 0
 
 
 def cmd_reproduce(args) -> int:
     from tqdm import tqdm
 
-    from steplab.io import write_json
-    from studies import STUDIES
-    from studies.scene_tour import count
+    from studies import STUDIES, run_study
 
-    provenance = _provenance({"quick": args.quick})
-    with tqdm(total=count(args.quick), desc="reproduce", unit="run", disable=None) as bar:
-        for name, study in STUDIES.items():
-            record = study(quick=args.quick, progress=lambda: bar.update(1))
-            record["provenance"] = provenance
-            write_json(args.out / f"{name}.json", record)
-            _print_table(record)
-    print(f"results written to {args.out}/")
+    records = []
+    with tqdm(STUDIES.values(), desc="reproduce", unit="study", disable=None) as bar:
+        for study in bar:
+            bar.set_postfix_str(study.name)
+            records.append(run_study(study, args.out, quick=args.quick, force=args.force))
+    _print_summary(records)
     return 0
 
 
-def _print_table(record: dict) -> None:
-    print(f"{'scene':<16} {'integrator':<20} {'backend':<7} {'steps':>7} {'energy change':>14} "
-          f"{'numpy-jax':>10} {'wall':>9}")
-    for r in record["rows"]:
-        change = r["energy_end"] - r["energy_start"]
-        print(f"{r['scene']:<16} {r['integrator']:<20} {r['backend']:<7} {r['steps']:>7} {change:>+14.4g} "
-              f"{r['backend_difference']:>10.2g} {r['wall_time'] * 1e3:>7.1f}ms")
+def _print_summary(records) -> None:
+    for record in records:
+        from studies import STUDIES
 
-
-def _provenance(parameters: dict) -> dict:
-    import subprocess
-    from importlib.metadata import version
-
-    try:
-        commit = subprocess.run(["git", "rev-parse", "HEAD"], capture_output=True, text=True,
-                                cwd=Path(__file__).parent, timeout=5).stdout.strip() or None
-    except (OSError, subprocess.SubprocessError):
-        commit = None
-    return {
-        "steplab": _version(), "git_commit": commit,
-        "packages": {p: version(p) for p in ("numpy", "scipy", "jax", "diffrax", "matplotlib")},
-        "python": platform.python_version(), "cpu": platform.processor() or platform.machine(),
-        "date": datetime.datetime.now(datetime.UTC).isoformat(timespec="seconds"),
-        "parameters": parameters,
-    }
+        state = "cached" if record.get("cached") else "computed"
+        print(f"{record['study']} ({state}): {record['title']}")
+        for label, value in STUDIES[record["study"]].summary(record):
+            print(f"  {label:<40} {value}")
+        for figure in record.get("figures", []):
+            print(f"  figure: {figure}")
+    if records:
+        print("results in the output folder as <study>.json")
 
 
 if __name__ == "__main__":

@@ -1,13 +1,14 @@
 """Studies: functions from parameters to a result record; plotting only reads records.
 
-Each study is registered in :data:`STUDIES` under its name. The error, stability,
-work-precision, collision and broadphase studies arrive in later issues; for now the
-registry holds the tour of the built-in scenes that ``steplab reproduce`` runs.
+Each study module defines ``STUDY`` (a :class:`studies.runner.Study`) and is listed in
+:data:`STUDIES`, which ``steplab study`` and ``steplab reproduce`` run.
 """
 
 from __future__ import annotations
 
-from .scene_tour import scene_tour as scene_tour
+from . import scene_tour
+from .runner import Study as Study
+from .runner import run_study as run_study
 
-#: name -> study function ``f(quick: bool, progress) -> record``
-STUDIES = {"scenes": scene_tour}
+#: every study, by name, in the order ``steplab reproduce`` runs them
+STUDIES: dict[str, Study] = {s.name: s for s in (scene_tour.STUDY,)}

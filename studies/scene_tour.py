@@ -7,22 +7,28 @@ import numpy as np
 from integrators import simulate
 from physics.scene import builtin_scenes, load_scene
 
+from .runner import Study
+
 BACKENDS = ("numpy", "jax")
 
 
-def scene_tour(quick: bool = False, progress=None) -> dict:
+def parameters(quick: bool) -> dict:
+    return {"scenes": builtin_scenes(), "backends": list(BACKENDS), "fraction": 0.1 if quick else 1.0}
+
+
+def compute(params: dict, progress=None) -> dict:
     """Run every built-in scene with its declared integrator and dt on NumPy and JAX.
 
     Records per scene and backend: steps, energy at the start and end, the largest
-    difference between the two backends' final states, and the wall time. ``quick``
-    runs a tenth of each scene's duration.
+    difference between the two backends' final states, and the wall time. ``fraction``
+    of each scene's duration is run.
     """
     rows = []
-    for name in builtin_scenes():
+    for name in params["scenes"]:
         scene = load_scene(name)
-        t_end = scene.t_start + (scene.t_end - scene.t_start) * (0.1 if quick else 1.0)
+        t_end = scene.t_start + (scene.t_end - scene.t_start) * params["fraction"]
         finals = {}
-        for backend in BACKENDS:
+        for backend in params["backends"]:
             traj = simulate(scene.model, scene.integrator, scene.y0, scene.t_start, t_end, scene.dt,
                             backend=backend, save_every=10**9)
             finals[backend] = traj.y[-1]
@@ -33,13 +39,19 @@ def scene_tour(quick: bool = False, progress=None) -> dict:
                 "energy_end": float(scene.model.energy(traj.y[-1])),
                 "wall_time": traj.wall_time,
             })
-            if progress is not None:
-                progress()
-        rows[-1]["backend_difference"] = rows[-2]["backend_difference"] = float(
-            np.max(np.abs(finals["numpy"] - finals["jax"])))
-    return {"study": "scenes", "quick": quick, "rows": rows}
+        difference = float(np.max(np.abs(finals["numpy"] - finals["jax"])))
+        for row in rows[-len(params["backends"]):]:
+            row["backend_difference"] = difference
+        if progress is not None:
+            progress()
+    return {"rows": rows}
 
 
-def count(quick: bool = False) -> int:
-    """Progress ticks the tour makes."""
-    return len(builtin_scenes()) * len(BACKENDS)
+def summary(record: dict) -> list[tuple[str, str]]:
+    worst = max(r["backend_difference"] for r in record["rows"])
+    return [("scenes run", str(len({r["scene"] for r in record["rows"]}))),
+            ("largest NumPy/JAX difference", f"{worst:.2g}")]
+
+
+STUDY = Study("scenes", "Tour of the built-in scenes on NumPy and JAX", parameters, compute,
+              plot=lambda record, out: [], summary=summary)
