@@ -239,3 +239,41 @@ def _run_jax(model, integrator, y, t_start, dt, n, save_every, saves, ts, limit,
         raise DivergenceError(integrator.name, dt, bad, t_start + bad * dt)
     out = np.concatenate([y[None], np.asarray(ys)])
     return Trajectory(ts, out, integrator.name, dt, n, "jax", wall, compile_time)
+
+
+def final_state_function(model, integrator):
+    """A jitted ``f(y0, t_start, dt, n) -> (y_n, first bad step or -1)`` for sweeps over dt.
+
+    ``dt`` and ``n`` are traced, so one compilation serves a whole error-versus-dt or
+    stability sweep (per model, integrator and precision). Studies time it with
+    ``block_until_ready`` after a warm-up call.
+    """
+    import jax
+    import jax.numpy as jnp
+    from jax import lax
+
+    integrator = _stepper(integrator)
+
+    def run(y0, t_start, dt, n):
+        limit = DIVERGENCE_FACTOR * jnp.maximum(1, jnp.max(jnp.abs(y0)))
+
+        def one_step(k, state):
+            y, carry, bad = state
+            y, carry = integrator.step(model, t_start + k * dt, y, dt, carry)
+            ok = jnp.all(jnp.abs(y) <= limit)
+            return y, carry, jnp.where((bad < 0) & ~ok, k + 1, bad)
+
+        state = (y0, integrator.init(model, t_start, y0), jnp.asarray(-1, dtype=jnp.int64))
+        y, _, bad = lax.fori_loop(0, n, one_step, state)
+        return y, bad
+
+    return jax.jit(run)
+
+
+def _stepper(integrator):
+    from . import get_integrator
+
+    integrator = get_integrator(integrator)
+    if not isinstance(integrator, Stepper):
+        raise ValueError(f"integrator '{integrator.name}' is not a fixed-step method")
+    return integrator
