@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import math
 from fractions import Fraction
 
 
@@ -33,8 +34,8 @@ class GameLoop:
     """
 
     def __init__(self, step, dt: float, max_steps_per_frame: int = 1000):
-        if not dt > 0:
-            raise ValueError(f"dt must be > 0, got {dt}")
+        if not (dt > 0 and math.isfinite(dt)):
+            raise ValueError(f"dt must be finite and > 0, got {dt}")
         self._step = step
         self.dt = dt
         self._dt = Fraction(dt)
@@ -45,8 +46,8 @@ class GameLoop:
 
     def advance(self, frame_time: float) -> float:
         """Consume one frame's time; return the interpolation factor alpha."""
-        if not frame_time >= 0:
-            raise ValueError(f"frame time must be >= 0, got {frame_time}")
+        if not (frame_time >= 0 and math.isfinite(frame_time)):
+            raise ValueError(f"frame time must be finite and >= 0, got {frame_time}")
         self._lag += Fraction(frame_time)
         taken = 0
         while self._lag >= self._dt:

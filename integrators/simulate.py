@@ -43,6 +43,8 @@ class Trajectory:
         Fixed steps taken (0 for a solver).
     wall_time : float
         Seconds spent integrating (for JAX: compilation excluded, see ``compile_time``).
+    collisions : physics.collision.CollisionLog or None
+        Every collision of the run, when it was run with collisions.
     """
 
     t: np.ndarray
@@ -53,6 +55,7 @@ class Trajectory:
     backend: str
     wall_time: float
     compile_time: float = 0.0
+    collisions: object = None
 
     @property
     def positions(self) -> np.ndarray:
@@ -87,7 +90,7 @@ def divergence_limit(y0, dtype) -> float:
 
 def simulate(model, integrator, y0, t_start: float, t_end: float, dt: float, *,
              backend: str = "numpy", dtype=None, save_every: int = 1, max_steps: int = MAX_STEPS,
-             progress: bool = False) -> Trajectory:
+             progress: bool = False, collisions=None) -> Trajectory:
     """Integrate ``model`` from ``y0`` over [t_start, t_end] with fixed steps of ``dt``.
 
     Parameters
@@ -106,6 +109,9 @@ def simulate(model, integrator, y0, t_start: float, t_end: float, dt: float, *,
         Refuse runs longer than this (a guard against typos such as dt = 1e-9).
     progress : bool
         Show a progress bar (NumPy steppers).
+    collisions : physics.collision.CollisionWorld, optional
+        Detect and resolve collisions after every step (fixed-step integrators on the
+        NumPy backend); the trajectory's ``collisions`` is the log of the run.
 
     Raises
     ------
@@ -117,6 +123,10 @@ def simulate(model, integrator, y0, t_start: float, t_end: float, dt: float, *,
     integrator = get_integrator(integrator)
     if backend not in ("numpy", "jax"):
         raise ValueError(f"backend must be 'numpy' or 'jax', got {backend!r}")
+    if collisions is not None and collisions.detector == "none":
+        collisions = None  # the detector "none": no collision handling at all
+    if collisions is not None:
+        _check_collisions(integrator, backend)
     n = step_count(t_start, t_end, dt)
     if n > max_steps:
         raise ValueError(f"{n} steps of dt = {dt:g} s exceed the limit of {max_steps} "
@@ -141,9 +151,21 @@ def simulate(model, integrator, y0, t_start: float, t_end: float, dt: float, *,
 
     assert isinstance(integrator, Stepper)
     model = _on_backend(model, backend, dtype)
+    if collisions is not None:
+        return _run_numpy(model, integrator, np.asarray(y0, dtype=dtype), t_start, dt, n, save_every,
+                          saves, ts, limit, progress, collisions)
     run = _run_numpy if backend == "numpy" else _run_jax
     return run(model, integrator, np.asarray(y0, dtype=dtype), t_start, dt, n, save_every,
                saves, ts, limit, progress)
+
+
+def _check_collisions(integrator, backend):
+    if isinstance(integrator, Solver):
+        raise ValueError(f"collisions need a fixed-step integrator; '{integrator.name}' is a "
+                         f"{integrator.kind} solver (run it with the detector 'none')")
+    if backend != "numpy":
+        raise ValueError(f"collision detection runs on the NumPy backend only, not {backend!r} "
+                         f"(use backend 'numpy', or the detector 'none')")
 
 
 def _on_backend(model, backend, dtype):
@@ -158,7 +180,9 @@ def _on_backend(model, backend, dtype):
     return model.cast(xp, dtype)
 
 
-def _run_numpy(model, integrator, y, t_start, dt, n, save_every, saves, ts, limit, progress):
+def _run_numpy(model, integrator, y, t_start, dt, n, save_every, saves, ts, limit, progress,
+               collisions=None):
+    log = collisions.new_log() if collisions is not None else None
     out = np.empty((len(saves),) + y.shape, dtype=y.dtype)
     out[0] = y
     saved = 1
@@ -166,7 +190,10 @@ def _run_numpy(model, integrator, y, t_start, dt, n, save_every, saves, ts, limi
     start = time.perf_counter()
     carry = integrator.init(model, t_start, y)
     for k in range(n):
-        y, carry = integrator.step(model, t_start + k * dt, y, dt, carry)
+        if log is None:
+            y, carry = integrator.step(model, t_start + k * dt, y, dt, carry)
+        else:  # integrate, then detect and resolve collisions (physics.collision.step)
+            y, carry = collisions.step(log, model, integrator, t_start + k * dt, y, dt, carry)
         # one reduction: NaN fails the comparison, so this also catches non-finite states
         if not np.abs(y).max() <= limit:
             raise DivergenceError(integrator.name, dt, k + 1, t_start + (k + 1) * dt)
@@ -178,7 +205,7 @@ def _run_numpy(model, integrator, y, t_start, dt, n, save_every, saves, ts, limi
     wall = time.perf_counter() - start
     if bar is not None:
         bar.close()
-    return Trajectory(ts, out, integrator.name, dt, n, "numpy", wall)
+    return Trajectory(ts, out, integrator.name, dt, n, "numpy", wall, collisions=log)
 
 
 def _progress_bar(n, enabled):

@@ -24,6 +24,8 @@ from .gravity import EARTH_GRAVITY, Gravity
 from .model import Model
 from .springs import Springs
 
+DEFAULT_MATERIAL = "default"  # as physics.collision.shapes.DEFAULT_MATERIAL
+
 #: largest scene the loader builds (bodies; all-pairs soft bodies count their pairs)
 MAX_BODIES = 1_000_000
 MAX_PAIRS = 5_000_000
@@ -47,6 +49,8 @@ class Scene:
     t_start: float
     t_end: float
     description: str = ""
+    #: the scene's [collisions] table (a physics.collision.CollisionWorld), or None
+    collisions: object = None
 
 
 def builtin_scenes() -> list[str]:
@@ -209,19 +213,24 @@ class _SceneBuilder:
         self.velocities: list[np.ndarray] = []
         self.pinned: list[bool] = []
         self.forces: list = []
+        self.materials: list[str] = []
 
     def build(self, data, name: str) -> Scene:
         root = _Table(data, "", self.label)
-        root.allow("name", "description", "simulation", "bodies", "soft_bodies", "particles", "forces")
+        root.allow("name", "description", "simulation", "bodies", "soft_bodies", "particles", "forces",
+                   "collisions")
         sim = root.table("simulation")
         if sim is None:
             root.fail("missing required table [simulation]")
         for body in root.tables("bodies"):
             self.add_body(body)
+            self._material(body)
         for soft in root.tables("soft_bodies"):
             self.add_soft_body(soft)
+            self._material(soft)
         for group in root.tables("particles"):
             self.add_particles(group)
+            self._material(group)
         if not self.names:
             root.fail("declares no bodies: add [[bodies]], [[soft_bodies]] or [[particles]]")
         forces = root.table("forces")
@@ -239,8 +248,10 @@ class _SceneBuilder:
         model = Model(np.array(self.masses), np.array(self.radii), self.forces,
                       pinned=np.array(self.pinned), names=self.names)
         y0 = np.stack([np.array(self.positions), np.array(self.velocities)])
+        table = root.table("collisions")
+        collisions = self.add_collisions(table) if table is not None else None
         return Scene(root.string("name", name), model, y0, integrator, dt, t_start, t_end,
-                     root.string("description", ""))
+                     root.string("description", ""), collisions)
 
     def _append(self, table, name, mass, radius, position, velocity, pinned=False):
         if name in self.names:
@@ -255,15 +266,18 @@ class _SceneBuilder:
         self.pinned.append(pinned)
 
     def add_body(self, t: _Table):
-        t.allow("name", "mass", "radius", "position", "velocity", "pinned")
+        t.allow("name", "mass", "radius", "position", "velocity", "pinned", "material")
+        velocity, pinned = t.vector("velocity", [0, 0, 0]), t.boolean("pinned")
+        if pinned and np.any(velocity != 0):
+            t.fail("a pinned body never moves, so it cannot have a velocity", "velocity")
         self._append(t, t.string("name", _REQUIRED), t.number("mass", _REQUIRED, positive=True),
                      t.number("radius", _REQUIRED, positive=True), t.vector("position", _REQUIRED),
-                     t.vector("velocity", [0, 0, 0]), t.boolean("pinned"))
+                     velocity, pinned)
 
     def add_soft_body(self, t: _Table):
         t.allow("name", "shape", "size", "center", "rows", "cols", "spacing", "origin", "shear",
                 "vertices", "edges", "connect", "mass", "radius", "stiffness", "damping",
-                "velocity", "pinned")
+                "velocity", "pinned", "material")
         name = t.string("name", _REQUIRED)
         shape = t.string("shape", _REQUIRED, choices=("box", "grid", "mesh"))
         if shape == "box":
@@ -291,8 +305,9 @@ class _SceneBuilder:
         velocity = t.vector("velocity", [0, 0, 0])
         pinned = set(self._indices(t, "pinned", n))
         offset = len(self.names)
-        for k, vertex in enumerate(mesh.vertices):
-            self._append(t, f"{name}[{k}]", mass / n, radius, vertex, velocity, k in pinned)
+        for k, vertex in enumerate(mesh.vertices):  # pinned vertices stay put: no velocity
+            self._append(t, f"{name}[{k}]", mass / n, radius, vertex, 0 * velocity if k in pinned else velocity,
+                         k in pinned)
         springs, dampers = soft_body.connect(mesh.vertices, pairs, t.number("stiffness", _REQUIRED, positive=True),
                                              t.number("damping", 0.0, nonnegative=True), offset)
         self.forces += [f for f in (springs, dampers) if f is not None]
@@ -320,7 +335,7 @@ class _SceneBuilder:
         return edges
 
     def add_particles(self, t: _Table):
-        t.allow("name", "count", "seed", "mass", "radius", "box_min", "box_max", "speed")
+        t.allow("name", "count", "seed", "mass", "radius", "box_min", "box_max", "speed", "material")
         name, count = t.string("name", _REQUIRED), t.integer("count", _REQUIRED, 1, MAX_BODIES)
         lo, hi = t.vector("box_min", _REQUIRED), t.vector("box_max", _REQUIRED)
         if not np.all(hi > lo):
@@ -403,3 +418,84 @@ class _SceneBuilder:
             mu_d = friction.number("mu_dynamic", _REQUIRED, nonnegative=True)
             self.forces.append(Friction(mu_s, mu_d, normal / length, friction.number("height", 0.0),
                                         np.array(self.radii)))
+
+    # --- collisions ----------------------------------------------------------------------
+
+    def _material(self, t: _Table):
+        """The collision material of the bodies a table just added."""
+        material = t.string("material", DEFAULT_MATERIAL)
+        self.materials += [material] * (len(self.names) - len(self.materials))
+
+    def add_collisions(self, c: _Table):
+        """The [collisions] table: detector, materials and static geometry (a CollisionWorld)."""
+        from .collision import world as collision_world
+        from .collision.pairs import DEFAULT_BROADPHASE, broadphase_methods
+        from .collision.response import PairProperties
+        from .collision.shapes import Box, OrientedBox, Plane, rotation_matrix
+
+        c.allow("detector", "restitution", "friction", "bisection_iterations", "max_impacts_per_step",
+                "broadphase", "rest_speed", "materials", "planes", "boxes")
+        detector = c.string("detector", "swept", choices=collision_world.DETECTOR_NAMES)
+        restitution = self._restitution(c, "restitution", 1.0)
+        friction = c.number("friction", 0.0, nonnegative=True)
+        iterations = c.integer("bisection_iterations", collision_world.DEFAULT_BISECTION_ITERATIONS, 0, 60)
+        max_impacts = c.integer("max_impacts_per_step", collision_world.DEFAULT_MAX_IMPACTS_PER_STEP, 1, 10**6)
+        broadphase = c.string("broadphase", DEFAULT_BROADPHASE, choices=broadphase_methods())
+        rest_speed = c.number("rest_speed", collision_world.DEFAULT_REST_SPEED, nonnegative=True)
+
+        shapes = []
+        for p in c.tables("planes"):
+            p.allow("name", "normal", "offset", "material", "trigger")
+            normal = p.vector("normal", _REQUIRED)
+            length = float(np.linalg.norm(normal))
+            if not length > 0:
+                p.fail("must be a non-zero vector", "normal")
+            shapes.append((p, Plane(normal / length, p.number("offset", 0.0), p.string("name", f"plane[{len(shapes)}]"),
+                                    p.string("material", DEFAULT_MATERIAL), p.boolean("trigger"))))
+        for b in c.tables("boxes"):
+            b.allow("name", "center", "size", "axis", "angle", "material", "trigger")
+            center, size = b.vector("center", _REQUIRED), b.vector("size", _REQUIRED, positive=True)
+            common = {"name": b.string("name", f"box[{len(shapes)}]"),
+                      "material": b.string("material", DEFAULT_MATERIAL), "trigger": b.boolean("trigger")}
+            angle = b.number("angle", 0.0)
+            axis = b.vector("axis", [0, 0, 1])
+            if not np.linalg.norm(axis) > 0:
+                b.fail("must be a non-zero vector", "axis")
+            if angle == 0.0:
+                shapes.append((b, Box.from_center(center, size, **common)))
+            else:
+                shapes.append((b, OrientedBox(center, 0.5 * size, rotation_matrix(axis, angle), **common)))
+        seen = set()
+        for t, shape in shapes:
+            if shape.name in seen:
+                t.fail(f"duplicate shape name {shape.name!r}", "name")
+            seen.add(shape.name)
+
+        used = set(self.materials) | {shape.material for _, shape in shapes} | {DEFAULT_MATERIAL}
+        table = {}
+        for m in c.tables("materials"):
+            m.allow("pair", "restitution", "friction")
+            pair = m.data.get("pair")
+            if (not isinstance(pair, list) or len(pair) != 2 or not all(isinstance(x, str) for x in pair)):
+                m.fail(f"must be two material names [\"a\", \"b\"], got {_short(pair)}", "pair")
+            unknown = [x for x in pair if x not in used]
+            if unknown:
+                m.fail(f"names material {unknown[0]!r}, which no body or shape has; materials: "
+                       f"{', '.join(sorted(used))}", "pair")
+            key = frozenset(pair)
+            if key in table:
+                m.fail(f"the pair {pair} is listed twice", "pair")
+            table[key] = (self._restitution(m, "restitution", _REQUIRED),
+                          m.number("friction", friction, nonnegative=True))
+        materials = tuple(self.materials) if set(self.materials) != {DEFAULT_MATERIAL} else ()
+        return collision_world.CollisionWorld(
+            detector=detector, shapes=tuple(shape for _, shape in shapes), materials=materials,
+            pair_properties=PairProperties(restitution, friction, table), bisection_iterations=iterations,
+            max_impacts_per_step=max_impacts, broadphase=broadphase, rest_speed=rest_speed)
+
+    @staticmethod
+    def _restitution(t: _Table, key: str, default):
+        value = t.number(key, default)
+        if not 0 <= value <= 1:
+            t.fail(f"must be between 0 and 1 (a coefficient of restitution), got {value:g}", key)
+        return value

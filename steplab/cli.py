@@ -8,6 +8,7 @@ status 1. Never a traceback.
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import json
 import math
 import sys
@@ -76,8 +77,18 @@ def build_parser() -> argparse.ArgumentParser:
                    help="keep every K-th state in the trajectory (default: 1)")
     p.add_argument("--max-steps", type=_count, default=None, metavar="N",
                    help="refuse runs of more than N steps (default: 10,000,000)")
-    p.add_argument("--out", type=Path, help="write the trajectory to FILE.npz or FILE.csv")
+    p.add_argument("--out", type=Path, help="write the trajectory to FILE.npz or FILE.csv (and the "
+                   "collisions, if any, to FILE.collisions.csv)")
+    p.add_argument("--detector", choices=("none", "overlap", "swept"),
+                   help="collision detection: none, overlap testing with bisection, or swept "
+                   "intersection testing (default: the scene's [collisions], else none)")
     p.add_argument("--json", action="store_true", help="print the summary as JSON")
+
+    p = sub.add_parser("recommend", help="the cheapest integrator and dt that meet an error tolerance")
+    p.add_argument("scene", help="built-in scene name or path to a TOML file")
+    p.add_argument("--tol", type=_positive, required=True, help="largest final position error, m")
+    p.add_argument("--t-end", type=_finite, help="end time, s (default: the scene's)")
+    p.add_argument("--json", action="store_true", help="print machine-readable JSON")
 
     p = sub.add_parser("study", help="run one study (see --list)")
     p.add_argument("name", nargs="?", help="study name")
@@ -102,14 +113,15 @@ def main(argv=None) -> int:
     from integrators.references import ReferenceFailedError
     from integrators.simulate import DivergenceError
     from physics.scene import SceneError
+    from studies.work_precision import NoFixedStepError
 
     command = {"integrators": cmd_integrators, "scenes": cmd_scenes, "run": cmd_run,
-               "study": cmd_study, "reproduce": cmd_reproduce}[args.command]
+               "recommend": cmd_recommend, "study": cmd_study, "reproduce": cmd_reproduce}[args.command]
     try:
         return command(args) or 0
     except (SceneError, UnknownIntegratorError, NotConstantForceError, ValueError) as err:
         return _fail(args.command, str(err), EXIT_BAD_INPUT)
-    except (DivergenceError, ReferenceFailedError) as err:
+    except (DivergenceError, ReferenceFailedError, NoFixedStepError) as err:
         return _fail(args.command, str(err), EXIT_DIVERGED)
     except KeyboardInterrupt:
         return _fail(args.command, "interrupted", 130)
@@ -191,9 +203,10 @@ def cmd_run(args) -> int:
     if not t_end > scene.t_start:
         raise ValueError(f"--t-end {t_end:g} must be later than the scene's t_start = {scene.t_start:g}")
     dtype = np.dtype(args.precision)
+    world = _collision_world(scene, args)
     traj = simulate(scene.model, integrator, scene.y0, scene.t_start, t_end, dt, backend=args.backend,
                     dtype=dtype, save_every=args.save_every, max_steps=args.max_steps or MAX_STEPS,
-                    progress=not args.json and sys.stderr.isatty())
+                    progress=not args.json and sys.stderr.isatty(), collisions=world)
     energy_start = float(scene.model.energy(scene.y0))
     energy_end = float(scene.model.energy(traj.y[-1].astype(float)))
     summary = {
@@ -203,16 +216,43 @@ def cmd_run(args) -> int:
         "final_positions": traj.positions[-1].tolist(), "final_velocities": traj.velocities[-1].tolist(),
         "energy_start": energy_start, "energy_end": energy_end,
         "energy_change": energy_end - energy_start, "wall_time": traj.wall_time,
+        "detector": world.detector if world is not None else "none",
+        "collisions": traj.collisions.summary() if traj.collisions is not None else None,
     }
     if args.out is not None:
         save_trajectory(args.out, traj, scene.model, {k: summary[k] for k in (
-            "scene", "integrator", "dt", "steps", "t_start", "t_end", "backend", "precision")})
+            "scene", "integrator", "dt", "steps", "t_start", "t_end", "backend", "precision", "detector",
+            "collisions")})
         summary["out"] = str(args.out)
+        if traj.collisions is not None:
+            from steplab.io import write_atomic
+
+            path = args.out.with_name(args.out.stem + ".collisions.csv")
+            write_atomic(path, traj.collisions.to_csv().encode())
+            summary["collisions_out"] = str(path)
     if args.json:
         print(json.dumps(summary, indent=2))
     else:
         _print_run(summary)
     return 0
+
+
+def _collision_world(scene, args):
+    """The scene's collision world with ``--detector`` applied, or None for no collisions."""
+    world = scene.collisions
+    if args.detector is not None:
+        if world is None and args.detector != "none":
+            from physics.collision import CollisionWorld
+
+            world = CollisionWorld(detector=args.detector)  # bodies against each other, eps = 1
+        elif world is not None:
+            world = world.with_detector(args.detector)
+    if world is None or world.detector == "none":
+        return None
+    if args.backend != "numpy":
+        raise ValueError(f"scene {scene.name!r} has collisions ({world.detector} detector), which run on the "
+                         f"NumPy backend only; use --backend numpy, or --detector none")
+    return world
 
 
 def _print_run(s: dict) -> None:
@@ -228,13 +268,63 @@ def _print_run(s: dict) -> None:
     change = s["energy_change"]
     rel = f" ({100 * change / abs(s['energy_start']):+.3g} %)" if s["energy_start"] else ""
     print(f"  energy: {s['energy_start']:.6g} J -> {s['energy_end']:.6g} J, change {change:+.4g} J{rel}")
+    if s.get("collisions") is not None:
+        c = s["collisions"]
+        extra = "".join(f", {c[k]} {label}" for k, label in (("triggers", "trigger entries"),
+                                                            ("cancelled", "cancelled")) if c[k])
+        print(f"  collisions ({s['detector']}): {c['impacts']} impacts{extra}, at most "
+              f"{c['most_impacts_in_a_step']} in one step, {c['resting_corrections']} resting-contact corrections")
+        if c["bound_hits"]:
+            print(f"  warning: {c['bound_hits']} steps reached the bound on impacts per step and left "
+                  f"the rest of the step unresolved (raise max_impacts_per_step)")
     print(f"  wall time: {s['wall_time'] * 1e3:.3g} ms")
     if "out" in s:
         print(f"  trajectory written to {s['out']}")
+    if "collisions_out" in s:
+        print(f"  collisions written to {s['collisions_out']}")
 
 
 def _vec(v) -> str:
     return "(" + ", ".join(f"{x:10.5g}" for x in v) + ")"
+
+
+# --- recommend ----------------------------------------------------------------------
+
+
+def cmd_recommend(args) -> int:
+    import numpy as np
+
+    from physics.scene import load_scene
+    from studies.problems import Problem
+    from studies.work_precision import recommend
+
+    scene = load_scene(args.scene)
+    t_end = args.t_end if args.t_end is not None else scene.t_end
+    if not t_end > scene.t_start:
+        raise ValueError(f"--t-end {t_end:g} must be later than the scene's t_start = {scene.t_start:g}")
+    problem = Problem(scene.name, scene.description, scene.model, scene.y0, scene.t_start, t_end)
+    if scene.model.constant_acceleration is not None:  # the closed form is the truth
+        from physics import projectile
+
+        accel = scene.model.constant_acceleration
+
+        def solution(t):
+            p, v = projectile(t, scene.y0[0], scene.y0[1], accel, scene.t_start)
+            return np.stack([p, v])
+
+        problem = dataclasses.replace(problem, solution=solution)
+    result = recommend(problem, args.tol)
+    if args.json:
+        print(json.dumps(result, indent=2))
+        return 0
+    if result["dt"] is None:
+        print(f"{result['note']}; {result['integrator']} does at rtol = {result['rtol']:g}: error "
+              f"{result['error']:.3g} m in {result['seconds'] * 1e3:.3g} ms")
+    else:
+        print(f"{scene.name}: {result['integrator']} with dt = {result['dt']:.6g} s ({result['steps']} steps) "
+              f"reaches error {result['error']:.3g} m <= {args.tol:g} m in {result['seconds'] * 1e3:.3g} ms "
+              "(compiled, median)")
+    return 0
 
 
 # --- studies ------------------------------------------------------------------------

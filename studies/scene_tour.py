@@ -26,7 +26,7 @@ def compute(params: dict, progress=None) -> dict:
     rows = []
     for name in params["scenes"]:
         scene = load_scene(name)
-        t_end = scene.t_start + (scene.t_end - scene.t_start) * params["fraction"]
+        t_end = scene.t_start + max((scene.t_end - scene.t_start) * params["fraction"], scene.dt)
         finals = {}
         for backend in params["backends"]:
             traj = simulate(scene.model, scene.integrator, scene.y0, scene.t_start, t_end, scene.dt,

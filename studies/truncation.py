@@ -132,7 +132,9 @@ def compute(params: dict, progress=None) -> dict:
                 finite = [p for p in points if p["error"] is not None]
                 if finite:
                     best = min(finite, key=lambda p: p["error"])
-                    best_dt[problem.name][method][precision] = {"dt": best["dt"], "error": best["error"]}
+                    # the least error is a round-off floor only if smaller steps did worse
+                    best_dt[problem.name][method][precision] = {
+                        "dt": best["dt"], "error": best["error"], "floor_reached": best is not finite[-1]}
                 if precision == "float64":
                     noise = ROUNDOFF_NOISE * np.finfo(np.float64).eps * max(1.0, float(np.max(np.abs(truth))))
                     orders[problem.name][method] = fit_order(points, noise)
@@ -168,7 +170,7 @@ def plot(record: dict, out) -> list[str]:
             ax.grid(True, which="major", alpha=0.3)
             ax.invert_xaxis()
         axes[0][0].set_ylabel("global position error at t_end (m)")
-        axes[0][0].legend(fontsize=7, loc="lower left", title="fitted slope (float64)", title_fontsize=7)
+        axes[0][0].legend(fontsize=7, loc="upper right", title="fitted slope (float64)", title_fontsize=7)
         fig.suptitle(f"Global error against time step: {curves[0]['title']}\n"
                      "truncation error falls as dt^order; accumulated round-off rises at small dt", y=1.0)
         fig.tight_layout()

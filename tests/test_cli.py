@@ -181,8 +181,8 @@ def test_console_script_end_to_end():
     assert bad.returncode == 2 and "Traceback" not in bad.stderr and bad.stderr.count("\n") == 1
 
 
-def test_reproduce_quick_writes_results(capsys, tmp_path):
-    status, out, _ = run(capsys, "reproduce", "--quick", "--out", str(tmp_path))
+def test_study_command_writes_results(capsys, tmp_path):
+    status, out, _ = run(capsys, "study", "scenes", "--quick", "--out", str(tmp_path))
     assert status == 0
     record = json.loads((tmp_path / "scenes.json").read_text())
     assert record["parameters"]["fraction"] == 0.1 and record["provenance"]["packages"]["jax"]
@@ -190,3 +190,7 @@ def test_reproduce_quick_writes_results(capsys, tmp_path):
     assert {r["scene"] for r in rows} >= {"projectile", "cloth"}
     # the two backends agree to round-off on every scene
     assert max(r["backend_difference"] for r in rows) < 1e-9
+    status, out, _ = run(capsys, "study", "scenes", "--quick", "--out", str(tmp_path))
+    assert status == 0 and "scenes (cached)" in out
+    status, out, _ = run(capsys, "study", "--list")
+    assert {"truncation", "stability", "work_precision", "frame_rate", "scenes"} <= set(out.split())

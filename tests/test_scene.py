@@ -150,7 +150,19 @@ def test_no_bodies_and_no_simulation():
 
 
 def test_unknown_scene_lists_builtins(tmp_path):
-    with pytest.raises(SceneError, match="built-in scenes are cloth"):
+    with pytest.raises(SceneError, match="built-in scenes are .*cloth"):
         load_scene("no-such-scene")
     with pytest.raises(SceneError, match="cannot read"):
         load_scene(tmp_path / "missing.toml")
+
+
+def test_pinned_bodies_never_move():
+    with pytest.raises(SceneError, match="bodies\\[0\\].velocity: a pinned body never moves"):
+        parse_scene(MINIMAL.replace("position = [0.0, 0.0, 0.0]", "position = [0.0, 0.0, 0.0]\n"
+                                    "velocity = [1.0, 0.0, 0.0]\npinned = true", 1))
+    from integrators import simulate
+
+    scene = parse_scene('[simulation]\ndt = 0.01\nt_end = 1.0\n[[soft_bodies]]\nname = "c"\nshape = "box"\n'
+                        "mass = 8.0\nstiffness = 100.0\nvelocity = [1.0, 0.0, 0.0]\npinned = [7]\n")
+    traj = simulate(scene.model, "semi-implicit-euler", scene.y0, 0, 1, 0.01)
+    np.testing.assert_array_equal(traj.positions[:, 7], np.broadcast_to(scene.y0[0, 7], (101, 3)))

@@ -132,3 +132,47 @@ def test_interrupted_run_leaves_no_partial_files_and_resumes(tmp_path):
     assert runner.run_study(_toy_study(calls, name="a"), tmp_path)["cached"]
     assert not runner.run_study(_toy_study(calls, name="b"), tmp_path)["cached"]
     assert json.loads((tmp_path / "b.json").read_text())["value"] == 3
+
+
+def test_recommend_meets_the_tolerance_when_run_independently():
+    """Re-run what `recommend` picks on the NumPy path: the error stays under the tolerance."""
+    from integrators import simulate
+    from studies.problems import scene_problem
+    from studies.work_precision import recommend
+
+    problem = scene_problem("drag-projectile", 2.0, "drag")
+    truth, _ = true_final(problem)
+    for tol in (1e-3, 1e-7):
+        choice = recommend(problem, tol)
+        traj = simulate(problem.model, choice["integrator"], problem.y0, problem.t_start, problem.t_end,
+                        choice["dt"])
+        assert traj.t[-1] == pytest.approx(problem.t_end)
+        assert np.max(np.abs(traj.positions[-1] - truth[0])) <= tol
+        assert choice["error"] <= tol and choice["seconds"] > 0
+
+
+def test_recommend_names_the_reference_when_no_fixed_step_gets_there():
+    from studies.work_precision import recommend
+
+    choice = recommend(oscillator_problem(t_end=0.3), 1e-12)
+    assert choice["integrator"] in ("rk4", "diffrax-dopri8")
+    if choice["integrator"] == "diffrax-dopri8":
+        assert "no fixed-step method reaches" in choice["note"]
+
+
+def test_pareto_front():
+    from studies.work_precision import pareto
+
+    points = [{"error": 1.0, "seconds": 1.0}, {"error": 0.5, "seconds": 2.0}, {"error": 2.0, "seconds": 3.0},
+              {"error": None, "seconds": 0.1}]
+    assert pareto(points, "seconds") == [0, 1]
+
+
+def test_frame_rate_fixed_step_is_bit_identical_and_naive_is_not():
+    from studies.frame_rate import compute, parameters
+
+    record = compute(parameters(quick=True))
+    assert record["fixed_bit_identical"]
+    assert len({r["fixed_steps"] for r in record["runs"]}) == 1
+    assert record["final_state_spread"]["fixed"] == 0.0
+    assert record["final_state_spread"]["naive"] > 1e-3

@@ -1,0 +1,57 @@
+"""Shared test setup: 64-bit JAX, importable project and helpers, common fixtures."""
+
+from __future__ import annotations
+
+import sys
+from pathlib import Path
+
+import pytest
+
+_TESTS = Path(__file__).resolve().parent
+_ROOT = _TESTS.parent
+# The project root (physics, integrators) and tests/ (helpers) must be importable whether
+# or not steplab is installed and whichever pytest import mode is configured.
+for _path in (_ROOT, _TESTS):
+    if str(_path) not in sys.path:
+        sys.path.insert(0, str(_path))
+
+import jax  # noqa: E402
+
+# Importing physics turns on float64 in JAX; do it here as well, before any test module
+# creates a JAX array, so no test depends on import order.
+jax.config.update("jax_enable_x64", True)
+import helpers  # noqa: E402
+
+import physics  # noqa: E402, F401
+
+
+def pytest_configure(config):
+    assert jax.config.jax_enable_x64, "tests need jax_enable_x64 (float64 JAX arrays)"
+
+
+@pytest.fixture
+def rng():
+    """A seeded generator: every random test case is reproducible."""
+    import numpy as np
+
+    return np.random.default_rng(20240611)
+
+
+@pytest.fixture
+def oscillator():
+    """Undamped body on a spring to a pinned anchor; period 1 s, exact solution attached."""
+    return helpers.oscillator()
+
+
+@pytest.fixture
+def damped_oscillator():
+    """The same oscillator with a damper (zeta = 0.1); exact solution attached."""
+    import math
+
+    return helpers.oscillator(damping=0.2 * 2 * math.pi, velocity=0.3, direction=(2.0, -1.0, 2.0))
+
+
+@pytest.fixture
+def lecture_projectile():
+    """The lecture's projectile: m = 2.5 kg, p = (10, 0, 2), V = (7.68, 0, 29), t0 = 5 s."""
+    return helpers.lecture_projectile()
