@@ -2,15 +2,15 @@
 
 from __future__ import annotations
 
-import contextlib
-import os
-import tempfile
+import io
 from pathlib import Path
 
 import matplotlib
 
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
+
+from steplab.io import write_atomic  # noqa: E402
 
 #: one colour and marker per integrator, so a method looks the same in every figure
 STYLE = {
@@ -32,20 +32,13 @@ def style(name: str) -> dict:
 
 def save_figure(fig, out: Path, stem: str) -> list[str]:
     """Write ``stem.png`` and ``stem.svg`` into ``out`` atomically; return their names."""
-    out.mkdir(parents=True, exist_ok=True)
     names = []
     for ext in ("png", "svg"):
-        target = out / f"{stem}.{ext}"
-        fd, tmp = tempfile.mkstemp(dir=out, prefix=f".{stem}.", suffix=f".{ext}")
-        os.close(fd)
-        try:
-            fig.savefig(tmp, format=ext, dpi=150, bbox_inches="tight",
-                        metadata={"Date": None} if ext == "svg" else {"Software": None})
-            os.replace(tmp, target)
-        except BaseException:
-            with contextlib.suppress(FileNotFoundError):
-                os.unlink(tmp)
-            raise
-        names.append(target.name)
+        buffer = io.BytesIO()
+        # no dates or versions in the files: the same record gives the same bytes
+        fig.savefig(buffer, format=ext, dpi=150, bbox_inches="tight",
+                    metadata={"Date": None} if ext == "svg" else {"Software": None})
+        write_atomic(Path(out) / f"{stem}.{ext}", buffer.getvalue())
+        names.append(f"{stem}.{ext}")
     plt.close(fig)
     return names
