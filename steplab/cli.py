@@ -84,6 +84,17 @@ def build_parser() -> argparse.ArgumentParser:
                    "intersection testing (default: the scene's [collisions], else none)")
     p.add_argument("--json", action="store_true", help="print the summary as JSON")
 
+    p = sub.add_parser("animate", help="render a simulation as an animation (GIF), alone or side by side")
+    p.add_argument("scene", help="built-in scene name or path to a TOML file")
+    p.add_argument("--integrator", help="integrator name (default: the scene's)")
+    p.add_argument("--compare", metavar="A,B",
+                   help="side by side: comma-separated integrators (e.g. euler,velocity-verlet)")
+    p.add_argument("--dt", type=_positive, help="time step, s (default: the scene's)")
+    p.add_argument("--t-end", type=_finite, help="end time, s (default: the scene's)")
+    p.add_argument("--fps", type=_count, default=30, help="frames per second (default: 30)")
+    p.add_argument("--view", choices=("xy", "xz", "yz"), help="plane shown (default: the two axes moved along most)")
+    p.add_argument("--out", type=Path, required=True, help="FILE.gif (or FILE.mp4 where ffmpeg is installed)")
+
     p = sub.add_parser("recommend", help="the cheapest integrator and dt that meet an error tolerance")
     p.add_argument("scene", help="built-in scene name or path to a TOML file")
     p.add_argument("--tol", type=_positive, required=True, help="largest final position error, m")
@@ -116,7 +127,8 @@ def main(argv=None) -> int:
     from studies.work_precision import NoFixedStepError
 
     command = {"integrators": cmd_integrators, "scenes": cmd_scenes, "run": cmd_run,
-               "recommend": cmd_recommend, "study": cmd_study, "reproduce": cmd_reproduce}[args.command]
+               "animate": cmd_animate, "recommend": cmd_recommend, "study": cmd_study,
+               "reproduce": cmd_reproduce}[args.command]
     try:
         return command(args) or 0
     except (SceneError, UnknownIntegratorError, NotConstantForceError, ValueError) as err:
@@ -286,6 +298,36 @@ def _print_run(s: dict) -> None:
 
 def _vec(v) -> str:
     return "(" + ", ".join(f"{x:10.5g}" for x in v) + ")"
+
+
+# --- animate ------------------------------------------------------------------------
+
+
+def cmd_animate(args) -> int:
+    from integrators import get_integrator, simulate
+    from physics.scene import load_scene
+    from steplab.animate import animate
+
+    if args.out.suffix.lower() not in (".gif", ".mp4"):
+        raise ValueError(f"--out {args.out}: unknown animation format {args.out.suffix or '(none)'!r}; use .gif")
+    scene = load_scene(args.scene)
+    names = [n.strip() for n in args.compare.split(",")] if args.compare else [args.integrator or scene.integrator]
+    if args.compare and len(names) < 2:
+        raise ValueError(f"--compare needs at least two comma-separated integrators, got {args.compare!r}")
+    methods = [get_integrator(n) for n in names]
+    dt = args.dt if args.dt is not None else scene.dt
+    t_end = args.t_end if args.t_end is not None else scene.t_end
+    if not t_end > scene.t_start:
+        raise ValueError(f"--t-end {t_end:g} must be later than the scene's t_start = {scene.t_start:g}")
+    steps = int((t_end - scene.t_start) / dt)
+    runs = []
+    for method in methods:
+        traj = simulate(scene.model, method, scene.y0, scene.t_start, t_end, dt,
+                        save_every=max(1, steps // 300))
+        runs.append((f"{scene.name}: {method.name}, dt = {dt:g} s", traj))
+    path = animate(runs, scene.model, args.out, fps=args.fps, view=args.view)
+    print(f"animation written to {path} ({', '.join(m.name for m in methods)})")
+    return 0
 
 
 # --- recommend ----------------------------------------------------------------------

@@ -194,3 +194,30 @@ def test_study_command_writes_results(capsys, tmp_path):
     assert status == 0 and "scenes (cached)" in out
     status, out, _ = run(capsys, "study", "--list")
     assert {"truncation", "stability", "work_precision", "frame_rate", "scenes"} <= set(out.split())
+
+
+def test_animate_writes_a_gif_side_by_side(capsys, tmp_path):
+    from PIL import Image
+
+    out = tmp_path / "a.gif"
+    status, text, _ = run(capsys, "animate", "oscillator", "--compare", "euler,velocity-verlet", "--t-end", "0.2",
+                          "--fps", "5", "--out", str(out))
+    assert status == 0 and "euler, velocity-verlet" in text
+    with Image.open(out) as gif:
+        assert gif.n_frames == 21 and gif.size[0] > gif.size[1]  # two panels side by side
+    assert not [p for p in tmp_path.iterdir() if p.name.startswith(".")]
+
+
+@pytest.mark.parametrize("argv,message", [
+    (["animate", "oscillator", "--out", "a.txt"], "unknown animation format '.txt'"),
+    (["animate", "oscillator", "--compare", "euler", "--out", "a.gif"], "--compare needs at least two"),
+    (["animate", "oscillator", "--compare", "euler,nope", "--out", "a.gif"], "unknown integrator 'nope'"),
+    (["recommend", "oscillator", "--tol", "-1"], "--tol: must be > 0"),
+    (["study", "nope"], "unknown study 'nope'"),
+])
+def test_more_bad_input_status_2(capsys, argv, message):
+    with pytest.raises(SystemExit) as exit_:
+        sys.exit(main(argv))
+    assert exit_.value.code == 2
+    err = capsys.readouterr().err
+    assert message in err and err.count("\n") == 1

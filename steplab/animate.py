@@ -1,0 +1,122 @@
+"""``steplab animate``: a simulation as an animation, alone or side by side, for teaching.
+
+Each panel shows the bodies (circles of their true radius) and springs in the plane of the
+two axes the motion spans most, and below it the energy against time, so a class sees
+both the motion and what the integrator does to the energy.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+#: at most this many frames are drawn (the trajectory is subsampled to fit)
+MAX_FRAMES = 150
+AXIS_NAMES = "xyz"
+
+
+def animate(runs: list[tuple[str, object]], model, out: str | Path, fps: int = 30, view: str | None = None) -> Path:
+    """Write an animation of one or more runs of the same scene, one panel each.
+
+    Parameters
+    ----------
+    runs : list of (label, Trajectory)
+    model : physics.Model
+        The scene's model (body radii, springs, energy).
+    out : path ending in .gif (Pillow) or .mp4 (ffmpeg, if installed)
+    view : "xy", "xz" or "yz", optional
+        The plane shown; by default the two axes the motion spans most.
+    """
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    from matplotlib import animation
+    from matplotlib.collections import LineCollection, PatchCollection
+    from matplotlib.patches import Circle
+
+    from physics import Springs
+
+    out = Path(out)
+    writers = {".gif": lambda: animation.PillowWriter(fps=fps)}
+    if animation.FFMpegWriter.isAvailable():
+        writers[".mp4"] = lambda: animation.FFMpegWriter(fps=fps)
+    if out.suffix.lower() not in writers:
+        raise ValueError(f"--out {out}: unknown animation format {out.suffix or '(none)'!r}; "
+                         f"use {' or '.join(writers)}")
+
+    if view is not None:
+        axes_idx = [AXIS_NAMES.index(a) for a in view]
+    else:
+        positions = np.concatenate([traj.positions for _, traj in runs])
+        spans = np.ptp(positions[np.isfinite(positions).all(axis=-1)], axis=0)
+        axes_idx = sorted(np.argsort(spans)[-2:]) if spans.max() > 0 else [0, 2]
+    radii = np.asarray(model.radii, dtype=float)
+    springs = [f for f in model.forces if isinstance(f, Springs)]
+    pairs = np.concatenate([np.stack([np.asarray(f.i), np.asarray(f.j)], 1) for f in springs]) if springs else None
+
+    frames = min(MAX_FRAMES, max(len(traj.t) for _, traj in runs))
+    fig, grid = plt.subplots(2, len(runs), figsize=(5.2 * len(runs), 6.4), squeeze=False,
+                             gridspec_kw={"height_ratios": [3, 1]})
+    artists = []
+    for col, (label, traj) in enumerate(runs):
+        ax, eax = grid[0][col], grid[1][col]
+        lo, hi = _window(traj.positions[..., axes_idx], radii.max())
+        ax.set_xlim(lo[0], hi[0])
+        ax.set_ylim(lo[1], hi[1])
+        ax.set_aspect("equal")
+        ax.set_xlabel(f"{AXIS_NAMES[axes_idx[0]]} (m)")
+        ax.set_ylabel(f"{AXIS_NAMES[axes_idx[1]]} (m)")
+        ax.set_title(label, fontsize=10)
+        lines = LineCollection([], colors="0.5", linewidths=0.8)
+        ax.add_collection(lines)
+        circles = PatchCollection([Circle((0, 0), r) for r in radii], facecolor="tab:blue", edgecolor="k",
+                                  linewidth=0.5)
+        ax.add_collection(circles)
+        clock = ax.text(0.02, 0.95, "", transform=ax.transAxes, fontsize=9, va="top")
+        energy = np.array([float(model.energy(y)) for y in traj.y])
+        eax.plot(traj.t, energy, color="0.7", lw=1)
+        marker, = eax.plot([], [], "o", color="tab:red", ms=4)
+        eax.set_xlabel("time t (s)")
+        eax.set_ylabel("energy (J)")
+        picks = np.linspace(0, len(traj.t) - 1, frames).round().astype(int)
+        artists.append((traj, picks, lines, circles, clock, marker, energy))
+
+    def draw(frame):
+        changed = []
+        for traj, picks, lines, circles, clock, marker, energy in artists:
+            k = picks[frame]
+            q = traj.positions[k][:, axes_idx]
+            circles.set_paths([Circle(tuple(c), r) for c, r in zip(q, radii)])
+            if pairs is not None:
+                lines.set_segments(np.stack([q[pairs[:, 0]], q[pairs[:, 1]]], axis=1))
+            clock.set_text(f"t = {traj.t[k]:.2f} s")
+            marker.set_data([traj.t[k]], [energy[k]])
+            changed += [lines, circles, clock, marker]
+        return changed
+
+    fig.tight_layout()
+    anim = animation.FuncAnimation(fig, draw, frames=frames, interval=1000 / fps, blit=False)
+    out.parent.mkdir(parents=True, exist_ok=True)
+    tmp = out.with_name(f".{out.name}.tmp{out.suffix}")
+    try:
+        anim.save(tmp, writer=writers[out.suffix.lower()]())
+        tmp.replace(out)  # atomic: never a half-written animation under the real name
+    finally:
+        tmp.unlink(missing_ok=True)
+        plt.close(fig)
+    return out
+
+
+def _window(q, pad):
+    """Plot limits around the finite positions q (..., 2), square enough to read a 1-D motion.
+
+    Each panel gets its own window, so a run that blows up does not shrink the others.
+    """
+    q = q.reshape(-1, 2)
+    q = q[np.isfinite(q).all(axis=1)]
+    lo, hi = q.min(axis=0), q.max(axis=0)
+    centre, half = (lo + hi) / 2, (hi - lo) / 2
+    half = np.maximum(half, 0.5 * half.max()) + pad + 0.05 * half.max()
+    return centre - half, centre + half
