@@ -16,6 +16,8 @@ from pathlib import Path
 
 EXIT_BAD_INPUT = 2
 EXIT_DIVERGED = 1
+#: 128 + SIGINT, what a shell reports for a Ctrl-C
+EXIT_INTERRUPTED = 130
 
 
 class _Parser(argparse.ArgumentParser):
@@ -95,6 +97,11 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--view", choices=("xy", "xz", "yz"), help="plane shown (default: the two axes moved along most)")
     p.add_argument("--out", type=Path, required=True, help="FILE.gif (or FILE.mp4 where ffmpeg is installed)")
 
+    p = sub.add_parser("paper", help="regenerate paper/paper.md, its figures and HTML from study results")
+    p.add_argument("--results", type=Path, default=Path("results"), help="results folder (default: results/)")
+    p.add_argument("--paper-dir", type=Path, default=Path("paper"), help="paper folder (default: paper/)")
+    p.add_argument("--no-tutorial", action="store_true", help="do not re-run the tutorial's code blocks")
+
     p = sub.add_parser("recommend", help="the cheapest integrator and dt that meet an error tolerance")
     p.add_argument("scene", help="built-in scene name or path to a TOML file")
     p.add_argument("--tol", type=_positive, required=True, help="largest final position error, m")
@@ -108,6 +115,13 @@ def build_parser() -> argparse.ArgumentParser:
 
     p = sub.add_parser("reproduce", help="run every study and write the results")
     _study_options(p)
+
+    p = sub.add_parser("bench", help="time steplab against diffrax, scipy, Numba and the memory bound")
+    p.add_argument("--quick", action="store_true", help="fewer repeats and batches (under about a minute)")
+    p.add_argument("--json", type=Path, metavar="FILE", help="write every ratio and the medians behind it to FILE")
+    p.add_argument("--markdown", action="store_true", help="print the table as Markdown (the README's)")
+    p.add_argument("--from", dest="source", type=Path, metavar="FILE",
+                   help="print the table of a record written by --json instead of running")
     return parser
 
 
@@ -118,29 +132,52 @@ def _study_options(p) -> None:
 
 
 def main(argv=None) -> int:
-    args = build_parser().parse_args(argv)
+    # a name that is not UTF-8 (a surrogate escape from argv) prints escaped, never crashes
+    if callable(getattr(sys.stdout, "reconfigure", None)):
+        sys.stdout.reconfigure(errors="backslashreplace")
+    command = None
+    try:  # Ctrl-C anywhere from here on ends with one line and status 130, never a traceback
+        args = build_parser().parse_args(argv)
+        command = args.command
+        import numpy as np
+
+        # runs detect non-finite states themselves: no floating-point warnings on stderr
+        with np.errstate(all="ignore"):
+            return _run_command(args)
+    except KeyboardInterrupt:
+        return _fail(command, "interrupted", EXIT_INTERRUPTED)
+
+
+def _run_command(args) -> int:
     from integrators import UnknownIntegratorError
     from integrators.exact import NotConstantForceError
     from integrators.references import ReferenceFailedError
     from integrators.simulate import DivergenceError
     from physics.scene import SceneError
+    from steplab.paper import PaperError
     from studies.work_precision import NoFixedStepError
 
     command = {"integrators": cmd_integrators, "scenes": cmd_scenes, "run": cmd_run,
-               "animate": cmd_animate, "recommend": cmd_recommend, "study": cmd_study,
-               "reproduce": cmd_reproduce}[args.command]
+               "animate": cmd_animate, "paper": cmd_paper, "recommend": cmd_recommend, "study": cmd_study,
+               "reproduce": cmd_reproduce, "bench": cmd_bench}[args.command]
     try:
         return command(args) or 0
-    except (SceneError, UnknownIntegratorError, NotConstantForceError, ValueError) as err:
+    except (SceneError, UnknownIntegratorError, NotConstantForceError, PaperError, ValueError) as err:
         return _fail(args.command, str(err), EXIT_BAD_INPUT)
     except (DivergenceError, ReferenceFailedError, NoFixedStepError) as err:
         return _fail(args.command, str(err), EXIT_DIVERGED)
-    except KeyboardInterrupt:
-        return _fail(args.command, "interrupted", 130)
+    except OSError as err:  # an unwritable --out or results folder, a full disk
+        where = f"{err.filename}: " if err.filename else ""
+        return _fail(args.command, f"{where}{err.strerror or err}", EXIT_BAD_INPUT)
+    except MemoryError:
+        return _fail(args.command, "out of memory (try a smaller scene, a shorter run or --save-every)",
+                     EXIT_BAD_INPUT)
 
 
-def _fail(command: str, message: str, status: int) -> int:
-    print(f"steplab {command}: error: {message}", file=sys.stderr)
+def _fail(command: str | None, message: str, status: int) -> int:
+    """Print one line (a message's own line breaks escaped) and return ``status``."""
+    message = str(message).replace("\r", "\\r").replace("\n", "\\n")
+    print(f"steplab {command}: error: {message}" if command else f"steplab: error: {message}", file=sys.stderr)
     return status
 
 
@@ -305,6 +342,7 @@ def _vec(v) -> str:
 
 def cmd_animate(args) -> int:
     from integrators import get_integrator, simulate
+    from integrators.simulate import step_count
     from physics.scene import load_scene
     from steplab.animate import animate
 
@@ -319,7 +357,7 @@ def cmd_animate(args) -> int:
     t_end = args.t_end if args.t_end is not None else scene.t_end
     if not t_end > scene.t_start:
         raise ValueError(f"--t-end {t_end:g} must be later than the scene's t_start = {scene.t_start:g}")
-    steps = int((t_end - scene.t_start) / dt)
+    steps = step_count(scene.t_start, t_end, dt)  # ValueError, not OverflowError, for t_end = 1e308
     runs = []
     for method in methods:
         traj = simulate(scene.model, method, scene.y0, scene.t_start, t_end, dt,
@@ -327,6 +365,19 @@ def cmd_animate(args) -> int:
         runs.append((f"{scene.name}: {method.name}, dt = {dt:g} s", traj))
     path = animate(runs, scene.model, args.out, fps=args.fps, view=args.view)
     print(f"animation written to {path} ({', '.join(m.name for m in methods)})")
+    return 0
+
+
+# --- paper --------------------------------------------------------------------------
+
+
+def cmd_paper(args) -> int:
+    from steplab.paper import build
+
+    if not (args.paper_dir / "paper.template.md").exists():
+        raise ValueError(f"--paper-dir {args.paper_dir}: no paper.template.md there (run from the repository root)")
+    for path in build(args.results, args.paper_dir, tutorial=not args.no_tutorial):
+        print(f"wrote {path}")
     return 0
 
 
@@ -412,6 +463,15 @@ def _print_summary(records) -> None:
             print(f"  figure: {figure}")
     if records:
         print("results in the output folder as <study>.json")
+
+
+# --- bench --------------------------------------------------------------------------
+
+
+def cmd_bench(args) -> int:
+    from steplab.bench import command
+
+    return command(args)
 
 
 if __name__ == "__main__":
