@@ -101,6 +101,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--results", type=Path, default=Path("results"), help="results folder (default: results/)")
     p.add_argument("--paper-dir", type=Path, default=Path("paper"), help="paper folder (default: paper/)")
     p.add_argument("--no-tutorial", action="store_true", help="do not re-run the tutorial's code blocks")
+    p.add_argument("--pdf", action="store_true", help="also print the HTML to PDF (needs Debian's chromium)")
 
     p = sub.add_parser("recommend", help="the cheapest integrator and dt that meet an error tolerance")
     p.add_argument("scene", help="built-in scene name or path to a TOML file")
@@ -376,7 +377,7 @@ def cmd_paper(args) -> int:
 
     if not (args.paper_dir / "paper.template.md").exists():
         raise ValueError(f"--paper-dir {args.paper_dir}: no paper.template.md there (run from the repository root)")
-    for path in build(args.results, args.paper_dir, tutorial=not args.no_tutorial):
+    for path in build(args.results, args.paper_dir, tutorial=not args.no_tutorial, pdf=args.pdf):
         print(f"wrote {path}")
     return 0
 

@@ -170,8 +170,9 @@ def load_records(results: Path) -> dict:
     return records
 
 
-def build(results: Path, paper: Path = Path("paper"), tutorial: bool = True, html: bool = True) -> list[Path]:
-    """Regenerate ``paper/paper.md``, its data and figures (and the tutorial's), and HTML."""
+def build(results: Path, paper: Path = Path("paper"), tutorial: bool = True, html: bool = True,
+          pdf: bool = False) -> list[Path]:
+    """Regenerate ``paper/paper.md``, its data and figures (and the tutorial's), HTML and PDF."""
     paper = Path(paper)
     template = (paper / "paper.template.md").read_text()
     # key order matters (it orders table rows): keep it, and render from exactly what is saved
@@ -197,7 +198,28 @@ def build(results: Path, paper: Path = Path("paper"), tutorial: bool = True, htm
                 target = paper / f"{name}.html"
                 write_atomic(target, to_html((paper / f"{name}.md").read_text(), bib).encode())
                 written.append(target)
+                if pdf:
+                    written.append(to_pdf(target))
     return written
+
+
+def to_pdf(html_path: Path) -> Path:
+    """Print an HTML page to PDF with headless Chromium (Debian's ``chromium`` package)."""
+    import shutil
+    import subprocess
+    import tempfile
+
+    browser = shutil.which("chromium") or shutil.which("chromium-browser")
+    if browser is None:
+        raise PaperError("--pdf needs Chromium: install it with `apt-get install chromium`")
+    target = html_path.with_suffix(".pdf")
+    with tempfile.TemporaryDirectory() as profile:
+        subprocess.run([browser, "--headless", "--no-sandbox", "--disable-gpu", "--disable-quic", "--no-first-run",
+                        "--disable-background-networking", "--disable-component-update", "--disable-sync",
+                        f"--user-data-dir={profile}", "--no-pdf-header-footer",
+                        f"--print-to-pdf={target.resolve()}", html_path.resolve().as_uri()],
+                       check=True, capture_output=True, timeout=120)
+    return target
 
 
 # --- tutorial -----------------------------------------------------------------------
@@ -259,10 +281,14 @@ def to_html(markdown_text: str, bib: dict) -> str:
             f'<em>{bib.get(k, {}).get("title", "")}</em>. {bib.get(k, {}).get("journal", "")} '
             f'{bib.get(k, {}).get("url", "")}</p>' for k in cited)
     body = markdown.markdown(text, extensions=["tables", "fenced_code", "toc"])
+    # a paragraph holding only an image is a figure: show its alt text as the caption
+    body = re.sub(r'<p><img alt="([^"]*)" src="([^"]+)" ?/?></p>',
+                  r'<figure><img alt="\1" src="\2"><figcaption>\1</figcaption></figure>', body)
     title = re.search(r"<h1[^>]*>(.*?)</h1>", body)
     return (f"<!DOCTYPE html>\n<html><head><meta charset=\"utf-8\"><title>{title.group(1) if title else 'steplab'}"
             "</title><style>body{max-width:52em;margin:2em auto;font-family:Georgia,serif;line-height:1.5;"
             "padding:0 1em}img{max-width:100%}table{border-collapse:collapse;font-size:.85em}"
             "td,th{border:1px solid #bbb;padding:.2em .5em}code,pre{background:#f4f4f4}"
-            "pre{padding:.6em;overflow-x:auto}figcaption,em{color:#333}</style></head><body>\n"
+            "pre{padding:.6em;overflow-x:auto}figure{margin:1.5em 0}figcaption{font-size:.9em;color:#333}"
+            "@media print{body{max-width:none;font-size:10pt}figure,table{break-inside:avoid}}</style></head><body>\n"
             f"{body}\n</body></html>\n")
