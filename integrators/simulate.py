@@ -15,6 +15,9 @@ MAX_STEPS = 10_000_000
 DIVERGENCE_FACTOR = 1e12
 #: relative slack when dividing the interval by dt, so 0.2 / 0.2 is one step, not zero
 STEP_COUNT_SLACK = 1e-9
+#: largest trajectory a run keeps in memory, bytes: a longer one must save fewer states
+#: (save_every) instead of ending in an out-of-memory kill
+MAX_TRAJECTORY_BYTES = 2 * 2**30
 
 
 class DivergenceError(ArithmeticError):
@@ -67,8 +70,29 @@ class Trajectory:
 
 
 def step_count(t_start: float, t_end: float, dt: float) -> int:
-    """Whole fixed steps of ``dt`` in [t_start, t_end]; the run ends at t_start + n dt."""
-    return int(np.floor((t_end - t_start) / dt * (1 + STEP_COUNT_SLACK)))
+    """Whole fixed steps of ``dt`` in [t_start, t_end]; the run ends at t_start + n dt.
+
+    ValueError when the count itself overflows (t_end = 1e300 with dt = 1e-10).
+    """
+    steps = np.floor((t_end - t_start) / dt * (1 + STEP_COUNT_SLACK))
+    if not np.isfinite(steps):
+        raise ValueError(f"[{t_start:g}, {t_end:g}] s holds more steps of dt = {dt:g} s than a float can count")
+    return int(steps)
+
+
+def check_time_advances(t_start: float, t_end: float, dt: float, dtype) -> None:
+    """ValueError unless every step advances time: dt must be at least the floating-point
+    spacing (one unit in the last place) at the run's largest |t|, in the run's precision.
+
+    A smaller dt makes ``t + dt == t`` (or t + dt skip ahead unevenly): time would stand
+    still while the state moves, or a loop ``while t < t_end: t += dt`` would never end.
+    """
+    t_far = np.asarray(max(abs(t_start), abs(t_end)), dtype=dtype)
+    smallest = float(np.spacing(t_far))
+    if not dt >= smallest:
+        raise ValueError(f"dt = {dt:g} s is smaller than the {np.dtype(dtype).name} spacing {smallest:g} s at "
+                         f"t = {float(t_far):g} s: t + dt would round back to t, so time would not advance "
+                         "(use a larger dt, or a t_start nearer 0)")
 
 
 def saved_steps(n: int, save_every: int) -> np.ndarray:
@@ -127,16 +151,26 @@ def simulate(model, integrator, y0, t_start: float, t_end: float, dt: float, *,
         collisions = None  # the detector "none": no collision handling at all
     if collisions is not None:
         _check_collisions(integrator, backend)
+    dtype = np.dtype(dtype or model.dtype)
+    check_time_advances(t_start, t_end, dt, dtype)
     n = step_count(t_start, t_end, dt)
     if n > max_steps:
         raise ValueError(f"{n} steps of dt = {dt:g} s exceed the limit of {max_steps} "
                          f"(raise it with max_steps / --max-steps)")
     if n < 1:
         raise ValueError(f"t_end - t_start = {t_end - t_start:g} s is shorter than one step dt = {dt:g} s")
-    dtype = np.dtype(dtype or model.dtype)
     saves = saved_steps(n, save_every)
+    size = len(saves) * np.size(y0) * dtype.itemsize
+    if size > MAX_TRAJECTORY_BYTES:
+        raise ValueError(f"keeping {len(saves)} states of {np.size(y0)} numbers would take {size / 2**30:.3g} GiB, "
+                         f"more than the limit of {MAX_TRAJECTORY_BYTES / 2**30:g} GiB (save fewer states: "
+                         "save_every / --save-every)")
     ts = t_start + saves * dt
     limit = divergence_limit(y0, dtype)
+    largest = float(np.max(np.abs(y0)))
+    if not largest <= limit:  # also NaN
+        raise ValueError(f"the initial state is non-finite or too large to integrate in {dtype.name} (largest "
+                         f"|component| {largest:g}; states beyond {limit:g} count as diverged)")
 
     if isinstance(integrator, Solver):
         backend = integrator.backend
@@ -161,8 +195,8 @@ def simulate(model, integrator, y0, t_start: float, t_end: float, dt: float, *,
 
 def _check_collisions(integrator, backend):
     if isinstance(integrator, Solver):
-        raise ValueError(f"collisions need a fixed-step integrator; '{integrator.name}' is a "
-                         f"{integrator.kind} solver (run it with the detector 'none')")
+        raise ValueError(f"collisions need a fixed-step integrator, not the {integrator.kind} solver "
+                         f"'{integrator.name}' (use the detector 'none')")
     if backend != "numpy":
         raise ValueError(f"collision detection runs on the NumPy backend only, not {backend!r} "
                          f"(use backend 'numpy', or the detector 'none')")

@@ -29,6 +29,8 @@ DEFAULT_MATERIAL = "default"  # as physics.collision.shapes.DEFAULT_MATERIAL
 #: largest scene the loader builds (bodies; all-pairs soft bodies count their pairs)
 MAX_BODIES = 1_000_000
 MAX_PAIRS = 5_000_000
+#: largest scene file read (bytes): a hostile path such as /dev/zero is refused, not read forever
+MAX_SCENE_BYTES = 16 * 2**20
 
 DEFAULT_INTEGRATOR = "semi-implicit-euler"
 
@@ -67,18 +69,23 @@ def load_scene(scene: str | Path) -> Scene:
         label = f"{scene} (built-in)"
     elif path.suffix == ".toml" or path.exists():
         try:
-            text = path.read_bytes()
+            with path.open("rb") as f:
+                text = f.read(MAX_SCENE_BYTES + 1)
         except OSError as err:
             raise SceneError(f"{path}: cannot read: {err.strerror or err}") from None
         label = str(path)
     else:
         raise SceneError(f"unknown scene {str(scene)!r}: not a file, and the built-in scenes are "
                          f"{', '.join(builtin_scenes())}")
-    return parse_scene(text, label, name=path.stem)
+    # a file name that is not UTF-8 (surrogate escapes) must still print as a scene name
+    name = path.stem.encode("utf-8", "surrogateescape").decode("utf-8", "backslashreplace")
+    return parse_scene(text, label, name=name)
 
 
 def parse_scene(text: bytes | str, label: str = "<scene>", name: str = "scene") -> Scene:
     """Build a scene from TOML text; ``label`` names it in error messages."""
+    if len(text) > MAX_SCENE_BYTES:
+        raise SceneError(f"{label}: larger than the limit of {MAX_SCENE_BYTES} bytes for a scene file")
     if isinstance(text, bytes):
         try:
             text = text.decode("utf-8")
@@ -88,7 +95,10 @@ def parse_scene(text: bytes | str, label: str = "<scene>", name: str = "scene") 
         data = tomllib.loads(text)
     except tomllib.TOMLDecodeError as err:
         raise SceneError(f"{label}: malformed TOML: {err}") from None
-    return _SceneBuilder(label).build(data, name)
+    except RecursionError:  # tomllib recurses once per level of [[[...]]] or {a = {b = ...}}
+        raise SceneError(f"{label}: malformed TOML: arrays or inline tables nested too deeply") from None
+    with np.errstate(all="ignore"):  # every derived number is checked; no warnings on stderr
+        return _SceneBuilder(label).build(data, name)
 
 
 class _Table:
@@ -101,7 +111,10 @@ class _Table:
         self.data = data
 
     def fail(self, message: str, key: str | None = None):
-        where = f"{self.where}.{key}" if key and self.where else (key or self.where)
+        if key and key.startswith("["):  # a list element: "vertices[3]", not "vertices.[3]"
+            where = f"{self.where}{key}"
+        else:
+            where = f"{self.where}.{key}" if key and self.where else (key or self.where)
         raise SceneError(f"{self.label}: {where}: {message}" if where else f"{self.label}: {message}")
 
     def allow(self, *keys: str):
@@ -122,7 +135,7 @@ class _Table:
             return None
         if isinstance(value, bool) or not isinstance(value, (int, float)):
             self.fail(f"must be a number, got {_kind(value)}", key)
-        value = float(value)
+        value = _float(value)
         if not math.isfinite(value):
             self.fail(f"must be finite, got {value}", key)
         if positive and not value > 0:
@@ -160,7 +173,7 @@ class _Table:
         if (not isinstance(value, list) or len(value) != 3
                 or any(isinstance(x, bool) or not isinstance(x, (int, float)) for x in value)):
             self.fail(f"must be a list of 3 numbers [x, y, z], got {_short(value)}", key)
-        vec = np.array(value, dtype=float)
+        vec = np.array([_float(x) for x in value])
         if not np.all(np.isfinite(vec)):
             self.fail(f"must be finite, got {_short(value)}", key)
         if positive and not np.all(vec > 0):
@@ -173,8 +186,8 @@ class _Table:
             self.fail(f"must be a non-empty list of [x, y, z], got {_kind(value)}", key)
         if len(value) > maximum:
             self.fail(f"has {len(value)} entries, more than the limit {maximum}", key)
-        return np.array([_Table({"v": v}, f"{self.where}.{key}[{k}]", self.label).vector("v")
-                         for k, v in enumerate(value)])
+        prefix = f"{self.where}.{key}" if self.where else key
+        return np.array([_Table({f"[{k}]": v}, prefix, self.label).vector(f"[{k}]") for k, v in enumerate(value)])
 
     def tables(self, key):
         value = self.data.get(key, [])
@@ -193,6 +206,24 @@ class _Table:
 _REQUIRED = object()
 
 
+def _unit(t: _Table, key: str, vec: np.ndarray) -> np.ndarray:
+    """``vec`` normalised; scaled by its largest component first, so that neither a huge
+    ([1e200, 1e200, 0]) nor a subnormal vector over- or underflows to a zero direction."""
+    scale = np.max(np.abs(vec))
+    if not scale > 0:
+        t.fail("must be a non-zero vector", key)
+    vec = vec / scale
+    return vec / np.linalg.norm(vec)
+
+
+def _float(value) -> float:
+    """A TOML number as a float; an integer too large for a float becomes inf (then refused)."""
+    try:
+        return float(value)
+    except OverflowError:
+        return math.inf if value > 0 else -math.inf
+
+
 def _kind(value) -> str:
     return {bool: "a boolean", int: "an integer", float: "a number", str: "a string",
             list: "a list", dict: "a table"}.get(type(value), type(value).__name__)
@@ -207,6 +238,7 @@ class _SceneBuilder:
     def __init__(self, label: str):
         self.label = label
         self.names: list[str] = []
+        self.index: dict[str, int] = {}  # body name -> index (a list lookup would be O(n^2) in total)
         self.masses: list[float] = []
         self.radii: list[float] = []
         self.positions: list[np.ndarray] = []
@@ -254,10 +286,17 @@ class _SceneBuilder:
                      root.string("description", ""), collisions)
 
     def _append(self, table, name, mass, radius, position, velocity, pinned=False):
-        if name in self.names:
+        if name in self.index:
             table.fail(f"duplicate body name {name!r}", "name")
         if len(self.names) >= MAX_BODIES:
             table.fail(f"more than {MAX_BODIES} bodies")
+        if not np.float64(1.0) / mass < np.inf:  # a subnormal mass: a = F / m would overflow
+            table.fail(f"a body of mass {mass:.3g} kg has no finite inverse mass (the smallest mass is "
+                       f"{1 / np.finfo(float).max:.3g} kg)", "mass")
+        if not (np.all(np.isfinite(position)) and np.all(np.isfinite(velocity))):
+            table.fail(f"body {name!r} would be placed at a non-finite position or velocity (the numbers "
+                       "overflow)")
+        self.index[name] = len(self.names)
         self.names.append(name)
         self.masses.append(mass)
         self.radii.append(radius)
@@ -310,6 +349,8 @@ class _SceneBuilder:
                          k in pinned)
         springs, dampers = soft_body.connect(mesh.vertices, pairs, t.number("stiffness", _REQUIRED, positive=True),
                                              t.number("damping", 0.0, nonnegative=True), offset)
+        if not np.all(np.isfinite(springs.rest_length)):
+            t.fail("vertices so far apart that a spring's rest length overflows")
         self.forces += [f for f in (springs, dampers) if f is not None]
 
     def _indices(self, t: _Table, key: str, n: int) -> list[int]:
@@ -340,6 +381,8 @@ class _SceneBuilder:
         lo, hi = t.vector("box_min", _REQUIRED), t.vector("box_max", _REQUIRED)
         if not np.all(hi > lo):
             t.fail("must exceed box_min in every component", "box_max")
+        if not np.all(np.isfinite(hi - lo)):  # the generator cannot draw from an infinitely wide box
+            t.fail("box_max - box_min overflows: the box is wider than the largest float", "box_max")
         rng = np.random.default_rng(t.integer("seed", 0, 0, 2**63 - 1))
         mass, radius = t.number("mass", _REQUIRED, positive=True), t.number("radius", _REQUIRED, positive=True)
         speed = t.number("speed", 0.0, nonnegative=True)
@@ -356,7 +399,7 @@ class _SceneBuilder:
         value = t._get(key, _REQUIRED)
         if not isinstance(value, list) or any(not isinstance(b, str) for b in value):
             t.fail(f"must be a list of body names, got {_short(value)}", key)
-        index = {n: k for k, n in enumerate(self.names)}
+        index = self.index
         unknown = [b for b in value if b not in index]
         if unknown:
             t.fail(f"names unknown body {unknown[0]!r}", key)
@@ -410,13 +453,10 @@ class _SceneBuilder:
         friction = forces.table("friction")
         if friction is not None:
             friction.allow("mu_static", "mu_dynamic", "height", "normal")
-            normal = friction.vector("normal", [0, 0, 1])
-            length = np.linalg.norm(normal)
-            if not length > 0:
-                friction.fail("must be a non-zero vector", "normal")
+            normal = _unit(friction, "normal", friction.vector("normal", [0, 0, 1]))
             mu_s = friction.number("mu_static", _REQUIRED, nonnegative=True)
             mu_d = friction.number("mu_dynamic", _REQUIRED, nonnegative=True)
-            self.forces.append(Friction(mu_s, mu_d, normal / length, friction.number("height", 0.0),
+            self.forces.append(Friction(mu_s, mu_d, normal, friction.number("height", 0.0),
                                         np.array(self.radii)))
 
     # --- collisions ----------------------------------------------------------------------

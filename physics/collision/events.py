@@ -1,0 +1,122 @@
+"""Collision events: the prologue, the record of every collision, and the epilogue.
+
+The lecture resolves a collision in three parts. The *prologue* learns that a collision
+occurred and may decide to ignore it (a character walks through an invisible wall: only
+a sound plays); the *collision* places the objects at the point of impact and gives them
+new velocities; the *epilogue* propagates the effects (destroy the rocket, play the
+"clink", inflict damage).
+
+Here a prologue is a callable ``prologue(event, log) -> bool``: returning False cancels
+the collision (no push, no impulse; the pair is left alone until the shapes separate, so
+a body crossing a ghost wall is reported once).
+An epilogue is ``epilogue(event, log) -> None``, called after the response with the
+impulse filled in. Every collision, resolved or cancelled, is one :class:`Collision`
+in the run's :class:`CollisionLog`, which ``steplab run --out`` writes beside the
+trajectory.
+"""
+
+from __future__ import annotations
+
+import csv
+import dataclasses
+import io
+
+import numpy as np
+
+#: CSV columns of a collision log
+CSV_COLUMNS = ("t", "kind", "body", "other", "nx", "ny", "nz", "impact_speed", "impulse",
+               "restitution", "t_lo", "t_hi")
+
+
+@dataclasses.dataclass
+class Collision:
+    """One collision between body ``body`` and ``other`` (a body name or a static shape's name).
+
+    Attributes
+    ----------
+    t : float
+        Time of the collision, s (for overlap testing: the end of the bisection bracket).
+    kind : str
+        ``"impact"`` (resolved), ``"trigger"`` (entered a trigger volume) or
+        ``"cancelled"`` (a prologue said no).
+    normal : ndarray, shape (3,)
+        Unit normal from ``body`` towards ``other``.
+    impact_speed : float
+        Approach speed along the normal just before, m/s.
+    impulse : float
+        |Lambda| given to ``body``, N s (0 until resolved).
+    bracket : (float, float)
+        The time interval known to contain the first touch: the bisection bracket for
+        overlap testing, (t, t) for intersection testing.
+    """
+
+    t: float
+    body: int
+    other: int | str
+    body_name: str
+    other_name: str
+    normal: np.ndarray
+    impact_speed: float
+    restitution: float
+    friction: float
+    bracket: tuple[float, float]
+    kind: str = "impact"
+    impulse: float = 0.0
+    #: whether ``other`` is a trigger shape
+    trigger: bool = False
+
+    def as_row(self) -> list:
+        return [repr(self.t), self.kind, self.body_name, self.other_name,
+                *(repr(float(x)) for x in self.normal), repr(self.impact_speed), repr(self.impulse),
+                repr(self.restitution), repr(self.bracket[0]), repr(self.bracket[1])]
+
+
+@dataclasses.dataclass
+class CollisionLog:
+    """Everything the collision stage did during one run."""
+
+    events: list[Collision] = dataclasses.field(default_factory=list)
+    #: bodies an epilogue removed from collision detection (they fly on untouched)
+    removed: set[int] = dataclasses.field(default_factory=set)
+    #: steps in which the bound on impacts per step was reached
+    bound_hits: int = 0
+    #: the most impacts resolved in one step
+    most_impacts_in_a_step: int = 0
+    #: resting-contact corrections (a body put back on a surface it was pressed into)
+    resting_corrections: int = 0
+    #: pairs whose collision a prologue cancelled, left alone until they separate
+    cancelled_pairs: set = dataclasses.field(default_factory=set)
+
+    def remove(self, body: int) -> None:
+        self.removed.add(int(body))
+
+    def count(self, kind: str = "impact") -> int:
+        return sum(1 for e in self.events if e.kind == kind)
+
+    def summary(self) -> dict:
+        return {"impacts": self.count("impact"), "triggers": self.count("trigger"),
+                "cancelled": self.count("cancelled"), "bound_hits": self.bound_hits,
+                "most_impacts_in_a_step": self.most_impacts_in_a_step,
+                "resting_corrections": self.resting_corrections}
+
+    def to_csv(self) -> str:
+        text = io.StringIO()
+        writer = csv.writer(text, lineterminator="\n")
+        writer.writerow(CSV_COLUMNS)
+        writer.writerows(e.as_row() for e in self.events)
+        return text.getvalue()
+
+
+def cancel_triggers(event: Collision, log: CollisionLog) -> bool:
+    """The built-in prologue: a collision with a trigger shape is recorded, never resolved."""
+    return not event.trigger
+
+
+def remove_on_impact(shape_name: str):
+    """An epilogue: a body that hits ``shape_name`` is removed (the rocket that slams into a wall)."""
+
+    def epilogue(event: Collision, log: CollisionLog) -> None:
+        if event.other_name == shape_name:
+            log.remove(event.body)
+
+    return epilogue

@@ -1,0 +1,161 @@
+"""Candidate pairs: what the broadphase hands the narrow phase.
+
+The broadphase (``physics.broadphase``: brute force, uniform grid, sort and sweep, ...)
+finds the pairs of bodies whose bounding spheres overlap; here the bounding sphere of a
+body covers its whole motion over the (sub-)step, so a pair that could touch at any time
+during it is a candidate.
+
+A candidate group is vectorised over its pairs and knows how to test them: body against
+body (:class:`BodyPairs`, sphere-sphere) or bodies against one static shape
+(:class:`ShapePairs`).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+
+from . import time_of_impact as toi
+from .narrow_phase import collide, collide_sphere_sphere
+from .shapes import Shape, Sphere
+
+#: the pair-finding method when a scene names none (a uniform grid, see physics.broadphase)
+DEFAULT_BROADPHASE = "grid"
+#: the method names of physics.broadphase, accepted (as brute force) when it cannot be imported
+FALLBACK_METHODS = ("brute", "grid", "hash", "sap", "sap-coherent", "bvh")
+
+
+def brute_force_pairs(centers, radii) -> np.ndarray:
+    """Every pair i < j with |c_i - c_j| <= r_i + r_j, shape (k, 2), int64, sorted.
+
+    The fallback when ``physics.broadphase`` cannot be imported.
+    """
+    centers, radii = np.asarray(centers, dtype=float), np.asarray(radii, dtype=float)
+    i, j = np.triu_indices(len(radii), k=1)
+    d = centers[j] - centers[i]
+    close = np.sum(d * d, axis=1) <= (radii[i] + radii[j]) ** 2
+    return np.stack([i[close], j[close]], axis=1).astype(np.int64)
+
+
+def broadphase_methods() -> tuple[str, ...]:
+    """The names ``find_pairs`` accepts (those of ``physics.broadphase``)."""
+    try:
+        from physics.broadphase import METHODS
+    except ImportError:  # without numba every method name runs as brute force (the same pairs)
+        return FALLBACK_METHODS
+    return tuple(METHODS)
+
+
+def find_pairs(centers, radii, method: str = DEFAULT_BROADPHASE) -> np.ndarray:
+    """Overlapping sphere pairs (k, 2), int64, i < j, rows sorted, by ``method``.
+
+    Every method of ``physics.broadphase`` returns the same array; without that package
+    (it needs numba) brute force gives it.
+    """
+    try:
+        from physics.broadphase import find_pairs as broadphase_find_pairs
+    except ImportError:
+        return brute_force_pairs(centers, radii)
+    return broadphase_find_pairs(centers, radii, method=method)
+
+
+def _lerp(q0, q1, index, s):
+    """Positions of bodies ``index`` at fraction ``s`` (per pair) along their chords."""
+    p = q0[index]
+    return p if s is None else p + np.asarray(s)[:, None] * (q1[index] - p)
+
+
+@dataclasses.dataclass(frozen=True)
+class BodyPairs:
+    """Candidate pairs of bodies ``i[k] < j[k]``."""
+
+    i: np.ndarray
+    j: np.ndarray
+    trigger = False
+
+    def __len__(self):
+        return len(self.i)
+
+    def subset(self, k) -> BodyPairs:
+        return BodyPairs(self.i[k], self.j[k])
+
+    def key(self, k) -> tuple:
+        return ("bodies", int(self.i[k]), int(self.j[k]))
+
+    def contact(self, radii, q0, q1=None, s=None):
+        """Contacts at the start positions ``q0``, or at fraction ``s`` (per pair) of the chords."""
+        return collide_sphere_sphere(Sphere(_lerp(q0, q1, self.i, s), radii[self.i]),
+                                     Sphere(_lerp(q0, q1, self.j, s), radii[self.j]))
+
+    def time_of_impact(self, radii, q0, q1):
+        return toi.sphere_sphere(q0[self.i], q1[self.i], q0[self.j], q1[self.j], radii[self.i], radii[self.j])
+
+    def velocity_b(self, v):
+        return v[self.j]
+
+    def inverse_mass_b(self, inverse_masses):
+        return inverse_masses[self.j]
+
+
+@dataclasses.dataclass(frozen=True)
+class ShapePairs:
+    """Candidate bodies ``i`` against the static shape ``shape`` (number ``index`` of the world)."""
+
+    index: int
+    shape: Shape
+    i: np.ndarray
+
+    def __len__(self):
+        return len(self.i)
+
+    @property
+    def trigger(self) -> bool:
+        return self.shape.trigger
+
+    def subset(self, k) -> ShapePairs:
+        return ShapePairs(self.index, self.shape, self.i[k])
+
+    def key(self, k) -> tuple:
+        return ("shape", self.index, int(self.i[k]))
+
+    def contact(self, radii, q0, q1=None, s=None):
+        return collide(Sphere(_lerp(q0, q1, self.i, s), radii[self.i]), self.shape)
+
+    def time_of_impact(self, radii, q0, q1):
+        return toi.time_of_impact(q0[self.i], q1[self.i], radii[self.i], self.shape)
+
+    def velocity_b(self, v):
+        return np.zeros((len(self.i), 3))
+
+    def inverse_mass_b(self, inverse_masses):
+        return np.zeros(len(self.i))
+
+
+def candidates(shapes, q0, q1, radii, inverse_masses, method: str, removed=(), margin: float = 0.0) -> list:
+    """The candidate groups for a sub-step in which bodies move from ``q0`` to ``q1``.
+
+    Each body's bounding sphere is centred on the middle of its chord and reaches its
+    radius plus half the chord (plus ``margin``), so it holds the body during the whole
+    sub-step. Pairs of immovable bodies (both pinned) are dropped: nothing can respond.
+    """
+    centers = 0.5 * (q0 + q1)
+    reach = radii + 0.5 * np.sqrt(np.sum((q1 - q0) ** 2, axis=1)) + margin
+    active = np.ones(len(radii), bool)
+    if removed:
+        active[list(removed)] = False
+    index = np.flatnonzero(active)
+    pairs = index[find_pairs(centers[index], reach[index], method)] if len(index) > 1 else np.zeros((0, 2), int)
+    movable = (inverse_masses[pairs[:, 0]] > 0) | (inverse_masses[pairs[:, 1]] > 0)
+    groups = [BodyPairs(pairs[movable, 0], pairs[movable, 1])]
+    moving = index[inverse_masses[index] > 0]
+    for k, shape in enumerate(shapes):
+        bounds = shape.bounds()
+        c, r = centers[moving], reach[moving]
+        if bounds is None:  # a plane: the sphere reaches down to it
+            near = c @ shape.normal - shape.offset <= r
+        else:
+            d = np.clip(c, bounds[0], bounds[1]) - c
+            near = np.sum(d * d, axis=1) <= r * r
+        groups.append(ShapePairs(k, shape, moving[near]))
+    return [g for g in groups if len(g)]

@@ -1,0 +1,73 @@
+"""Resting contact: a body at rest on the floor stays at rest.
+
+A ball lying on the floor is pulled into it by gravity during every step; an impulse
+with restitution would make it bounce by a step's worth of speed every step (jitter),
+and ignoring it lets it sink. At the end of each step a contact is *resting* when
+
+- the bodies overlap by more than the contact slop (the step pushed one into the other), or
+- they touched without approaching at the start of the (sub-)step and end it touching and
+  approaching (explicit Euler moves positions with the old velocity, so a ball resting on
+  the floor gains a step's worth of downward speed without moving into it).
+
+The bodies are put back in touch along the contact normal, and the part of their
+relative velocity that pushes them together is removed: a restitution-free (eps = 0)
+impulse, with Coulomb friction limited by it. A resting ball so stays exactly on the
+floor with zero velocity: what gravity added over the step is what the contact takes
+away, as the floor's support force would. Removing approach speed never adds energy.
+
+Bodies touching several surfaces (a ball in a corner, a stack) are settled by up to
+:data:`RESTING_PASSES` Gauss-Seidel passes, one contact after the other.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from .pairs import BodyPairs
+from .response import normal_speed, resolve
+
+#: passes over the contacts; each pass settles every contact once, one after the other
+RESTING_PASSES = 4
+
+
+def settle(world, groups, starts, y, radii, inverse_masses, slop: float, ignored=frozenset()) -> int:
+    """Settle the resting contacts of the state ``y`` (in place); ``starts`` from the sub-step's start.
+
+    Returns the number of corrections made.
+    """
+    corrections = 0
+    for _ in range(RESTING_PASSES):
+        settled: list[np.ndarray] = []
+        for pairs, start in zip(groups, starts):
+            if pairs.trigger:
+                continue
+            contact = pairs.contact(radii, y[0])
+            depth = contact.penetration_depth
+            pressed = depth > slop
+            if start.resting.any():
+                speed = normal_speed(y[1][pairs.i], pairs.velocity_b(y[1]), contact.normal)
+                pressed |= start.resting & (depth >= -slop) & (speed > 0)
+            pressed = np.flatnonzero(pressed)
+            if ignored:
+                pressed = np.array([k for k in pressed if pairs.key(k) not in ignored], dtype=int)
+            if not pressed.size:
+                continue
+            if isinstance(pairs, BodyPairs):
+                for k in pressed:  # pairs may share bodies: one after the other
+                    one = pairs.subset([k])
+                    now = one.contact(radii, y[0])
+                    friction = world.properties(int(one.i[0]), int(one.j[0]))[1]
+                    resolve(y, one.i, one.j, inverse_masses, now.normal, now.penetration_depth, 0.0, friction)
+                settled += [pairs.i[pressed], pairs.j[pressed]]
+            else:  # one shape: every body at most once, so all at once
+                body = pairs.i[pressed]
+                friction = np.array([world.properties(int(i), pairs.shape)[1] for i in body])
+                resolve(y, body, None, inverse_masses, contact.normal[pressed], depth[pressed], 0.0, friction)
+                settled.append(body)
+        if not settled:
+            break
+        corrections += sum(len(b) for b in settled)
+        bodies = np.concatenate(settled)
+        if len(np.unique(bodies)) == len(bodies):
+            break  # no body settled twice: no contact disturbed another
+    return corrections

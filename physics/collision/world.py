@@ -1,0 +1,90 @@
+"""A collision world: the static geometry, the detector and the materials of one scene."""
+
+from __future__ import annotations
+
+import dataclasses
+from collections.abc import Callable
+
+from .events import CollisionLog, cancel_triggers
+from .pairs import DEFAULT_BROADPHASE
+from .response import PairProperties
+from .shapes import DEFAULT_MATERIAL, Shape
+
+#: the detectors, by name
+DETECTOR_NAMES = ("none", "overlap", "swept")
+#: bisection iterations of overlap testing (the lecture: "usually 5 iterations is pretty close")
+DEFAULT_BISECTION_ITERATIONS = 5
+#: collisions resolved per step before the rest of the step is left unresolved (and reported)
+DEFAULT_MAX_IMPACTS_PER_STEP = 64
+#: approach speeds at or below this never bounce, m/s (Box2D's "restitution threshold" is
+#: 1 m/s; 1 mm/s only stops round-off-sized speeds from rattling through touching bodies)
+DEFAULT_REST_SPEED = 1e-3
+
+
+@dataclasses.dataclass(frozen=True)
+class CollisionWorld:
+    """Everything collision handling needs besides the bodies (which are the model's spheres).
+
+    Parameters
+    ----------
+    detector : {"none", "overlap", "swept"}
+    shapes : tuple of Shape
+        Static geometry: planes, boxes, oriented boxes (triggers among them).
+    materials : tuple of str
+        One material name per body; empty for all ``"default"``.
+    pair_properties : PairProperties
+        Restitution and friction per pair of materials.
+    bisection_iterations : int
+        Overlap testing: halvings of the step bracketing each collision time.
+    max_impacts_per_step : int
+        Collisions resolved per step at most; the log counts the steps that reach it.
+    broadphase : str
+        Pair-finding method (see ``physics.broadphase``).
+    rest_speed : float
+        m/s; slower approaches are resting contacts (eps = 0), see :func:`.step.rest_speed`.
+    prologues, epilogues : tuples of callables
+        See :mod:`.events`. The default prologue makes trigger shapes report, not collide.
+    """
+
+    detector: str = "swept"
+    shapes: tuple[Shape, ...] = ()
+    materials: tuple[str, ...] = ()
+    pair_properties: PairProperties = dataclasses.field(default_factory=PairProperties)
+    bisection_iterations: int = DEFAULT_BISECTION_ITERATIONS
+    max_impacts_per_step: int = DEFAULT_MAX_IMPACTS_PER_STEP
+    broadphase: str = DEFAULT_BROADPHASE
+    rest_speed: float = DEFAULT_REST_SPEED
+    prologues: tuple[Callable, ...] = (cancel_triggers,)
+    epilogues: tuple[Callable, ...] = ()
+
+    def __post_init__(self):
+        if self.detector not in DETECTOR_NAMES:
+            raise ValueError(f"unknown collision detector {self.detector!r}; valid: {', '.join(DETECTOR_NAMES)}")
+        if self.bisection_iterations < 0:
+            raise ValueError(f"bisection_iterations must be >= 0, got {self.bisection_iterations}")
+        if not self.rest_speed >= 0:
+            raise ValueError(f"rest_speed must be >= 0, got {self.rest_speed}")
+        if self.max_impacts_per_step < 1:
+            raise ValueError(f"max_impacts_per_step must be >= 1, got {self.max_impacts_per_step}")
+
+    def material(self, body: int) -> str:
+        return self.materials[body] if self.materials else DEFAULT_MATERIAL
+
+    def properties(self, body: int, other) -> tuple[float, float]:
+        """(restitution, friction) of ``body`` against another body (an index) or a static shape."""
+        other_material = other.material if isinstance(other, Shape) else self.material(other)
+        return self.pair_properties.lookup(self.material(body), other_material)
+
+    def with_detector(self, detector: str) -> CollisionWorld:
+        return dataclasses.replace(self, detector=detector)
+
+    def new_log(self) -> CollisionLog:
+        return CollisionLog()
+
+    def step(self, log, model, integrator, t, y, dt, carry):
+        """One physics step with collisions (see :func:`physics.collision.step.physics_step`)."""
+        if self.detector == "none":
+            return integrator.step(model, t, y, dt, carry)
+        from .step import physics_step
+
+        return physics_step(self, log, model, integrator, t, y, dt, carry)

@@ -1,0 +1,301 @@
+"""Tunnelling study: when does overlap testing miss a thin wall, and what does not missing cost?
+
+A sphere of radius r is shot at speed v at a static wall of thickness w, with step dt
+and a random phase (where the sphere is when a step ends). Overlap testing sees the wall
+only if the end of some step finds the sphere overlapping it, i.e. the centre inside the
+band of width w + 2r (the Minkowski sum of the wall and the sphere, along the motion).
+Steps sample the centre's path every v dt, so with a uniformly random phase it misses with
+probability
+
+    P(miss) = max(0, 1 - (w + 2r) / (v dt)),
+
+a function of the ratio v dt / (w + 2r) alone. Intersection (swept) testing computes the
+time of impact instead and never misses. The study measures both miss rates for several
+walls and steps against that curve; checks the lecture's design rule ("fastest object
+moves smaller distance than thinnest object"); counts the sub-steps overlap testing needs
+to stop missing against one swept test; and measures how bisection iterations trade the
+time-of-impact error for cost.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+
+import numpy as np
+
+from integrators import simulate
+from physics import Model
+from physics.collision import BoundingSphere, Box, CollisionWorld, PairProperties, collide, overlaps
+from physics.collision.shapes import Sphere
+from physics.collision.time_of_impact import lecture_sphere_sphere, sphere_sphere
+
+from . import plotting
+from .runner import Study
+
+#: the integrator: exact for straight-line motion, so every miss is the detector's
+INTEGRATOR = "semi-implicit-euler"
+
+
+def parameters(quick: bool) -> dict:
+    return {
+        "radius": 0.05, "seed": 20240611,
+        # (wall thickness w, step dt): the miss rate should depend on v dt / (w + 2r) only
+        "walls": [[0.01, 0.01], [0.1, 0.002]] if quick else [[0.01, 0.01], [0.01, 0.002], [0.1, 0.01], [0.002, 0.02]],
+        "ratios": np.round(np.geomspace(0.05, 30, 8) if quick else np.geomspace(0.015, 30, 16), 4).tolist(),
+        "trials": 30 if quick else 100,
+        "cost_ratios": [1.5, 4.0, 12.0] if quick else [1.5, 3.0, 6.0, 12.0, 24.0],
+        "cost_trials": 10 if quick else 40,
+        "bisection_iterations": list(range(0, 13 if quick else 21)),
+        "bisection_ratio": 0.5,
+        "bisection_trials": 40 if quick else 200,
+    }
+
+
+def shoot(ratio: float, w: float, dt: float, r: float, phases, detector: str, iterations: int = 5,
+          substeps: int = 1, batched: bool = False) -> dict:
+    """Shoot spheres at the wall x in [-w/2, w/2] at v = ratio (w + 2r) / dt, one per phase.
+
+    ``phases`` (fractions of a step in [0, 1)) place each sphere's samples along its path.
+    Each shot is its own run unless ``batched``: then all spheres fly side by side in one
+    run (lanes far enough apart never to meet), and a collision of one splits the step for
+    all, adding a sample of every sphere at that time. Returns the misses, each sphere's
+    first collision time and its true first-touch time, and the run time.
+    """
+    phases = np.asarray(phases, dtype=float)
+    v = ratio * (w + 2 * r) / dt
+    travel = v * dt
+    x0 = -(0.5 * w + r) - travel * (1 + phases)  # at least one step before first touch
+    steps = math.ceil((w + 2 * r) / travel + 3)
+    wall_time, misses, toi = 0.0, 0, []
+    for group in ([np.arange(len(phases))] if batched else [[k] for k in range(len(phases))]):
+        n = len(group)
+        lane = 2 * (r + travel) + 1.0
+        side = math.ceil(math.sqrt(n))
+        k = np.arange(n)
+        y0 = np.zeros((2, n, 3))
+        y0[0, :, 0], y0[0, :, 1], y0[0, :, 2] = x0[group], lane * (k % side), lane * (k // side)
+        y0[1, :, 0] = v
+        middle = 0.5 * lane * (side - 1)
+        wall = Box.from_center([0.0, middle, middle], [w, lane * side, lane * side], name="wall")
+        world = CollisionWorld(detector, (wall,), pair_properties=PairProperties(1.0),
+                               bisection_iterations=iterations, max_impacts_per_step=2 * n + 10)
+        start = time.perf_counter()
+        traj = simulate(Model(np.ones(n), np.full(n, r)), INTEGRATOR, y0, 0.0, steps * dt, dt / substeps,
+                        collisions=world, save_every=10**9)
+        wall_time += time.perf_counter() - start
+        misses += int(np.sum(traj.velocities[-1, :, 0] > 0))
+        first = {}
+        for event in traj.collisions.events:
+            first.setdefault(event.body, event.t)
+        toi += [first.get(b) for b in range(n)]
+    return {"misses": misses, "trials": len(phases), "wall_time": wall_time, "toi": toi,
+            "true_toi": ((-(0.5 * w + r) - x0) / v).tolist()}
+
+
+def analytic_miss_rate(ratio: float) -> float:
+    return max(0.0, 1.0 - 1.0 / ratio)
+
+
+def lecture_errors(points, params) -> list[dict]:
+    """The collision-detection chapter's errors and claims, checked by computation."""
+    r = params["radius"]
+    a, b = BoundingSphere(np.zeros(3), 1.0), BoundingSphere(np.array([1.5, 0.0, 0.0]), 1.0)
+    depth = float(collide(Sphere(a.center, np.array(1.0)), Sphere(b.center, np.array(1.0))).penetration_depth)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        still = float(lecture_sphere_sphere([0, 0, 0], [0, 0, 0], [3, 0, 0], [3, 0, 0], 1.0, 1.0))
+    ours_still = float(sphere_sphere(np.zeros(3), np.zeros(3), np.array([3.0, 0, 0]), np.array([3.0, 0, 0]), 1.0, 1.0))
+    apart = float(lecture_sphere_sphere([0, 0, 0], [-1, 0, 0], [3, 0, 0], [4, 0, 0], 1.0, 1.0))
+    ours_apart = float(sphere_sphere(np.zeros(3), np.array([-1.0, 0, 0]), np.array([3.0, 0, 0]),
+                                     np.array([4.0, 0, 0]), 1.0, 1.0))
+    inside = float(lecture_sphere_sphere([0, 0, 0], [1, 0, 0], [1, 0, 0], [1, 0, 0], 1.0, 1.0))
+    rule_rows = []
+    for w, dt in params["walls"]:
+        thinnest = min(w, 2 * r)
+        rule = thinnest / (w + 2 * r)
+        overlap = [p for p in points if p["detector"] == "overlap" and p["w"] == w and p["dt"] == dt]
+        within = [p["miss_rate"] for p in overlap if p["ratio"] < rule]
+        missing = [p["ratio"] for p in overlap if p["miss_rate"] > 0]
+        rule_rows.append({"w": w, "dt": dt, "rule_ratio": rule, "max_miss_rate_within_rule": max(within, default=None),
+                          "smallest_ratio_with_misses": min(missing, default=None)})
+    return [
+        {"where": "Complex Geometry - Bounding Volume (2 of 3)",
+         "printed": "Sphere - if distance between centers less than sum of Radii then no collision",
+         "correct": "if the distance between the centres is MORE than the sum of the radii, no collision "
+                    "(at most the sum: they overlap)",
+         "evidence": f"unit spheres with centres 1.5 m apart (less than 2): the point (0.75, 0, 0) is in both, "
+                     f"the narrow phase finds them {depth:g} m deep, and the overlap test says "
+                     f"{overlaps(a, b)}", "is_error": True},
+        {"where": "Intersection Testing: Sphere-Sphere Collision",
+         "printed": "t = (-(A.B) - sqrt((A.B)^2 - B^2 (A^2 - (rP + rQ)^2))) / B^2",
+         "correct": "right for spheres apart and approaching, but it divides by B^2 and ignores t < 0 and t > 1",
+         "evidence": f"no relative motion (B = 0) gives {still} (0/0); steplab's rationalised form gives "
+                     f"{ours_still} (no impact). Spheres moving apart give t = {apart:g} (a collision in the past; "
+                     f"steplab: {ours_apart}); spheres already overlapping give t = {inside:g} < 0 (steplab: 0)",
+         "is_error": False},
+        {"where": "Intersection Testing: Sphere-Sphere Collision",
+         "printed": "Or, simpler: d^2 = A^2 - (A.B)^2 / B^2; if d^2 > (rP + rQ)^2, no collision",
+         "correct": "a rejection test only: d is the closest distance of the infinite line, so d^2 <= (rP + rQ)^2 "
+                    "does not mean a collision in this step (the closest approach may be before t = 0 or after "
+                    "t = 1)",
+         "evidence": "spheres moving apart along their line of centres have d = 0, yet the time of impact is "
+                     f"{ours_apart} (none)", "is_error": False},
+        {"where": "Overlap Testing: Limitations",
+         "printed": "Design constraint on speed of objects "
+                    "(fastest object moves smaller distance than thinnest object)",
+         "correct": "sufficient but conservative: overlap testing cannot miss while v dt <= w + 2r (the wall "
+                    "thickened by the sphere, the Minkowski sum), and for two moving objects the relative "
+                    "displacement is what counts",
+         "evidence": "; ".join(
+             f"w = {row['w']:g} m, dt = {row['dt']:g} s: the rule allows ratios < {row['rule_ratio']:.3g}, "
+             f"largest miss rate there {row['max_miss_rate_within_rule']}, first misses at ratio "
+             f"{row['smallest_ratio_with_misses']} (the first tested above 1)" for row in rule_rows),
+         "is_error": False, "rule": rule_rows},
+    ]
+
+
+def compute(params: dict, progress=None) -> dict:
+    r, trials = params["radius"], params["trials"]
+    rng = np.random.default_rng(params["seed"])
+    # stratified random phases, one per 1/trials of a step: the miss fraction is then within
+    # 1/trials of the probability (plain uniform phases scatter by sqrt(p (1 - p) / trials))
+    phases = (np.arange(trials) + rng.uniform(0.0, 1.0, trials)) / trials
+    points = []
+    for w, dt in params["walls"]:
+        for ratio in params["ratios"]:
+            for detector in ("overlap", "swept"):
+                shot = shoot(ratio, w, dt, r, phases, detector)
+                points.append({"detector": detector, "ratio": ratio, "miss_rate": shot["misses"] / trials,
+                               "trials": trials, "w": w, "dt": dt, "speed": ratio * (w + 2 * r) / dt,
+                               "analytic_miss_rate": analytic_miss_rate(ratio) if detector == "overlap" else 0.0})
+        if progress is not None:
+            progress()
+    w, dt = params["walls"][0]
+    batched = [{"ratio": ratio, "miss_rate": shoot(ratio, w, dt, r, phases, "overlap", batched=True)["misses"] / trials,
+                "trials": trials, "w": w, "dt": dt} for ratio in params["ratios"]]
+
+    cost = []
+    some = (np.arange(params["cost_trials"]) + rng.uniform(0.0, 1.0, params["cost_trials"])) / params["cost_trials"]
+    for ratio in params["cost_ratios"]:
+        substeps = math.ceil(ratio)
+        sub = shoot(ratio, w, dt, r, some, "overlap", substeps=substeps)
+        single = shoot(ratio, w, dt, r, some, "overlap")
+        swept = shoot(ratio, w, dt, r, some, "swept")
+        cost.append({"ratio": ratio, "substeps": substeps, "trials": len(some),
+                     "miss_rate_overlap": single["misses"] / len(some),
+                     "miss_rate_overlap_substepped": sub["misses"] / len(some),
+                     "miss_rate_swept": swept["misses"] / len(some),
+                     "tests_per_step_overlap": substeps, "tests_per_step_swept": 1,
+                     "wall_time_overlap_substepped": sub["wall_time"], "wall_time_swept": swept["wall_time"]})
+
+    bisection = []
+    some = rng.uniform(0.0, 1.0, params["bisection_trials"])
+    for iterations in params["bisection_iterations"]:
+        shot = shoot(params["bisection_ratio"], w, dt, r, some, "overlap", iterations, batched=True)
+        errors = np.array([t - true for t, true in zip(shot["toi"], shot["true_toi"]) if t is not None])
+        bisection.append({"iterations": iterations, "toi_error": float(np.mean(np.abs(errors))),
+                          "toi_error_max": float(np.max(np.abs(errors))), "bound": dt * 2.0**-iterations,
+                          "detected": int(len(errors)), "overlap_tests_per_collision": iterations + 1})
+    swept_shot = shoot(params["bisection_ratio"], w, dt, r, some, "swept", batched=True)
+    swept_error = max(abs(t - true) for t, true in zip(swept_shot["toi"], swept_shot["true_toi"]))
+    return {"points": points, "batched": batched, "bisection": bisection, "swept_toi_error": swept_error,
+            "cost": cost, "lecture_errors": lecture_errors(points, params)}
+
+
+def plot(record: dict, out) -> list[str]:
+    plt = plotting.plt
+    figures = []
+    params = record["parameters"]
+    r = params["radius"]
+
+    # 1. miss rate against v dt / (w + 2r)
+    fig, ax = plt.subplots(figsize=(7.6, 5.0))
+    grid = np.geomspace(min(params["ratios"]), max(params["ratios"]), 400)
+    ax.plot(grid, [analytic_miss_rate(x) for x in grid], color="k", lw=1.5,
+            label="analytic, overlap: 1 - (w + 2r) / (v dt)")
+    markers = ["o", "s", "^", "D", "v"]
+    for k, (w, dt) in enumerate(params["walls"]):
+        pts = [p for p in record["points"] if p["w"] == w and p["dt"] == dt]
+        ov = [p for p in pts if p["detector"] == "overlap"]
+        sw = [p for p in pts if p["detector"] == "swept"]
+        ax.plot([p["ratio"] for p in ov], [p["miss_rate"] for p in ov], ls="none", marker=markers[k % 5],
+                color="tab:orange", mfc="none", ms=7, label=f"overlap, w = {w * 100:g} cm, dt = {dt * 1e3:g} ms")
+        ax.plot([p["ratio"] for p in sw], [p["miss_rate"] for p in sw], ls="none", marker=markers[k % 5],
+                color="tab:blue", ms=4, label=f"swept, w = {w * 100:g} cm, dt = {dt * 1e3:g} ms")
+    batched = record["batched"]
+    w0, dt0 = params["walls"][0]
+    ax.plot([p["ratio"] for p in batched], [p["miss_rate"] for p in batched], ls=":", marker="x", color="tab:red",
+            lw=0.8, label=f"overlap, all {params['trials']} shots in one scene (w = {w0 * 100:g} cm, "
+                          f"dt = {dt0 * 1e3:g} ms):\nother shots' impacts split the step and add samples")
+    ax.axvline(1.0, color="gray", ls="--", lw=1)
+    ax.text(1.03, 0.45, "v dt = w + 2r", color="gray", fontsize=8, rotation=90, va="top")
+    for w, _ in params["walls"]:
+        rule = min(w, 2 * r) / (w + 2 * r)
+        ax.axvline(rule, color="tab:green", ls=":", lw=1)
+    ax.text(min(w / (w + 2 * r) for w, _ in params["walls"]) * 1.03, 0.55,
+            "lecture's rule:\nv dt = thinnest object", color="tab:green", fontsize=8, va="top")
+    ax.set_xscale("log")
+    ax.set_xlabel("distance per step / wall thickened by the sphere,  v dt / (w + 2r)")
+    ax.set_ylabel(f"fraction of shots through the wall ({params['trials']} stratified random phases)")
+    ax.set_ylim(-0.03, 1.03)
+    ax.set_title("Tunnelling: overlap testing misses as predicted, swept testing never")
+    ax.legend(fontsize=7, loc="upper left")
+    ax.grid(True, which="major", alpha=0.3)
+    fig.tight_layout()
+    figures += plotting.save_figure(fig, out, "tunnelling_miss_rate")
+
+    # 2. bisection: time-of-impact error against iterations
+    fig, ax = plt.subplots(figsize=(6.4, 4.6))
+    b = record["bisection"]
+    its = [p["iterations"] for p in b]
+    ax.semilogy(its, [p["toi_error_max"] for p in b], "o-", color="tab:orange", ms=4, label="largest error")
+    ax.semilogy(its, [p["toi_error"] for p in b], "s--", color="tab:orange", ms=3, mfc="none", label="mean error")
+    ax.semilogy(its, [p["bound"] for p in b], color="k", lw=1, label="bracket width dt / 2^k")
+    ax.axvline(5, color="gray", ls=":", lw=1)
+    ax.text(5.2, b[0]["bound"] * 0.5, "lecture's 5 iterations:\nbracket dt / 32", fontsize=8, color="gray", va="top")
+    ax.axhline(max(record["swept_toi_error"], 1e-18), color="tab:blue", lw=1, label="swept (closed form)")
+    ax.set_xlabel("bisection iterations k (overlap tests per collision: k + 1)")
+    ax.set_ylabel("time-of-impact error (s)")
+    ax.set_title(f"Bisection: error halves per iteration (dt = {params['walls'][0][1] * 1e3:g} ms)")
+    ax.legend(fontsize=8)
+    ax.grid(True, which="major", alpha=0.3)
+    fig.tight_layout()
+    figures += plotting.save_figure(fig, out, "tunnelling_bisection")
+
+    # 3. cost of not missing
+    fig, ax = plt.subplots(figsize=(6.4, 4.6))
+    c = record["cost"]
+    ratios = [p["ratio"] for p in c]
+    ax.loglog(ratios, [p["tests_per_step_overlap"] for p in c], "o-", color="tab:orange",
+              label="overlap: sub-steps needed, ceil(v dt / (w + 2r))")
+    ax.loglog(ratios, [p["tests_per_step_swept"] for p in c], "s-", color="tab:blue", label="swept: one test per step")
+    speedup = [p["wall_time_overlap_substepped"] / p["wall_time_swept"] for p in c]
+    ax.loglog(ratios, speedup, "^--", color="tab:gray", label="measured run time, overlap sub-stepped / swept")
+    ax.set_xticks(ratios, [f"{x:g}" for x in ratios])
+    ax.minorticks_off()
+    ax.set_xlabel("v dt / (w + 2r)")
+    ax.set_ylabel("narrow-phase tests per step  (or time ratio)")
+    ax.set_title("The cost of never missing: sub-stepping against one swept test\n"
+                 f"(miss rate with sub-steps: {max(p['miss_rate_overlap_substepped'] for p in c):g}, "
+                 f"swept: {max(p['miss_rate_swept'] for p in c):g})", fontsize=10)
+    ax.legend(fontsize=8)
+    ax.grid(True, which="major", alpha=0.3)
+    fig.tight_layout()
+    figures += plotting.save_figure(fig, out, "tunnelling_cost")
+    return figures
+
+
+def summary(record: dict) -> list[tuple[str, str]]:
+    overlap = [p for p in record["points"] if p["detector"] == "overlap"]
+    swept = [p for p in record["points"] if p["detector"] == "swept"]
+    worst = max(abs(p["miss_rate"] - p["analytic_miss_rate"]) for p in overlap)
+    five = next(p for p in record["bisection"] if p["iterations"] == 5)
+    return [("swept misses (all speeds)", f"{sum(p['miss_rate'] for p in swept):g}"),
+            ("overlap miss rate vs analytic, worst difference", f"{worst:.3f}"),
+            ("time-of-impact error after 5 bisections", f"{five['toi_error_max']:.3g} s (bound {five['bound']:.3g})"),
+            ("lecture errors found (detection chapter)",
+             str(sum(1 for e in record["lecture_errors"] if e["is_error"])))]
+
+
+STUDY = Study("tunnelling", "Tunnelling: overlap testing against swept testing, and bisection",
+              parameters, compute, plot, summary)
