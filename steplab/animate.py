@@ -16,7 +16,8 @@ MAX_FRAMES = 150
 AXIS_NAMES = "xyz"
 
 
-def animate(runs: list[tuple[str, object]], model, out: str | Path, fps: int = 30, view: str | None = None) -> Path:
+def animate(runs: list[tuple[str, object]], model, out: str | Path, fps: int = 30, view: str | None = None,
+            shapes=()) -> Path:
     """Write an animation of one or more runs of the same scene, one panel each.
 
     Parameters
@@ -27,6 +28,7 @@ def animate(runs: list[tuple[str, object]], model, out: str | Path, fps: int = 3
     out : path ending in .gif (Pillow) or .mp4 (ffmpeg, if installed)
     view : "xy", "xz" or "yz", optional
         The plane shown; by default the two axes the motion spans most.
+    shapes : static collision shapes (planes, boxes, oriented boxes) to draw in grey
     """
     import matplotlib
 
@@ -62,13 +64,15 @@ def animate(runs: list[tuple[str, object]], model, out: str | Path, fps: int = 3
     artists = []
     for col, (label, traj) in enumerate(runs):
         ax, eax = grid[0][col], grid[1][col]
-        lo, hi = _window(traj.positions[..., axes_idx], radii.max())
+        lo, hi = _window(np.concatenate([traj.positions[..., axes_idx].reshape(-1, 2), _extent(shapes)[:, axes_idx]]),
+                         radii.max())
         ax.set_xlim(lo[0], hi[0])
         ax.set_ylim(lo[1], hi[1])
         ax.set_aspect("equal")
         ax.set_xlabel(f"{AXIS_NAMES[axes_idx[0]]} (m)")
         ax.set_ylabel(f"{AXIS_NAMES[axes_idx[1]]} (m)")
         ax.set_title(label, fontsize=10)
+        _draw_shapes(ax, shapes, axes_idx, lo, hi)
         lines = LineCollection([], colors="0.5", linewidths=0.8)
         ax.add_collection(lines)
         circles = PatchCollection([Circle((0, 0), r) for r in radii], facecolor="tab:blue", edgecolor="k",
@@ -120,3 +124,51 @@ def _window(q, pad):
     centre, half = (lo + hi) / 2, (hi - lo) / 2
     half = np.maximum(half, 0.5 * half.max()) + pad + 0.05 * half.max()
     return centre - half, centre + half
+
+
+def _extent(shapes) -> np.ndarray:
+    """Corners (k, 3) of the static boxes, so that a panel's window shows them."""
+    from physics.collision import Box, OrientedBox
+
+    points = [np.zeros((0, 3))]
+    for shape in shapes:
+        if isinstance(shape, Box):
+            points.append(np.stack([shape.lo, shape.hi]))
+        elif isinstance(shape, OrientedBox):
+            reach = np.abs(shape.rotation) @ shape.half_extents
+            points.append(np.stack([shape.center - reach, shape.center + reach]))
+    return np.concatenate(points)
+
+
+def _draw_shapes(ax, shapes, axes_idx, lo, hi):
+    """Static geometry projected on the view plane: boxes as their outline, planes as lines."""
+    from matplotlib.patches import Polygon
+    from scipy.spatial import ConvexHull
+
+    from physics.collision import Box, OrientedBox, Plane
+
+    for shape in shapes:
+        if isinstance(shape, (Box, OrientedBox)):
+            if isinstance(shape, Box):
+                corners = np.array([[(shape.lo, shape.hi)[(k >> a) & 1][a] for a in range(3)] for k in range(8)])
+            else:
+                signs = np.array([[1 if (k >> a) & 1 else -1 for a in range(3)] for k in range(8)])
+                corners = shape.center + (signs * shape.half_extents) @ shape.rotation.T
+            flat = corners[:, axes_idx]
+            try:
+                hull = flat[ConvexHull(flat).vertices]
+            except Exception:  # a box seen edge-on: draw its extent as a line
+                hull = flat[[np.argmin(flat[:, 0] + flat[:, 1]), np.argmax(flat[:, 0] + flat[:, 1])]]
+            ax.add_patch(Polygon(hull, closed=True, facecolor="0.75", edgecolor="0.3", zorder=0))
+        elif isinstance(shape, Plane):
+            n = np.asarray(shape.normal, float)[axes_idx]
+            if np.hypot(*n) < 1e-9:
+                continue  # the plane is parallel to the view
+            # points with n . (a, b) = offset, across the window, and shading on the solid side
+            if abs(n[1]) >= abs(n[0]):
+                a = np.array([lo[0], hi[0]])
+                b = (shape.offset - n[0] * a) / n[1]
+            else:
+                b = np.array([lo[1], hi[1]])
+                a = (shape.offset - n[1] * b) / n[0]
+            ax.plot(a, b, color="0.3", lw=2, zorder=0)

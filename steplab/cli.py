@@ -90,7 +90,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("scene", help="built-in scene name or path to a TOML file")
     p.add_argument("--integrator", help="integrator name (default: the scene's)")
     p.add_argument("--compare", metavar="A,B",
-                   help="side by side: comma-separated integrators (e.g. euler,velocity-verlet)")
+                   help="side by side: integrators (euler,velocity-verlet) or detectors (overlap,swept)")
+    p.add_argument("--detector", choices=("none", "overlap", "swept"), help="collision detector (default: the scene's)")
     p.add_argument("--dt", type=_positive, help="time step, s (default: the scene's)")
     p.add_argument("--t-end", type=_finite, help="end time, s (default: the scene's)")
     p.add_argument("--fps", type=_count, default=30, help="frames per second (default: 30)")
@@ -343,29 +344,43 @@ def _vec(v) -> str:
 
 def cmd_animate(args) -> int:
     from integrators import get_integrator, simulate
-    from integrators.simulate import step_count
+    from physics.collision import DETECTOR_NAMES
     from physics.scene import load_scene
     from steplab.animate import animate
 
     if args.out.suffix.lower() not in (".gif", ".mp4"):
         raise ValueError(f"--out {args.out}: unknown animation format {args.out.suffix or '(none)'!r}; use .gif")
     scene = load_scene(args.scene)
-    names = [n.strip() for n in args.compare.split(",")] if args.compare else [args.integrator or scene.integrator]
-    if args.compare and len(names) < 2:
-        raise ValueError(f"--compare needs at least two comma-separated integrators, got {args.compare!r}")
-    methods = [get_integrator(n) for n in names]
     dt = args.dt if args.dt is not None else scene.dt
     t_end = args.t_end if args.t_end is not None else scene.t_end
     if not t_end > scene.t_start:
         raise ValueError(f"--t-end {t_end:g} must be later than the scene's t_start = {scene.t_start:g}")
-    steps = step_count(scene.t_start, t_end, dt)  # ValueError, not OverflowError, for t_end = 1e308
+    # each panel: (integrator, detector); --compare varies one of them
+    panels = [(args.integrator or scene.integrator, args.detector)]
+    if args.compare:
+        names = [n.strip() for n in args.compare.split(",")]
+        if len(names) < 2:
+            raise ValueError(f"--compare needs at least two comma-separated integrators or detectors, "
+                             f"got {args.compare!r}")
+        if all(n in DETECTOR_NAMES for n in names):
+            panels = [(panels[0][0], n) for n in names]
+        else:
+            panels = [(n, args.detector) for n in names]
+    steps = int((t_end - scene.t_start) / dt)
     runs = []
-    for method in methods:
+    for name, detector in panels:
+        method = get_integrator(name)
+        args.detector, args.backend = detector, "numpy"
+        world = _collision_world(scene, args)
         traj = simulate(scene.model, method, scene.y0, scene.t_start, t_end, dt,
-                        save_every=max(1, steps // 300))
-        runs.append((f"{scene.name}: {method.name}, dt = {dt:g} s", traj))
-    path = animate(runs, scene.model, args.out, fps=args.fps, view=args.view)
-    print(f"animation written to {path} ({', '.join(m.name for m in methods)})")
+                        save_every=max(1, steps // 300), collisions=world)
+        label = f"{scene.name}: {method.name}, dt = {dt:g} s"
+        if world is not None or detector is not None:
+            label += f", {world.detector if world is not None else 'no'} detector"
+        runs.append((label, traj))
+    shapes = scene.collisions.shapes if scene.collisions is not None else ()
+    path = animate(runs, scene.model, args.out, fps=args.fps, view=args.view, shapes=shapes)
+    print(f"animation written to {path} ({'; '.join(label for label, _ in runs)})")
     return 0
 
 
