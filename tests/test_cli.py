@@ -205,7 +205,7 @@ def test_animate_writes_a_gif_side_by_side(capsys, tmp_path):
     out = tmp_path / "a.gif"
     status, text, _ = run(capsys, "animate", "oscillator", "--compare", "euler,velocity-verlet", "--t-end", "0.2",
                           "--fps", "5", "--out", str(out))
-    assert status == 0 and "euler, velocity-verlet" in text
+    assert status == 0 and "oscillator: euler" in text and "oscillator: velocity-verlet" in text
     with Image.open(out) as gif:
         assert gif.n_frames == 21 and gif.size[0] > gif.size[1]  # two panels side by side
     assert not [p for p in tmp_path.iterdir() if p.name.startswith(".")]
