@@ -109,6 +109,17 @@ def _least_error(data):
         "\n\n(least error in m, at dt in s; *: still falling at the smallest dt tried, the floor is further down.)"
 
 
+def _lecture_errors(data):
+    rows = [[e["where"], e["printed"], e["correct"], e["evidence"]] for e in data]
+    return _markdown_table(["where", "printed", "correct", "evidence (computed by steplab)"], rows)
+
+
+def _restitution(data):
+    rows = [[r["object"], f"{r['cor_lecture']:.3f}"] + [f"{r['cor_measured'][d]:.4f}" for d in data["detectors"]]
+            for r in data["rows"]]
+    return _markdown_table(["ball", "lecture c.o.r."] + [f"measured, {d}" for d in data["detectors"]], rows)
+
+
 #: name -> (slice of the records the table needs, how to draw it)
 TABLES = {
     "orders": (lambda r: {"orders": r["truncation"]["orders"], "declared": r["truncation"]["declared_orders"]},
@@ -119,6 +130,13 @@ TABLES = {
     "stability": (lambda r: {z: {k: v[k] for k in ("measured", "theory")}
                              for z, v in r["stability"]["by_damping_ratio"].items()}, _stability),
     "frame_rate": (lambda r: r["frame_rate"]["runs"], _frame_rate),
+    "restitution": (lambda r: {"rows": [{k: row[k] for k in ("object", "cor_lecture", "cor_measured")}
+                                        for row in r["restitution"]["rows"]],
+                               "detectors": list(r["restitution"]["rows"][0]["cor_measured"])}, _restitution),
+    "lecture_errors": (lambda r: [{k: e[k] for k in ("where", "printed", "correct", "evidence")}
+                                  for study in ("restitution", "tunnelling") for e in r[study]["lecture_errors"]
+                                  if e.get("is_error", True) and not e["correct"].startswith("checked")],
+                       _lecture_errors),
 }
 
 
