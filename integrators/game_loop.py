@@ -36,6 +36,9 @@ class GameLoop:
     def __init__(self, step, dt: float, max_steps_per_frame: int = 1000):
         if not (dt > 0 and math.isfinite(dt)):
             raise ValueError(f"dt must be finite and > 0, got {dt}")
+        if isinstance(max_steps_per_frame, bool) or not isinstance(max_steps_per_frame, int) \
+                or max_steps_per_frame < 1:  # the cap is what bounds a frame's work: it must exist
+            raise ValueError(f"max_steps_per_frame must be an integer >= 1, got {max_steps_per_frame!r}")
         self._step = step
         self.dt = dt
         self._dt = Fraction(dt)

@@ -486,11 +486,8 @@ class _SceneBuilder:
         shapes = []
         for p in c.tables("planes"):
             p.allow("name", "normal", "offset", "material", "trigger")
-            normal = p.vector("normal", _REQUIRED)
-            length = float(np.linalg.norm(normal))
-            if not length > 0:
-                p.fail("must be a non-zero vector", "normal")
-            shapes.append((p, Plane(normal / length, p.number("offset", 0.0), p.string("name", f"plane[{len(shapes)}]"),
+            normal = _unit(p, "normal", p.vector("normal", _REQUIRED))  # [1e200, 1e200, 0] too
+            shapes.append((p, Plane(normal, p.number("offset", 0.0), p.string("name", f"plane[{len(shapes)}]"),
                                     p.string("material", DEFAULT_MATERIAL), p.boolean("trigger"))))
         for b in c.tables("boxes"):
             b.allow("name", "center", "size", "axis", "angle", "material", "trigger")
@@ -498,9 +495,7 @@ class _SceneBuilder:
             common = {"name": b.string("name", f"box[{len(shapes)}]"),
                       "material": b.string("material", DEFAULT_MATERIAL), "trigger": b.boolean("trigger")}
             angle = b.number("angle", 0.0)
-            axis = b.vector("axis", [0, 0, 1])
-            if not np.linalg.norm(axis) > 0:
-                b.fail("must be a non-zero vector", "axis")
+            axis = _unit(b, "axis", b.vector("axis", [0, 0, 1]))
             if angle == 0.0:
                 shapes.append((b, Box.from_center(center, size, **common)))
             else:

@@ -34,7 +34,8 @@ class Mesh:
 
 def all_pairs(n: int) -> np.ndarray:
     """Every unique pair (i < j) of n vertices, shape (n (n - 1) / 2, 2)."""
-    return np.array(list(itertools.combinations(range(n), 2)), dtype=np.int64).reshape(-1, 2)
+    i, j = np.triu_indices(n, k=1)  # row-major: (0, 1), (0, 2), ..., (1, 2), ...
+    return np.stack([i, j], axis=1).astype(np.int64)
 
 
 def box(size=(1.0, 1.0, 1.0), center=(0.0, 0.0, 0.0)) -> Mesh:

@@ -18,6 +18,8 @@ from pathlib import Path
 import numpy as np
 
 TRAJECTORY_FORMATS = (".npz", ".csv")
+#: the names write_atomic gives its temporary files: ``.<name>.<random>.tmp``
+TEMPORARY_PATTERN = ".*.*.tmp"
 
 
 def write_atomic(path: str | Path, data: bytes) -> None:
@@ -44,6 +46,21 @@ def _umask() -> int:
     return mask
 
 
+def remove_temporary_files(folder: str | Path) -> list[Path]:
+    """Delete the temporary files a killed writer left in ``folder`` (SIGKILL skips clean-up).
+
+    Call it when a run starts, not while another process writes into the same folder.
+    Returns what was deleted.
+    """
+    removed = []
+    for path in sorted(Path(folder).glob(TEMPORARY_PATTERN)):
+        with contextlib.suppress(FileNotFoundError, IsADirectoryError, PermissionError):
+            if path.is_file():
+                path.unlink()
+                removed.append(path)
+    return removed
+
+
 def write_json(path: str | Path, record) -> None:
     write_atomic(path, (json.dumps(record, indent=2, sort_keys=True) + "\n").encode())
 
@@ -54,6 +71,11 @@ def check_trajectory_path(path: str | Path) -> Path:
     if path.suffix.lower() not in TRAJECTORY_FORMATS:
         raise ValueError(f"--out {path}: unknown trajectory format {path.suffix or '(none)'!r}; "
                          f"use {' or '.join(TRAJECTORY_FORMATS)}")
+    if path.is_dir():
+        raise ValueError(f"--out {path}: is a folder, not a file")
+    folder = next((p for p in path.parents if p.exists()), None)  # the deepest existing ancestor
+    if folder is not None and not folder.is_dir():
+        raise ValueError(f"--out {path}: {folder} is a file, not a folder")
     return path
 
 

@@ -8,6 +8,8 @@ from pathlib import Path
 import matplotlib
 
 matplotlib.use("Agg")
+# fixed SVG element ids: the same record gives byte-identical figures
+matplotlib.rcParams["svg.hashsalt"] = "steplab"
 import matplotlib.pyplot as plt  # noqa: E402
 
 from steplab.io import write_atomic  # noqa: E402

@@ -20,7 +20,7 @@ import subprocess
 from collections.abc import Callable
 from pathlib import Path
 
-from steplab.io import write_json
+from steplab.io import remove_temporary_files, write_json
 
 #: packages whose source is part of every study's cache key
 SOURCE_PACKAGES = ("physics", "integrators", "studies")
@@ -37,9 +37,10 @@ class Study:
     summary: Callable[[dict], list[tuple[str, str]]] = lambda record: []
 
 
-def source_hash() -> str:
-    """SHA-256 of the source files of steplab's model, integrators and studies."""
-    root = Path(__file__).resolve().parent.parent
+def source_hash(root: Path | None = None) -> str:
+    """SHA-256 of the source files of steplab's model, integrators and studies (under ``root``,
+    default: this checkout)."""
+    root = Path(root) if root is not None else Path(__file__).resolve().parent.parent
     digest = hashlib.sha256()
     for package in SOURCE_PACKAGES:
         for path in sorted((root / package).rglob("*")):
@@ -61,14 +62,17 @@ def is_cached(study: Study, out: Path, quick: bool) -> bool:
         record = json.loads(path.read_text())
     except (OSError, ValueError):
         return False
-    if record.get("cache_key") != cache_key(study.name, study.parameters(quick)):
+    if not isinstance(record, dict) or record.get("cache_key") != cache_key(study.name, study.parameters(quick)):
         return False
-    return all((out / figure).exists() for figure in record.get("figures", []))
+    figures = record.get("figures", [])
+    return isinstance(figures, list) and all(isinstance(f, str) and (out / f).is_file() for f in figures)
 
 
 def run_study(study: Study, out: Path, quick: bool = False, force: bool = False, progress=None) -> dict:
     """Run one study into ``out`` (unless cached) and return its record."""
     out = Path(out)
+    if out.is_dir():  # what a run killed by SIGKILL left half-written
+        remove_temporary_files(out)
     if not force and is_cached(study, out, quick):
         record = json.loads((out / f"{study.name}.json").read_text())
         record["cached"] = True

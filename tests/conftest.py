@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import os
 import sys
 from pathlib import Path
 
@@ -27,6 +28,19 @@ import physics  # noqa: E402, F401
 
 def pytest_configure(config):
     assert jax.config.jax_enable_x64, "tests need jax_enable_x64 (float64 JAX arrays)"
+
+
+# Hypothesis (fuzz and property tests): the default profile "ci" is derandomised (the same
+# examples on every run and machine), has no per-example deadline (no wall-clock asserts)
+# and keeps no example database. HYPOTHESIS_PROFILE=explore draws fresh random examples;
+# STEPLAB_FUZZ_SCALE=10 multiplies every test's example budget (tests/test_fuzz.py).
+from hypothesis import HealthCheck, settings  # noqa: E402
+
+settings.register_profile("ci", derandomize=True, deadline=None, database=None, print_blob=True,
+                          suppress_health_check=[HealthCheck.too_slow, HealthCheck.data_too_large])
+settings.register_profile("explore", deadline=None, print_blob=True,
+                          suppress_health_check=[HealthCheck.too_slow, HealthCheck.data_too_large])
+settings.load_profile(os.environ.get("HYPOTHESIS_PROFILE", "ci"))
 
 
 @pytest.fixture

@@ -1,0 +1,64 @@
+"""The cost of a step: every fixed-step integrator x number of bodies x backend."""
+
+from __future__ import annotations
+
+from integrators import get_integrator
+from integrators.simulate import final_state_function
+
+from .common import STEPPERS, particle_chain, ready
+
+DT = 1e-3
+#: implicit Euler's Newton iteration builds and factors a dense (3N x 3N) Jacobian: seconds
+#: per step at 10^3 bodies, out of reach at 10^5, so only the single body is benchmarked
+IMPLICIT_MAX_BODIES = 1
+
+
+class IntegratorStep:
+    """One step of a chain of spheres under gravity, drag and springs.
+
+    ``numpy`` is steplab's readable step-by-step path; ``jax`` the same step compiled in
+    ``setup`` (at 1 body it mostly measures the dispatch of a compiled call, see
+    :class:`CompiledLoop` for the in-loop cost).
+    """
+
+    params = (STEPPERS, [1, 1_000, 100_000], ["numpy", "jax"])
+    param_names = ["integrator", "bodies", "backend"]
+    timeout = 300
+
+    def setup(self, integrator, bodies, backend):
+        method = get_integrator(integrator)
+        if method.implicit and bodies > IMPLICIT_MAX_BODIES:
+            raise NotImplementedError("dense Newton Jacobian: too large")
+        model, y = particle_chain(bodies)
+        if backend == "jax":
+            import jax
+            import jax.numpy as jnp
+
+            model, y = model.cast(jnp), jnp.asarray(y)
+            step = jax.jit(lambda y, carry: method.step(model, 0.0, y, DT, carry)[0])
+            self.call = lambda y, carry: ready(step(y, carry))
+        else:
+            self.call = lambda y, carry: method.step(model, 0.0, y, DT, carry)[0]
+        self.y, self.carry = y, method.init(model, 0.0, y)
+        self.call(self.y, self.carry)  # compile (jax), warm caches (numpy)
+
+    def time_step(self, integrator, bodies, backend):
+        self.call(self.y, self.carry)
+
+
+class CompiledLoop:
+    """1000 steps of one body on a spring inside steplab's compiled loop: the per-step floor."""
+
+    params = STEPPERS
+    param_names = ["integrator"]
+
+    def setup(self, integrator):
+        import jax.numpy as jnp
+
+        model, y = particle_chain(2)
+        self.run = final_state_function(model.cast(jnp), integrator)
+        self.y = jnp.asarray(y)
+        ready(self.run(self.y, 0.0, DT, 1000))
+
+    def time_1000_steps(self, integrator):
+        ready(self.run(self.y, 0.0, DT, 1000)[0])

@@ -1,0 +1,153 @@
+"""``steplab bench``: its comparisons compute the same thing, and its record has every key.
+
+No wall-clock assertion here (timings belong in the benchmark): the peers must reach the
+same final state as steplab for the same method, dt and steps, and a tiny bench run must
+produce the JSON contract of issue 6.
+"""
+
+import dataclasses
+import json
+
+import numpy as np
+import pytest
+
+from integrators import RK4
+from integrators.simulate import final_state_function
+from physics import Drag, Friction, Gravity, Model
+from physics.scene import load_scene
+from steplab import bench, peers
+from steplab.cli import main
+from studies.problems import oscillator_problem
+
+#: a bench run small enough for a unit test (seconds, not minutes)
+TINY = bench.Config(small_steps=300, particles=500, cloth_side=6, broadphase_n=2_000, periods=1,
+                    max_log2_steps=14, batch=3, batch_steps=50, repeats=1, python_repeats=1, python_steps=50,
+                    loop_steps=2, compile_scenes=("projectile",))
+#: final states of the same method, dt and steps agree to this (m, m/s): round-off only
+ROUND_OFF = 1e-12
+
+
+def _steplab_final(model, method, y0, dt, n):
+    import jax.numpy as jnp
+
+    run = final_state_function(model.cast(jnp), method)
+    y, bad = run(jnp.asarray(y0), 0.0, dt, n)
+    assert int(bad) == -1
+    return np.asarray(y)
+
+
+def test_semi_implicit_euler_peers_reach_steplabs_state():
+    import jax.numpy as jnp
+
+    problem = oscillator_problem(0.0)
+    dt, n = 1e-3, 400
+    ours = _steplab_final(problem.model, "semi-implicit-euler", problem.y0, dt, n)
+    theirs, steps = peers.diffrax_fixed_step(problem.model.cast(jnp), "semi-implicit-euler", 0.0, dt, n)(
+        jnp.asarray(problem.y0))
+    assert int(steps) == n
+    system = peers.PointMasses.from_model(problem.model)
+    for other in (theirs, peers.numba_semi_implicit_euler(system, problem.y0, dt, n),
+                  peers.numpy_semi_implicit_euler(system, problem.y0, dt, n)):
+        np.testing.assert_allclose(np.asarray(other), ours, rtol=0, atol=ROUND_OFF)
+    assert not np.allclose(ours, problem.y0)  # it moved
+
+
+@pytest.mark.parametrize("method", ["euler", "rk4"])
+def test_diffrax_counterparts_reach_steplabs_state(method):
+    import jax.numpy as jnp
+
+    scene = load_scene("drag-projectile")  # nonlinear: drag depends on |v|
+    dt, n = 0.01, 100
+    ours = _steplab_final(scene.model, method, scene.y0, dt, n)
+    theirs, steps = peers.diffrax_fixed_step(scene.model.cast(jnp), method, 0.0, dt, n)(jnp.asarray(scene.y0))
+    assert int(steps) == n
+    np.testing.assert_allclose(np.asarray(theirs), ours, rtol=1e-13, atol=ROUND_OFF)
+
+
+def test_diffrax_rk4_tableau_is_steplabs():
+    tableau = peers.diffrax_rk4().tableau
+    ours = RK4.tableau
+    assert [list(row) for row in tableau.a_lower] == [list(row) for row in ours.a_lower]
+    assert list(tableau.b_sol) == list(ours.b) and list(tableau.c) == list(ours.c)
+    assert peers.diffrax_rk4().order(None) == 4
+
+
+def test_numba_loop_reaches_steplabs_state_with_every_supported_force():
+    model, y0, _ = bench.cloth_model(5)  # gravity, springs, dampers, pinned corners
+    system = peers.PointMasses.from_model(model)
+    ours = _steplab_final(model, "semi-implicit-euler", y0, 5e-4, 200)
+    np.testing.assert_allclose(peers.numba_semi_implicit_euler(system, y0, 5e-4, 200), ours, rtol=0, atol=1e-11)
+    np.testing.assert_allclose(peers.numpy_semi_implicit_euler(system, y0, 5e-4, 200), ours, rtol=0, atol=1e-11)
+    model, y0 = bench.particles_model(50)  # gravity and drag
+    system = peers.PointMasses.from_model(model)
+    ours = _steplab_final(model, "semi-implicit-euler", y0, 1e-3, 100)
+    np.testing.assert_allclose(peers.numba_semi_implicit_euler(system, y0, 1e-3, 100), ours, rtol=0, atol=1e-11)
+
+
+def test_peers_refuse_forces_they_do_not_model():
+    model = Model([1.0], [0.1], [Gravity(), Friction(0.5, 0.3, np.array([0.0, 0.0, 1.0]), 0.0, np.array([0.1]))])
+    with pytest.raises(ValueError, match="friction"):
+        peers.PointMasses.from_model(model)
+    assert peers.PointMasses.from_model(Model([1.0], [0.1], [Drag(np.array([0.2]))])).beta.tolist() == [0.2]
+
+
+def test_memory_bound_streams_the_bytes_it_claims():
+    model, _ = bench.particles_model(1000)
+    system = peers.PointMasses.from_model(model)
+    # q and v read and written (2 x N x 3 doubles), 1/m and drag beta only read (2 x N doubles)
+    assert bench._step_bytes(model, system) == (2 * 1000 * 3 * 8, 2 * 1000 * 8)
+    peers.memory_stream(48_000, 16_000)()
+
+
+@pytest.fixture(scope="module")
+def tiny_record():
+    return bench.run_bench(TINY, quick=True)
+
+
+def test_tiny_bench_run_has_the_json_contract(tiny_record):
+    record = json.loads(json.dumps(tiny_record))  # JSON-able
+    assert set(bench.REQUIRED_RATIOS) <= set(record["ratios"])
+    expected = {"vs_diffrax_euler", "vs_diffrax_rk4", "vs_python_loop_semi_implicit_euler", "vs_numba_1e6",
+                "vs_memory_bound_cloth_1e5_springs", "vs_numba_cloth_1e5_springs", "vs_diffrax_tsit5_at_1e-8",
+                "batched_vs_loop_initial_conditions", "batched_vs_loop_dt", "batched_vs_loop_springs"}
+    assert expected <= set(record["ratios"])
+    for name, ratio in record["ratios"].items():
+        seconds = record["seconds"][name]
+        assert seconds["steplab"] > 0 and seconds["peer"] > 0, name
+        assert ratio == pytest.approx(seconds["steplab"] / seconds["peer"]), name
+    for name, target in record["targets"].items():
+        assert target["met"] == ((target.get("ratio") or target.get("seconds")) <= target["target"]), name
+    assert set(bench.TARGETS) | {"compile_seconds_max"} <= set(record["targets"])
+    assert record["compile_seconds"] and record["provenance"]["packages"]["jax"]
+
+
+def test_tiny_bench_run_compared_equal_computations(tiny_record):
+    differences = {name: s["difference"] for name, s in tiny_record["seconds"].items()
+                   if s["difference"] is not None}
+    assert differences["vs_ckdtree_1e5"] == 0  # the same pairs
+    for name, difference in differences.items():
+        assert difference <= 1e-9, name
+    accuracy = tiny_record["seconds"]["vs_scipy_at_1e-8"]
+    assert accuracy["steplab_error"] <= 1e-8 and accuracy["peer_error"] <= 1e-8
+
+
+def test_bench_command_writes_json_and_prints_tables(tiny_record, monkeypatch, tmp_path, capsys):
+    monkeypatch.delenv("EQX_ON_ERROR", raising=False)  # restored after the test: other tests need diffrax to raise
+    runs = []
+    monkeypatch.setattr(bench, "run_bench", lambda config, quick, progress: runs.append(config) or tiny_record)
+    out = tmp_path / "bench.json"
+    assert main(["bench", "--quick", "--json", str(out)]) == 0
+    assert runs == [bench.QUICK]
+    table = capsys.readouterr().out
+    assert "vs_diffrax_semi_implicit_euler" in table and "ratio" in table
+    assert json.loads(out.read_text())["ratios"] == tiny_record["ratios"]
+    assert main(["bench", "--from", str(out), "--markdown"]) == 0
+    markdown = capsys.readouterr().out
+    assert markdown.startswith("| comparison |") and "`vs_memory_bound_1e6`" in markdown
+
+
+def test_quick_bench_keeps_the_issues_sizes():
+    # --quick shortens repeats, not the systems the targets are stated for
+    for field in ("small_steps", "particles", "broadphase_n"):
+        assert getattr(bench.QUICK, field) == getattr(bench.FULL, field)
+    assert dataclasses.asdict(bench.FULL)["small_steps"] == 100_000
