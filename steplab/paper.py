@@ -120,6 +120,34 @@ def _restitution(data):
     return _markdown_table(["ball", "lecture c.o.r."] + [f"measured, {d}" for d in data["detectors"]], rows)
 
 
+def _bench(data):
+    rows = []
+    for name in data["order"]:
+        x = data["seconds"][name]
+        target = data["targets"].get(name)
+        verdict = "-" if target is None else f"<= {target['target']:g}: {'met' if target['met'] else 'missed'}"
+        rows.append([x["what"], x["peer_name"], _seconds(x["steplab"]), _seconds(x["peer"]),
+                     f"{data['ratios'][name]:.3g}", verdict])
+    return _markdown_table(["comparison", "peer", "steplab", "peer time", "ratio", "target"], rows) + \
+        "\n\n(medians of interleaved rounds; ratio = steplab / peer, below 1: steplab is faster.)"
+
+
+def _seconds(t: float) -> str:
+    return f"{t * 1e3:.3g} ms" if t < 1 else f"{t:.3g} s"
+
+
+def _broadphase_targets(data):
+    rows = []
+    for name, t in data.items():
+        if "target_bytes" in t:
+            value, limit = f"{t['beyond_output_bytes'] / 2**20:.0f} MiB", f"{t['target_bytes'] / 2**20:.0f} MiB"
+        else:
+            value, limit = f"{t.get('ratio', t.get('slope')):.2f}", f"{t['target']:g}"
+        method = f" ({t['method']})" if "method" in t else ""
+        rows.append([name.replace("_", " ") + method, value, limit, "met" if t.get("met") else "missed"])
+    return _markdown_table(["target", "measured", "limit", ""], rows)
+
+
 #: name -> (slice of the records the table needs, how to draw it)
 TABLES = {
     "orders": (lambda r: {"orders": r["truncation"]["orders"], "declared": r["truncation"]["declared_orders"]},
@@ -133,6 +161,8 @@ TABLES = {
     "restitution": (lambda r: {"rows": [{k: row[k] for k in ("object", "cor_lecture", "cor_measured")}
                                         for row in r["restitution"]["rows"]],
                                "detectors": list(r["restitution"]["rows"][0]["cor_measured"])}, _restitution),
+    "bench": (lambda r: {k: r["bench"][k] for k in ("order", "seconds", "ratios", "targets")}, _bench),
+    "broadphase_targets": (lambda r: r["broadphase"]["targets"], _broadphase_targets),
     "lecture_errors": (lambda r: [{k: e[k] for k in ("where", "printed", "correct", "evidence")}
                                   for study in ("restitution", "tunnelling") for e in r[study]["lecture_errors"]
                                   if e.get("is_error", True) and not e["correct"].startswith("checked")],
