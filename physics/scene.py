@@ -468,8 +468,9 @@ class _SceneBuilder:
 
     def add_collisions(self, c: _Table):
         """The [collisions] table: detector, materials and static geometry (a CollisionWorld)."""
+        from .broadphase import METHODS
         from .collision import world as collision_world
-        from .collision.pairs import DEFAULT_BROADPHASE, broadphase_methods
+        from .collision.pairs import DEFAULT_BROADPHASE
         from .collision.response import PairProperties
         from .collision.shapes import Box, OrientedBox, Plane, rotation_matrix
 
@@ -480,7 +481,7 @@ class _SceneBuilder:
         friction = c.number("friction", 0.0, nonnegative=True)
         iterations = c.integer("bisection_iterations", collision_world.DEFAULT_BISECTION_ITERATIONS, 0, 60)
         max_impacts = c.integer("max_impacts_per_step", collision_world.DEFAULT_MAX_IMPACTS_PER_STEP, 1, 10**6)
-        broadphase = c.string("broadphase", DEFAULT_BROADPHASE, choices=broadphase_methods())
+        broadphase = c.string("broadphase", DEFAULT_BROADPHASE, choices=tuple(METHODS))
         rest_speed = c.number("rest_speed", collision_world.DEFAULT_REST_SPEED, nonnegative=True)
 
         shapes = []

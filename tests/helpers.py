@@ -198,3 +198,17 @@ def max_error(y, y_ref) -> float:
 def fit_order(dts, errors) -> float:
     """Least-squares slope of log(error) against log(dt)."""
     return float(np.polyfit(np.log(dts), np.log(errors), 1)[0])
+
+
+#: the smallest valid scene, and the same with a second body 1 m away (for springs and errors)
+ONE_BODY_SCENE = """
+[simulation]
+dt = 0.01
+t_end = 1.0
+[[bodies]]
+name = "a"
+mass = 1.0
+radius = 0.1
+position = [0.0, 0.0, 0.0]
+"""
+TWO_BODY_SCENE = ONE_BODY_SCENE + '[[bodies]]\nname = "b"\nmass = 1.0\nradius = 0.1\nposition = [1.0, 0.0, 0.0]\n'

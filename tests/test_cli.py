@@ -7,24 +7,9 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from helpers import TWO_BODY_SCENE
 
 from steplab.cli import main
-
-SPRING_SCENE = """
-[simulation]
-dt = 0.01
-t_end = 1.0
-[[bodies]]
-name = "a"
-mass = 1.0
-radius = 0.1
-position = [0.0, 0.0, 0.0]
-[[bodies]]
-name = "b"
-mass = 1.0
-radius = 0.1
-position = [1.0, 0.0, 0.0]
-"""
 
 
 def run(capsys, *argv):
@@ -142,16 +127,16 @@ def test_bad_input_one_line_status_2(capsys, argv, message):
 BAD_SCENES = [
     ("[simulation]\ndt = 0.1\nt_end = = 2\n", "malformed TOML"),
     (b"[simulation]\n\xff = 1\n", "not UTF-8"),
-    (SPRING_SCENE.replace("mass = 1.0", "mass = -2.0", 1), "bodies[0].mass: must be > 0, got -2"),
-    (SPRING_SCENE.replace("radius = 0.1", "radius = 0", 1), "bodies[0].radius: must be > 0"),
-    (SPRING_SCENE.replace("dt = 0.01", "dt = 0"), "simulation.dt: must be > 0"),
-    (SPRING_SCENE.replace("t_end = 1.0", "t_end = -1.0"), "simulation.t_end: must be later than t_start"),
-    (SPRING_SCENE.replace("t_end = 1.0", "t_end = nan"), "simulation.t_end: must be finite"),
-    (SPRING_SCENE.replace('name = "a"', "name = 5"), "bodies[0].name: must be a string, got an integer"),
-    (SPRING_SCENE.replace("dt = 0.01\n", ""), "simulation.dt: missing required key"),
-    (SPRING_SCENE + '[[forces.springs]]\nbodies = ["a", "z"]\nstiffness = 1.0\n',
+    (TWO_BODY_SCENE.replace("mass = 1.0", "mass = -2.0", 1), "bodies[0].mass: must be > 0, got -2"),
+    (TWO_BODY_SCENE.replace("radius = 0.1", "radius = 0", 1), "bodies[0].radius: must be > 0"),
+    (TWO_BODY_SCENE.replace("dt = 0.01", "dt = 0"), "simulation.dt: must be > 0"),
+    (TWO_BODY_SCENE.replace("t_end = 1.0", "t_end = -1.0"), "simulation.t_end: must be later than t_start"),
+    (TWO_BODY_SCENE.replace("t_end = 1.0", "t_end = nan"), "simulation.t_end: must be finite"),
+    (TWO_BODY_SCENE.replace('name = "a"', "name = 5"), "bodies[0].name: must be a string, got an integer"),
+    (TWO_BODY_SCENE.replace("dt = 0.01\n", ""), "simulation.dt: missing required key"),
+    (TWO_BODY_SCENE + '[[forces.springs]]\nbodies = ["a", "z"]\nstiffness = 1.0\n',
      "forces.springs[0].bodies: names unknown body 'z'"),
-    (SPRING_SCENE + "[forces.gravty]\n", "forces: unknown key 'gravty'"),
+    (TWO_BODY_SCENE + "[forces.gravty]\n", "forces: unknown key 'gravty'"),
 ]
 
 

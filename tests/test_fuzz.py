@@ -32,6 +32,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from helpers import ONE_BODY_SCENE, TWO_BODY_SCENE
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
@@ -398,17 +399,7 @@ def test_cli_command_line_fuzz(argv, suffix):
 
 # --- chosen hostile inputs, each with the line it must print ---------------------------------
 
-SCENE = """
-[simulation]
-dt = 0.01
-t_end = 1.0
-[[bodies]]
-name = "a"
-mass = 1.0
-radius = 0.1
-position = [0.0, 0.0, 0.0]
-"""
-TWO = SCENE + '[[bodies]]\nname = "b"\nmass = 1.0\nradius = 0.1\nposition = [1.0, 0.0, 0.0]\n'
+SCENE, TWO = ONE_BODY_SCENE, TWO_BODY_SCENE
 
 HOSTILE = [
     # (scene text, extra argv, fragment of the one-line message)

@@ -2,26 +2,9 @@
 
 import numpy as np
 import pytest
+from helpers import TWO_BODY_SCENE
 
 from physics.scene import SceneError, builtin_scenes, load_scene, parse_scene
-
-MINIMAL = """
-[simulation]
-dt = 0.01
-t_end = 1.0
-
-[[bodies]]
-name = "a"
-mass = 1.0
-radius = 0.1
-position = [0.0, 0.0, 0.0]
-
-[[bodies]]
-name = "b"
-mass = 2.0
-radius = 0.1
-position = [1.0, 0.0, 0.0]
-"""
 
 
 def test_builtins_exist():
@@ -45,7 +28,7 @@ def test_projectile_is_the_lecture_example():
 
 
 def test_spring_rest_length_defaults_to_initial_distance():
-    scene = parse_scene(MINIMAL + '[[forces.springs]]\nbodies = ["a", "b"]\nstiffness = 3.0\n')
+    scene = parse_scene(TWO_BODY_SCENE + '[[forces.springs]]\nbodies = ["a", "b"]\nstiffness = 3.0\n')
     (springs,) = scene.model.forces
     assert float(springs.rest_length[0]) == 1.0
     # at rest length the spring exerts nothing
@@ -73,7 +56,7 @@ pinned = [0, 3]
 
 
 def test_particles_are_seeded():
-    text = MINIMAL + """
+    text = TWO_BODY_SCENE + """
 [[particles]]
 name = "p"
 count = 5
@@ -113,8 +96,8 @@ BAD = [
 
 @pytest.mark.parametrize("old,new,message", BAD)
 def test_bad_scene_names_the_key(old, new, message):
-    text = MINIMAL.replace(old, new, 1)
-    assert text != MINIMAL or not old
+    text = TWO_BODY_SCENE.replace(old, new, 1)
+    assert text != TWO_BODY_SCENE or not old
     with pytest.raises(SceneError, match=None) as err:
         parse_scene(text, "s.toml")
     assert str(err.value).startswith("s.toml: ")
@@ -124,12 +107,12 @@ def test_bad_scene_names_the_key(old, new, message):
 
 def test_spring_naming_unknown_body():
     with pytest.raises(SceneError, match=r"forces.springs\[0\].bodies: names unknown body 'c'"):
-        parse_scene(MINIMAL + '[[forces.springs]]\nbodies = ["a", "c"]\nstiffness = 1.0\n', "s.toml")
+        parse_scene(TWO_BODY_SCENE + '[[forces.springs]]\nbodies = ["a", "c"]\nstiffness = 1.0\n', "s.toml")
 
 
 def test_spring_to_itself():
     with pytest.raises(SceneError, match="must name two different bodies"):
-        parse_scene(MINIMAL + '[[forces.springs]]\nbodies = ["a", "a"]\nstiffness = 1.0\n')
+        parse_scene(TWO_BODY_SCENE + '[[forces.springs]]\nbodies = ["a", "a"]\nstiffness = 1.0\n')
 
 
 def test_malformed_toml_names_the_line():
@@ -158,7 +141,7 @@ def test_unknown_scene_lists_builtins(tmp_path):
 
 def test_pinned_bodies_never_move():
     with pytest.raises(SceneError, match="bodies\\[0\\].velocity: a pinned body never moves"):
-        parse_scene(MINIMAL.replace("position = [0.0, 0.0, 0.0]", "position = [0.0, 0.0, 0.0]\n"
+        parse_scene(TWO_BODY_SCENE.replace("position = [0.0, 0.0, 0.0]", "position = [0.0, 0.0, 0.0]\n"
                                     "velocity = [1.0, 0.0, 0.0]\npinned = true", 1))
     from integrators import simulate
 

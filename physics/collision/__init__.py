@@ -36,7 +36,6 @@ from .events import cancel_triggers as cancel_triggers
 from .events import remove_on_impact as remove_on_impact
 from .narrow_phase import PAIR_TESTS as PAIR_TESTS
 from .narrow_phase import collide as collide
-from .pairs import find_pairs as find_pairs
 from .response import PairProperties as PairProperties
 from .response import impulse as impulse
 from .shapes import Box as Box

@@ -16,50 +16,13 @@ import dataclasses
 
 import numpy as np
 
-from . import time_of_impact as toi
+from ..broadphase import find_pairs
 from .narrow_phase import collide, collide_sphere_sphere
 from .shapes import Shape, Sphere
+from .time_of_impact import sphere_sphere, time_of_impact
 
 #: the pair-finding method when a scene names none (a uniform grid, see physics.broadphase)
 DEFAULT_BROADPHASE = "grid"
-#: the method names of physics.broadphase, accepted (as brute force) when it cannot be imported
-FALLBACK_METHODS = ("brute", "grid", "hash", "sap", "sap-coherent", "bvh")
-
-
-def brute_force_pairs(centers, radii) -> np.ndarray:
-    """Every pair i < j with |c_i - c_j| <= r_i + r_j, shape (k, 2), int64, sorted.
-
-    The fallback when ``physics.broadphase`` cannot be imported.
-    """
-    centers, radii = np.asarray(centers, dtype=float), np.asarray(radii, dtype=float)
-    i, j = np.triu_indices(len(radii), k=1)
-    d = centers[j] - centers[i]
-    close = np.sum(d * d, axis=1) <= (radii[i] + radii[j]) ** 2
-    return np.stack([i[close], j[close]], axis=1).astype(np.int64)
-
-
-def broadphase_methods() -> tuple[str, ...]:
-    """The names ``find_pairs`` accepts (those of ``physics.broadphase``)."""
-    try:
-        from physics.broadphase import METHODS
-    except ImportError:  # without numba every method name runs as brute force (the same pairs)
-        return FALLBACK_METHODS
-    return tuple(METHODS)
-
-
-def find_pairs(centers, radii, method: str = DEFAULT_BROADPHASE) -> np.ndarray:
-    """Overlapping sphere pairs (k, 2), int64, i < j, rows sorted, by ``method``.
-
-    Every method of ``physics.broadphase`` returns the same array; without that package
-    (it needs numba) brute force gives it.
-    """
-    try:
-        from physics.broadphase import find_pairs as broadphase_find_pairs
-    except ImportError:
-        return brute_force_pairs(centers, radii)
-    return broadphase_find_pairs(centers, radii, method=method)
-
-
 def _lerp(q0, q1, index, s):
     """Positions of bodies ``index`` at fraction ``s`` (per pair) along their chords."""
     p = q0[index]
@@ -89,7 +52,7 @@ class BodyPairs:
                                      Sphere(_lerp(q0, q1, self.j, s), radii[self.j]))
 
     def time_of_impact(self, radii, q0, q1):
-        return toi.sphere_sphere(q0[self.i], q1[self.i], q0[self.j], q1[self.j], radii[self.i], radii[self.j])
+        return sphere_sphere(q0[self.i], q1[self.i], q0[self.j], q1[self.j], radii[self.i], radii[self.j])
 
     def velocity_b(self, v):
         return v[self.j]
@@ -123,7 +86,7 @@ class ShapePairs:
         return collide(Sphere(_lerp(q0, q1, self.i, s), radii[self.i]), self.shape)
 
     def time_of_impact(self, radii, q0, q1):
-        return toi.time_of_impact(q0[self.i], q1[self.i], radii[self.i], self.shape)
+        return time_of_impact(q0[self.i], q1[self.i], radii[self.i], self.shape)
 
     def velocity_b(self, v):
         return np.zeros((len(self.i), 3))
