@@ -254,7 +254,7 @@ def cmd_run(args) -> int:
     if not t_end > scene.t_start:
         raise ValueError(f"--t-end {t_end:g} must be later than the scene's t_start = {scene.t_start:g}")
     dtype = np.dtype(args.precision)
-    world = _collision_world(scene, args)
+    world = _collision_world(scene, args.detector, args.backend)
     traj = simulate(scene.model, integrator, scene.y0, scene.t_start, t_end, dt, backend=args.backend,
                     dtype=dtype, save_every=args.save_every, max_steps=args.max_steps or MAX_STEPS,
                     progress=not args.json and sys.stderr.isatty(), collisions=world)
@@ -288,19 +288,19 @@ def cmd_run(args) -> int:
     return 0
 
 
-def _collision_world(scene, args):
-    """The scene's collision world with ``--detector`` applied, or None for no collisions."""
+def _collision_world(scene, detector, backend):
+    """The scene's collision world with ``detector`` (None: the scene's) applied, or None for no collisions."""
     world = scene.collisions
-    if args.detector is not None:
-        if world is None and args.detector != "none":
+    if detector is not None:
+        if world is None and detector != "none":
             from physics.collision import CollisionWorld
 
-            world = CollisionWorld(detector=args.detector)  # bodies against each other, eps = 1
+            world = CollisionWorld(detector=detector)  # bodies against each other, eps = 1
         elif world is not None:
-            world = world.with_detector(args.detector)
+            world = world.with_detector(detector)
     if world is None or world.detector == "none":
         return None
-    if args.backend != "numpy":
+    if backend != "numpy":
         raise ValueError(f"scene {scene.name!r} has collisions ({world.detector} detector), which run on the "
                          f"NumPy backend only; use --backend numpy, or --detector none")
     return world
@@ -370,8 +370,7 @@ def cmd_animate(args) -> int:
     runs = []
     for name, detector in panels:
         method = get_integrator(name)
-        args.detector, args.backend = detector, "numpy"
-        world = _collision_world(scene, args)
+        world = _collision_world(scene, detector, "numpy")
         traj = simulate(scene.model, method, scene.y0, scene.t_start, t_end, dt,
                         save_every=max(1, steps // 300), collisions=world)
         label = f"{scene.name}: {method.name}, dt = {dt:g} s"
