@@ -11,6 +11,8 @@ import jax
 jax.config.update("jax_enable_x64", True)
 
 from .broadphase import find_pairs as find_pairs  # noqa: E402
+from .central_gravity import CentralGravity as CentralGravity  # noqa: E402
+from .central_gravity import kepler_orbit as kepler_orbit  # noqa: E402
 from .dampers import Dampers as Dampers  # noqa: E402
 from .drag import Drag as Drag  # noqa: E402
 from .force import Force as Force  # noqa: E402

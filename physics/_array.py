@@ -49,6 +49,16 @@ def scatter_pair_blocks(xp, n: int, i, j, block):
     return xp.transpose(out, (0, 2, 1, 3))
 
 
+def block_diagonal(xp, block):
+    """Jacobian (N, 3, N, 3) of per-body forces whose block ``d f_i / d x_i`` is ``block`` (N, 3, 3)."""
+    n = block.shape[0]
+    idx = xp.arange(n)
+    if is_numpy(xp):
+        out = np.zeros((n, 3, n, 3), dtype=block.dtype)
+        out[idx, :, idx, :] = block
+        return out
+    return xp.zeros((n, 3, n, 3), dtype=block.dtype).at[idx, :, idx, :].set(block)
+
 def safe_unit(xp, x, length):
     """``x / length`` row-wise, and the zero vector where ``length`` is zero.
 

@@ -7,7 +7,7 @@ from typing import ClassVar
 
 import numpy as np
 
-from ._array import norm
+from ._array import block_diagonal, norm
 from .force import Force
 
 #: density of air at sea level and 15 C, kg/m^3
@@ -53,11 +53,4 @@ class Drag(Force):
             0,
         )
         block = -self.beta[:, None, None] * (speed[:, None, None] * xp.eye(3, dtype=v.dtype) + vhat_v)
-        n = v.shape[0]
-        idx = xp.arange(n)
-        dense = xp.zeros((n, 3, n, 3), dtype=v.dtype)
-        if xp is np:
-            dense[idx, :, idx, :] = block
-        else:
-            dense = dense.at[idx, :, idx, :].set(block)
-        return None, dense
+        return None, block_diagonal(xp, block)

@@ -17,6 +17,7 @@ from pathlib import Path
 import numpy as np
 
 from . import soft_body
+from .central_gravity import CentralGravity
 from .dampers import Dampers
 from .drag import AIR_DENSITY, Drag
 from .friction import Friction
@@ -412,11 +413,16 @@ class _SceneBuilder:
         return pair[0], pair[1]
 
     def add_forces(self, forces: _Table):
-        forces.allow("gravity", "springs", "dampers", "drag", "friction")
+        forces.allow("gravity", "central_gravity", "springs", "dampers", "drag", "friction")
         gravity = forces.table("gravity")
         if gravity is not None:
             gravity.allow("g")
             self.forces.append(Gravity(gravity.vector("g", list(EARTH_GRAVITY))))
+        central = forces.table("central_gravity")
+        if central is not None:
+            central.allow("mu", "center")
+            self.forces.append(CentralGravity(central.number("mu", _REQUIRED, positive=True),
+                                              central.vector("center", [0.0, 0.0, 0.0])))
         springs = forces.tables("springs")
         if springs:
             q = np.array(self.positions)

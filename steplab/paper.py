@@ -17,6 +17,8 @@ import json
 import re
 from pathlib import Path
 
+import numpy as np
+
 from steplab.io import write_atomic
 
 PLACEHOLDER = re.compile(r"\{\{\s*([^{}]+?)\s*\}\}")
@@ -85,6 +87,44 @@ def _stability(data):
     rows = [[m] + [format_value(data[z][kind][m], ".4f") for z in zetas for kind in ("measured", "theory")]
             for m in methods]
     return _markdown_table(header, rows) + "\n\n(0: unstable for every dt > 0; none: no limit found.)"
+
+
+def _huge_dt(data):
+    ys = list(dict.fromkeys(r["omega_dt"] for r in data))
+    cells = {(r["integrator"], r["omega_dt"]): "no divergence" if r["diverged_at_step"] is None
+             else f"{r['diverged_at_step']} ({r['predicted_step']})" for r in data}
+    methods = list(dict.fromkeys(r["integrator"] for r in data))
+    return _markdown_table(["integrator"] + [f"omega dt = {y:g}" for y in ys],
+                           [[m] + [cells[m, y] for y in ys] for m in methods])
+
+
+def _far_from_origin(data):
+    edges = data["stall_edge"]
+    rows = [[f"{speed} m/s", f"{float(speed) / 60:.2g} m", format_value(first, ".3g"),
+             f"2^{np.log2(edges['float32'][speed]):.0f} m"] for speed, first in data["first_stall"]["float32"].items()]
+    slowest = min(edges["float64"], key=float)
+    stalls64 = [x for x in data["first_stall"]["float64"].values() if x is not None]
+    note = (f"float64 stalls at {min(stalls64):.0e} m" if stalls64 else "float64 stalls nowhere up to 10^7 m") + \
+        f"; at {slowest} m/s the rounding model puts its edge at 2^{np.log2(edges['float64'][slowest]):.0f} m."
+    return _markdown_table(["speed", "step v dt", "first stalled x0 of 1e3..1e7 m", "rounding model: stalls from"],
+                           rows) + f"\n\n(float32, dt = 1/60 s; {note})"
+
+
+def _mass_ratio(data):
+    ratios = sorted({r["mass_ratio"] for r in data})
+    shown = sorted({ratios[0], ratios[len(ratios) // 2], ratios[-1]})
+    cells = {(r["integrator"], r["mass_ratio"]): r for r in data}
+    methods = list(dict.fromkeys(r["integrator"] for r in data))
+
+    def cell(m, ratio):
+        r = cells[m, ratio]
+        if r["dt_max"] is None or r["dt_max"] == 0:
+            return "any dt" if r["dt_max"] is None else "none"
+        return f"{r['dt_max']:.3g} s ({r['dt_max_theory']:.3g})"
+
+    return _markdown_table(["integrator"] + [f"mass ratio {x:g}" for x in shown],
+                           [[m] + [cell(m, x) for x in shown] for m in methods]) + \
+        "\n\n(largest stable dt measured (theory); none: unstable at every dt; any dt: no limit.)"
 
 
 def _frame_rate(data):
@@ -157,6 +197,11 @@ TABLES = {
                                if p in r["truncation"]["least_error"]}, _least_error),
     "stability": (lambda r: {z: {k: v[k] for k in ("measured", "theory")}
                              for z, v in r["stability"]["by_damping_ratio"].items()}, _stability),
+    "huge_dt": (lambda r: [{k: row[k] for k in ("integrator", "omega_dt", "diverged_at_step", "predicted_step")}
+                           for row in r["stability"]["extremes"]["huge_dt"]], _huge_dt),
+    "far_from_origin": (lambda r: {k: r["stability"]["extremes"]["far_from_origin"][k]
+                                   for k in ("first_stall", "stall_edge")}, _far_from_origin),
+    "mass_ratio": (lambda r: r["stability"]["extremes"]["mass_ratio"]["rows"], _mass_ratio),
     "frame_rate": (lambda r: r["frame_rate"]["runs"], _frame_rate),
     "restitution": (lambda r: {"rows": [{k: row[k] for k in ("object", "cor_lecture", "cor_measured")}
                                         for row in r["restitution"]["rows"]],

@@ -50,9 +50,9 @@ COLOURS = {"brute": ("tab:gray", "x"), "grid": ("tab:blue", "o"), "hash": ("tab:
 
 
 def parameters(quick: bool) -> dict:
-    sizes = [100, 300, 1_000, 3_000, 10_000]
+    sizes = [100, 300, 1_000, 3_000]
     if not quick:
-        sizes += [30_000, 100_000, 300_000, 1_000_000]
+        sizes += [10_000, 30_000, 100_000, 300_000, 1_000_000]
     return {
         "distributions": list(DISTRIBUTIONS), "methods": list(METHODS), "peers": list(PEERS),
         "sizes": sizes,

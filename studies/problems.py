@@ -8,7 +8,7 @@ from collections.abc import Callable
 import numpy as np
 
 from integrators import get_integrator, simulate
-from physics import Dampers, Model, Springs, projectile
+from physics import Dampers, Model, Springs, kepler_orbit, projectile
 from physics.scene import load_scene
 
 #: tolerance of the adaptive references used where no closed form exists
@@ -77,6 +77,20 @@ def oscillator_problem(damping_ratio: float = 0.0, t_end: float = 1.125) -> Prob
     name = "damped-oscillator" if damping_ratio else "oscillator"
     title = f"damped oscillator, zeta = {damping_ratio:g} (exact)" if damping_ratio else "harmonic oscillator (exact)"
     return Problem(name, title, model, y0, 0.0, t_end, solution, omega)
+
+
+def kepler_problem(t_end: float = 1.0) -> Problem:
+    """The ``kepler`` scene: a = 1 m, e = 0.5, period 1 s, exact through Kepler's equation."""
+    scene = load_scene("kepler")
+    (gravity,) = scene.model.forces
+    mu, center = float(gravity.mu), np.asarray(gravity.center)
+
+    def solution(t):
+        q, v = kepler_orbit(t, scene.y0[0, 0], scene.y0[1, 0], mu, scene.t_start, center)
+        return np.stack([q[..., None, :], v[..., None, :]], axis=-3)  # (..., 2, 1, 3)
+
+    return Problem("kepler", "Kepler orbit, e = 0.5 (exact)", scene.model, scene.y0, scene.t_start, t_end,
+                   solution, omega=2 * np.pi)
 
 
 def scene_problem(scene_name: str, t_end: float, title: str, omega: float | None = None) -> Problem:

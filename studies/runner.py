@@ -5,8 +5,9 @@ A :class:`Study` is three plain functions: ``parameters(quick)`` gives the param
 and ``plot(record, out)`` draws figures from the record alone. The runner adds
 provenance, writes the figures and then the JSON (each atomically, JSON last), and
 skips a study whose JSON carries the same cache key: a hash of its parameters and of
-steplab's source code. So an interrupted ``steplab reproduce`` resumes where it
-stopped, and a change to the code or the parameters re-runs what it affects.
+the source code it runs (physics, integrators and the study modules it uses). So an
+interrupted ``steplab reproduce`` resumes where it stopped, and a change to the code or
+the parameters re-runs what it affects.
 """
 
 from __future__ import annotations
@@ -17,12 +18,14 @@ import hashlib
 import json
 import platform
 import subprocess
-from collections.abc import Callable
+import sys
+import types
+from collections.abc import Callable, Iterable
 from pathlib import Path
 
 from steplab.io import remove_temporary_files, write_json
 
-#: packages whose source is part of every study's cache key
+#: packages whose source is part of the cache keys (of studies: the modules a study uses)
 SOURCE_PACKAGES = ("physics", "integrators", "studies")
 
 
@@ -37,22 +40,45 @@ class Study:
     summary: Callable[[dict], list[tuple[str, str]]] = lambda record: []
 
 
-def source_hash(root: Path | None = None) -> str:
-    """SHA-256 of the source files of steplab's model, integrators and studies (under ``root``,
-    default: this checkout)."""
+def source_hash(root: Path | None = None, studies: Iterable[str] | None = None) -> str:
+    """SHA-256 of the source files of steplab's model and integrators, and of ``studies``
+    (module names such as ``studies.stability``; default: the whole studies package), under
+    ``root`` (default: this checkout)."""
     root = Path(root) if root is not None else Path(__file__).resolve().parent.parent
+    files = []
+    for package in SOURCE_PACKAGES if studies is None else ("physics", "integrators"):
+        files += sorted(p for p in (root / package).rglob("*")
+                        if p.suffix in (".py", ".toml") and "__pycache__" not in p.parts)
+    if studies is not None:
+        files += [root / "studies" / f"{name.split('.')[-1]}.py" for name in sorted(studies)]
     digest = hashlib.sha256()
-    for package in SOURCE_PACKAGES:
-        for path in sorted((root / package).rglob("*")):
-            if path.suffix in (".py", ".toml") and "__pycache__" not in path.parts:
-                digest.update(str(path.relative_to(root)).encode())
-                digest.update(path.read_bytes())
+    for path in files:
+        digest.update(str(path.relative_to(root)).encode())
+        digest.update(path.read_bytes())
     return digest.hexdigest()
 
 
-def cache_key(name: str, parameters: dict) -> str:
-    text = json.dumps({"study": name, "parameters": parameters}, sort_keys=True)
-    return hashlib.sha256((text + source_hash()).encode()).hexdigest()
+def study_modules(study: Study) -> set[str]:
+    """The modules of the studies package a study's code uses: its own and, through their
+    imports, every one they reach (found from the imported names, so nothing is listed by hand)."""
+    seen, todo = set(), [study.compute.__module__]
+    while todo:
+        name = todo.pop()
+        if name in seen or name not in sys.modules:
+            continue
+        seen.add(name)
+        for value in vars(sys.modules[name]).values():
+            used = value.__name__ if isinstance(value, types.ModuleType) else getattr(value, "__module__", None)
+            if isinstance(used, str) and used.startswith("studies."):
+                todo.append(used)
+    return {name for name in seen if name.startswith("studies.")}
+
+
+def cache_key(study: Study, parameters: dict) -> str:
+    """Hash of the parameters and of the code the study runs: physics, integrators and the
+    study modules it uses, so an edit to one study does not invalidate the others."""
+    text = json.dumps({"study": study.name, "parameters": parameters}, sort_keys=True)
+    return hashlib.sha256((text + source_hash(studies=study_modules(study))).encode()).hexdigest()
 
 
 def is_cached(study: Study, out: Path, quick: bool) -> bool:
@@ -62,7 +88,7 @@ def is_cached(study: Study, out: Path, quick: bool) -> bool:
         record = json.loads(path.read_text())
     except (OSError, ValueError):
         return False
-    if not isinstance(record, dict) or record.get("cache_key") != cache_key(study.name, study.parameters(quick)):
+    if not isinstance(record, dict) or record.get("cache_key") != cache_key(study, study.parameters(quick)):
         return False
     figures = record.get("figures", [])
     return isinstance(figures, list) and all(isinstance(f, str) and (out / f).is_file() for f in figures)
@@ -78,9 +104,10 @@ def run_study(study: Study, out: Path, quick: bool = False, force: bool = False,
         record["cached"] = True
         return record
     parameters = study.parameters(quick)
+    key = cache_key(study, parameters)  # of the source as the study starts: an edit meanwhile re-runs it
     record = study.compute(parameters, progress=progress)
     record.update(study=study.name, title=study.title, parameters=parameters,
-                  provenance=provenance(), cache_key=cache_key(study.name, parameters))
+                  provenance=provenance(), cache_key=key)
     record["figures"] = study.plot(record, out)
     write_json(out / f"{study.name}.json", record)  # last: its presence means "complete"
     record["cached"] = False

@@ -1,204 +1,124 @@
-"""Stability study: the largest stable omega dt of every integrator, measured and derived.
+"""Stability study: how large a step each integrator survives, and what it costs near the edge.
 
-Measured: on the oscillator x'' = -omega^2 x - 2 zeta omega x', by bisection on long runs
-of the real integrator (a run is unstable when the growth per step of its measured
-LONG_RUN_STEPS-step map exceeds GROWTH_TOLERANCE). Methods whose one-step amplification
-exceeds 1 at even the smallest omega dt are recorded as 0 (unstable for every dt > 0);
-methods stable at omega dt = OMEGA_DT_MAX as null (no limit found).
-
-Derived: the largest y = omega dt with spectral radius <= 1 of each method's one-step
-map on the scalar test equation: |R(y mu)| <= 1 with mu = -zeta + i sqrt(1 - zeta^2) for
-Runge-Kutta methods (R from their Butcher tableau), and the 2x2 / 3x3 recurrence matrix
-for the partitioned methods (semi-implicit Euler, velocity and position Verlet).
+* Limits on the oscillator: the largest stable omega dt of every method, undamped and
+  damped, measured on long runs and derived from its stability function
+  (studies/stability_limits.py), drawn on the stability regions |R(z)| <= 1.
+* Energy over long runs (10^6 steps) on the oscillator and a Kepler orbit.
+* Stiff springs: the largest stable dt against the stiffness of the soft body, and the
+  numerical damping implicit Euler pays for being stable at any dt (studies/stiffness.py).
+* The extremes: huge dt, positions far from the origin in float32 and float64, mass
+  ratios up to 10^6 across a spring (studies/extremes.py).
 """
 
 from __future__ import annotations
 
 import numpy as np
-from scipy.optimize import brentq
 
-from integrators import INTEGRATORS, ExplicitRungeKutta, Stepper
-from integrators.simulate import final_state_function
+from integrators import INTEGRATORS, Stepper
 
-from . import plotting
-from .problems import oscillator_problem
+from . import extremes, plotting, stiffness
+from .problems import kepler_problem, oscillator_problem
 from .runner import Study
+from .stability_limits import (
+    CLOSED_FORMS,
+    GROWTH_TOLERANCE,
+    LONG_RUN_STEPS,
+    measured_limit,
+    oscillator_mode,
+    theoretical_limit,
+)
 
-#: steps of one stability run; the largest growth per step (log of the spectral radius of
-#: the measured N-step map, over N) that still counts as stable; the probe deviation, m
-LONG_RUN_STEPS = 20_000
-GROWTH_TOLERANCE = 1e-9
-PROBE = 1e-6
-#: search interval of omega dt, and the bisection's relative tolerance
-OMEGA_DT_MIN, OMEGA_DT_MAX = 1e-3, 100.0
-BISECTION_RTOL = 1e-6
-#: a one-step spectral radius above 1 + this at omega dt = OMEGA_DT_MIN is growth, not round-off
-AMPLIFICATION_TOLERANCE = 1e-14
-THEORY_TOLERANCE = 1e-14
+#: energy runs up to this many steps use the NumPy backend; windows of an energy envelope
+SHORT_RUN_STEPS = 10_000
+ENVELOPE_WINDOWS = 200
 
 
 def parameters(quick: bool) -> dict:
     steppers = [name for name, m in INTEGRATORS.items() if isinstance(m, Stepper)]
-    return {"integrators": steppers, "damping_ratios": [0.0, 0.1],
+    return {"integrators": steppers, "damping_ratios": [0.0] if quick else [0.0, 0.1],
             "long_run_steps": LONG_RUN_STEPS // 4 if quick else LONG_RUN_STEPS,
-            "energy_steps": 10_000 if quick else 1_000_000, "energy_omega_dt": 0.1}
+            "energy_steps": 2_000 if quick else 1_000_000, "energy_omega_dt": 0.1, "kepler_dt": 1e-3,
+            # the sweeps below measure a limit per point: a first look sweeps the game default only
+            "sweep_integrators": ["semi-implicit-euler"] if quick else steppers,
+            # stiff springs (studies/stiffness.py)
+            "stiffnesses": [1e2, 1e4] if quick else np.geomspace(10, 1e5, 5).tolist(),
+            "stiffness_steps": 1000 if quick else 5000, "stiffness_rtol": 1e-2 if quick else 1e-4,
+            "damping_omega_dts": np.geomspace(1e-3, 100, 6 if quick else 21).tolist(),
+            # the extremes (studies/extremes.py)
+            "huge_omega_dts": [3.0, 10.0, 100.0], "huge_max_steps": 1000,
+            "precisions": ["float64", "float32"], "far_offsets": 9 if quick else 17,
+            "far_speeds": [1e-3, 1e-2, 1e-1, 1.0], "coasting_steps": 60, "jitter_periods": 5,
+            "mass_ratios": [1.0, 1e6] if quick else np.geomspace(1, 1e6, 7).tolist(),
+            "mass_ratio_steps": 1000 if quick else 5000, "mass_ratio_rtol": 1e-2 if quick else 1e-4}
 
 
-# --- theory -------------------------------------------------------------------------
+def energy_history(problem, method: str, steps: int, dt: float) -> dict:
+    """Relative energy error |E(t) - E(0)| / |E(0)| over ``steps`` steps, as an envelope.
 
-
-def _partitioned_map(method: str, y: float, zeta: float) -> np.ndarray:
-    """One-step matrix of a partitioned method on u'' = -u - 2 zeta u' (omega = 1, h = y).
-
-    Written out from each method's definition (integrators/*.py docstrings), acting on
-    (u, v), or (u, v, carry) for the Verlet methods, which keep an acceleration between
-    steps: velocity Verlet its last evaluation (at the predicted velocity), position
-    Verlet the one it estimates the half-step velocity from.
+    The energy is evaluated after every step; the record keeps the largest error in each
+    of about ENVELOPE_WINDOWS log-spaced windows of steps (and the time each window ends),
+    so a log-time plot shows the first period and the last alike, and a symplectic
+    method's band is drawn whole (a sample every so many steps would alias with the
+    orbit). A run that diverges (or, for implicit Euler on the orbit, whose Newton
+    iteration fails once numerical damping has spiralled the body into the singular
+    centre) is shown up to the step before, and the step is recorded.
     """
-    h = y
-
-    def acc(u, v):
-        return -u - 2 * zeta * v
-
-    columns = []
-    size = 3 if method in ("velocity-verlet", "position-verlet") else 2
-    for basis in np.eye(size):
-        u, v = basis[0], basis[1]
-        if method == "semi-implicit-euler":
-            v1 = v + h * acc(u, v)
-            columns.append([u + h * v1, v1])
-        elif method == "velocity-verlet":
-            a0 = basis[2]
-            u1 = u + h * v + h * h / 2 * a0
-            a1 = acc(u1, v + h * a0)
-            columns.append([u1, v + h / 2 * (a0 + a1), a1])
-        else:  # position-verlet: drift, kick with the half-step velocity estimated from a_prev
-            u_half = u + h / 2 * v
-            a = acc(u_half, v + h / 2 * basis[2])
-            v1 = v + h * a
-            columns.append([u_half + h / 2 * v1, v1, a])
-    return np.array(columns).T
+    energy, diverged = _energy_after_every_step(problem, method, steps, dt)
+    errors = np.abs(energy[1:] - energy[0]) / abs(energy[0])
+    starts = np.unique(np.round(np.geomspace(1, len(errors), ENVELOPE_WINDOWS)).astype(int)) - 1
+    ends = np.append(starts[1:], len(errors))  # step number at the end of each window
+    return {"integrator": method, "t": (ends * dt).tolist(),  # time since the start
+            "relative_energy_error": np.maximum.reduceat(errors, starts).tolist(),
+            "max_relative_energy_error": float(errors.max()), "final_relative_energy_error": float(errors[-1]),
+            "diverged_at_step": diverged}
 
 
-def spectral_radius(method: str, y: float, zeta: float) -> float:
-    """Largest |growth factor| per step at omega dt = y (from the method's definition)."""
-    mu = complex(-zeta, np.sqrt(1 - zeta**2))
+def _energy_after_every_step(problem, method: str, steps: int, dt: float) -> tuple[np.ndarray, int | None]:
+    """E(y_0), ..., E(y_n) and the first diverged step (None): n = steps, or the step before divergence.
+
+    Short runs step in NumPy (compiling costs about as much as 10^4 NumPy steps); long
+    ones are one compiled scan that returns only the energies, never the states.
+    """
     integrator = INTEGRATORS[method]
-    if isinstance(integrator, ExplicitRungeKutta):
-        return abs(integrator.tableau.stability_function(y * mu))
-    if method == "euler":
-        return abs(1 + y * mu)
-    if method == "implicit-euler":
-        return abs(1 / (1 - y * mu))
-    return float(np.max(np.abs(np.linalg.eigvals(_partitioned_map(method, y, zeta)))))
+    if steps <= SHORT_RUN_STEPS:
+        from integrators import DivergenceError, simulate
 
+        try:
+            traj, diverged = simulate(problem.model, method, problem.y0, 0.0, steps * dt, dt), None
+        except DivergenceError as err:
+            diverged = err.step
+            traj = simulate(problem.model, method, problem.y0, 0.0, (err.step - 1) * dt, dt)
+        return np.array([float(problem.model.energy(y)) for y in traj.y]), diverged
 
-def theoretical_limit(method: str, zeta: float) -> float | None:
-    """Largest omega dt with spectral radius <= 1: 0 if none, None if unbounded."""
-    ys = np.geomspace(OMEGA_DT_MIN, OMEGA_DT_MAX, 4000)
-    # |eigenvalue| = 1 exactly on the stable range of a symplectic method: allow round-off
-    excess = lambda y: spectral_radius(method, y, zeta) - 1 - THEORY_TOLERANCE  # noqa: E731
-    stable = np.array([excess(y) <= 0 for y in ys])
-    if not stable[0]:
-        return 0.0
-    if stable.all():
-        return None
-    k = int(np.argmin(stable))  # first unstable grid point
-    return float(brentq(excess, ys[k - 1], ys[k], xtol=1e-14))
-
-
-CLOSED_FORMS = {
-    "euler": "0 undamped (|1 + i y| > 1); 2 zeta damped",
-    "semi-implicit-euler": "2 undamped; 2 sqrt(1 + zeta^2) - 2 zeta damped",
-    "velocity-verlet": "2 undamped (trace 2 - y^2, det 1)",
-    "position-verlet": "2 undamped",
-    "heun": "0 undamped (|R(i y)|^2 = 1 + y^4 / 4)",
-    "midpoint": "0 undamped (same R as Heun)",
-    "rk4": "2 sqrt(2) = 2.8284 undamped",
-    "implicit-euler": "none: |1 / (1 - z)| <= 1 on the whole left half-plane (A-stable)",
-}
-
-
-# --- measurement --------------------------------------------------------------------
-
-
-def measured_limit(method: str, zeta: float, steps: int) -> dict:
-    """Largest stable omega dt by bisection on long runs of the real integrator.
-
-    Each test runs ``steps`` steps from two small deviations from rest (position, and
-    velocity / omega, of size PROBE), which gives the empirical ``steps``-step map M_N
-    of the linearised dynamics; the run is stable when its growth per step,
-    log(spectral radius of M_N) / steps, is at most GROWTH_TOLERANCE. The probes are
-    small enough that a 10^5-fold growth stays linear.
-    """
+    import jax
     import jax.numpy as jnp
+    from jax import lax
 
-    problem = oscillator_problem(zeta)
-    run = final_state_function(problem.model.cast(jnp), method)
-    starts = []
-    for u, v in ((PROBE, 0.0), (0.0, PROBE)):
-        y0 = np.zeros_like(problem.y0)
-        y0[0, 1, 0], y0[1, 1, 0] = 1.0 + u, v * problem.omega
-        starts.append(jnp.asarray(y0))
+    from integrators.simulate import divergence_limit
 
-    def stable(y: float) -> bool:
-        dt = y / problem.omega
-        columns = []
-        for y0 in starts:
-            final, bad = run(y0, 0.0, dt, steps)
-            if int(bad) >= 0:
-                return False
-            columns.append([float(final[0, 1, 0]) - 1.0, float(final[1, 1, 0]) / problem.omega])
-        radius = np.max(np.abs(np.linalg.eigvals(np.array(columns).T / PROBE)))
-        return bool(np.isfinite(radius) and np.log(max(radius, 1e-300)) / steps <= GROWTH_TOLERANCE)
+    model = problem.model.cast(jnp)
+    limit = divergence_limit(problem.y0, np.float64)
 
-    growth = _one_step_growth(problem, method, OMEGA_DT_MIN)
-    if growth > 1 + AMPLIFICATION_TOLERANCE:
-        return {"omega_dt_max": 0.0, "growth_per_step_at_min": growth}
-    if stable(OMEGA_DT_MAX):
-        return {"omega_dt_max": None}
-    lo, hi = OMEGA_DT_MIN, OMEGA_DT_MAX
-    if not stable(lo):
-        return {"omega_dt_max": 0.0}
-    while hi - lo > BISECTION_RTOL * lo:
-        mid = 0.5 * (lo + hi)
-        lo, hi = (mid, hi) if stable(mid) else (lo, mid)
-    return {"omega_dt_max": lo, "bracket": [lo, hi]}
+    @jax.jit
+    def run(y0):
+        def one_step(state, k):
+            y, carry, alive = state
+            # once diverged, stop stepping: a failed Newton iteration would otherwise spend its
+            # full iteration budget on NaN at every remaining step
+            y, carry = lax.cond(alive, lambda: integrator.step(model, k * dt, y, dt, carry), lambda: (y, carry))
+            ok = alive & jnp.all(jnp.abs(y) <= limit)
+            return (y, carry, ok), (model.energy(y), ok)
 
+        y0 = jnp.asarray(y0)
+        state = (y0, integrator.init(model, 0.0, y0), jnp.asarray(True))
+        _, (energy, ok) = lax.scan(one_step, state, jnp.arange(steps))
+        return jnp.concatenate([model.energy(y0)[None], energy]), ok
 
-def _one_step_growth(problem, method: str, y: float) -> float:
-    """Spectral radius of one real step of the integrator on (deviation, velocity / omega)."""
-    integrator = INTEGRATORS[method]
-    dt = y / problem.omega
-    columns = []
-    for u, v in ((1.0, 0.0), (0.0, 1.0)):
-        state = problem.y0.copy()
-        state[0, 1, 0], state[1, 1, 0] = 1.0 + u, v * problem.omega
-        carry = integrator.init(problem.model, 0.0, state)
-        new, _ = integrator.step(problem.model, 0.0, state, dt, carry)
-        columns.append([new[0, 1, 0] - 1.0, new[1, 1, 0] / problem.omega])
-    return float(np.max(np.abs(np.linalg.eigvals(np.array(columns).T))))
-
-
-def energy_history(method: str, steps: int, omega_dt: float) -> dict:
-    """Relative energy error of the undamped oscillator at log-spaced times over ``steps`` steps."""
-    from integrators import DivergenceError, simulate
-
-    problem = oscillator_problem(0.0)
-    dt = omega_dt / problem.omega
-    save_every = max(1, steps // 200)
-    diverged = None
-    try:
-        traj = simulate(problem.model, method, problem.y0, 0.0, steps * dt, dt, backend="jax",
-                        save_every=save_every)
-    except DivergenceError as err:  # show the growth up to the step before divergence
-        diverged = err.step
-        traj = simulate(problem.model, method, problem.y0, 0.0, (err.step - 1) * dt, dt, backend="jax",
-                        save_every=max(1, (err.step - 1) // 200))
-    e0 = float(problem.model.energy(problem.y0))
-    errors = [abs(float(problem.model.energy(y)) - e0) / e0 for y in traj.y[1:]]
-    return {"integrator": method, "t": traj.t[1:].tolist(), "relative_energy_error": errors,
-            "max_relative_energy_error": max(errors), "diverged_at_step": diverged}
+    energy, ok = (np.asarray(x) for x in run(problem.y0))
+    if ok.all():
+        return energy, None
+    bad = int(np.argmin(ok))  # index of the first bad step (0-based): step bad + 1
+    return energy[:bad + 1], bad + 1
 
 
 def compute(params: dict, progress=None) -> dict:
@@ -207,19 +127,30 @@ def compute(params: dict, progress=None) -> dict:
         key = f"{zeta:g}"
         measured[key], theory[key] = {}, {}
         for method in params["integrators"]:
-            measured[key][method] = measured_limit(method, zeta, params["long_run_steps"])
+            measured[key][method] = measured_limit(oscillator_mode(zeta), method, params["long_run_steps"])
             theory[key][method] = theoretical_limit(method, zeta)
             if progress is not None:
                 progress()
-    energy = [energy_history(m, params["energy_steps"], params["energy_omega_dt"]) for m in params["integrators"]]
+    oscillator, kepler = oscillator_problem(0.0), kepler_problem()
+    energy = {"oscillator": [energy_history(oscillator, m, params["energy_steps"],
+                                            params["energy_omega_dt"] / oscillator.omega)
+                             for m in params["integrators"]],
+              "kepler": [energy_history(kepler, m, params["energy_steps"], params["kepler_dt"])
+                         for m in params["integrators"]]}
     undamped = f"{params['damping_ratios'][0]:g}"
+    stiff = stiffness.stable_dt_against_stiffness(params["sweep_integrators"], params["stiffnesses"],
+                                                  params["stiffness_steps"], params["stiffness_rtol"], progress)
+    stiff["implicit_euler_damping"] = stiffness.implicit_euler_damping(params["damping_omega_dts"])
     return {
+        "growth_tolerance": GROWTH_TOLERANCE,
         "omega_dt_max": {m: r["omega_dt_max"] for m, r in measured[undamped].items()},
         "theory": theory[undamped],
         "by_damping_ratio": {z: {"measured": {m: r["omega_dt_max"] for m, r in measured[z].items()},
                                  "theory": theory[z], "details": measured[z]} for z in measured},
         "closed_forms": CLOSED_FORMS,
         "energy": energy,
+        "stiff_springs": stiff,
+        "extremes": extremes.compute(params, progress),
     }
 
 
@@ -231,7 +162,7 @@ def plot(record: dict, out) -> list[str]:
     figures = []
 
     fig, ax = plt.subplots(figsize=(7.5, 6.5))
-    x, y = np.meshgrid(np.linspace(-4.5, 2.5, 560), np.linspace(-3.5, 3.5, 560))
+    x, y = np.meshgrid(np.linspace(-4.5, 2.5, 400), np.linspace(-3.5, 3.5, 400))
     z = x + 1j * y  # the grid avoids z = 1, the pole of implicit Euler's R
     regions = {"euler": np.abs(1 + z), "heun / midpoint": np.abs(INTEGRATORS["heun"].tableau.stability_function(z)),
                "rk4": np.abs(INTEGRATORS["rk4"].tableau.stability_function(z)),
@@ -272,19 +203,26 @@ def plot(record: dict, out) -> list[str]:
     ax.legend(fontsize=7, loc="lower left", ncol=2)
     figures += plotting.save_figure(fig, out, "stability_regions")
 
-    fig, ax = plt.subplots(figsize=(7.5, 5))
-    for e in record["energy"]:
-        style = plotting.style(e["integrator"])
-        if e["diverged_at_step"]:
-            style["label"] += f" (diverges at step {e['diverged_at_step']})"
-        ax.loglog(e["t"], np.maximum(e["relative_energy_error"], 1e-17), lw=1.2, ms=0, **style)
-    ax.set_xlabel("time t (s)")
-    ax.set_ylabel("relative energy error |E(t) - E(0)| / E(0)")
-    ax.set_title("Energy over long runs: harmonic oscillator, omega dt = 0.1\n"
-                 "symplectic methods stay bounded; explicit Euler grows; RK4 and implicit Euler dissipate")
-    ax.grid(True, alpha=0.3)
-    ax.legend(fontsize=7)
+    fig, axes = plt.subplots(1, 2, figsize=(13, 5), sharey=True)
+    params = record["parameters"]
+    titles = {"oscillator": f"harmonic oscillator, omega dt = {params['energy_omega_dt']:g}",
+              "kepler": f"Kepler orbit (e = 0.5, period 1 s), dt = {params['kepler_dt']:g} s"}
+    for ax, (problem, runs) in zip(axes, record["energy"].items()):
+        for e in runs:
+            style = plotting.style(e["integrator"])
+            if e["diverged_at_step"]:
+                style["label"] += f" (stops at step {e['diverged_at_step']})"
+            ax.loglog(e["t"], np.maximum(e["relative_energy_error"], 1e-17), lw=1.2, ms=0, **style)
+        ax.set_xlabel("time t (s)")
+        ax.set_title(f"{titles[problem]}, {params['energy_steps']:,} steps", fontsize=10)
+        ax.grid(True, alpha=0.3)
+        ax.legend(fontsize=7)
+    axes[0].set_ylabel("relative energy error |E(t) - E(0)| / |E(0)|\n(largest in each window of steps)")
+    fig.suptitle("Energy over long runs: symplectic methods stay bounded, explicit Euler grows, "
+                 "RK4 and implicit Euler dissipate")
     figures += plotting.save_figure(fig, out, "stability_energy")
+    figures += stiffness.plot(record["stiff_springs"], out)
+    figures += extremes.plot(record["extremes"], out)
     return figures
 
 
@@ -295,6 +233,18 @@ def summary(record: dict) -> list[tuple[str, str]]:
         text = "no limit found" if value is None else f"{value:.4f}"
         text += f" (theory {'none' if theory is None else f'{theory:.4f}'})"
         rows.append((f"largest stable omega dt, {method}", text))
+    for problem, runs in record["energy"].items():
+        worst = max(runs, key=lambda e: e["final_relative_energy_error"])
+        best = min(runs, key=lambda e: e["final_relative_energy_error"])
+        rows.append((f"final energy error, {problem}",
+                     f"{best['integrator']} {best['final_relative_energy_error']:.1e} ... "
+                     f"{worst['integrator']} {worst['final_relative_energy_error']:.1e}"))
+    slopes = record["stiff_springs"]["slopes"]
+    rows.append(("slope of largest stable dt against k", ", ".join(f"{m} {v:.3f}" for m, v in slopes.items())))
+    far = record["extremes"]["far_from_origin"]
+    for speed, offset in far["first_stall"].get("float32", {}).items():
+        rows.append((f"float32 body at {speed} m/s stalls from", "never (to 1e7 m)" if offset is None else
+                     f"{offset:.3g} m (rounding model: {far['stall_edge']['float32'][speed]:.4g} m)"))
     return rows
 
 

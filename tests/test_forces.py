@@ -12,6 +12,7 @@ from helpers import LECTURE_G, LECTURE_MASS, LECTURE_P0, LECTURE_V0, mixed_probl
 from numpy.testing import assert_allclose, assert_array_equal
 
 from physics import (
+    CentralGravity,
     Dampers,
     Drag,
     Friction,
@@ -20,6 +21,7 @@ from physics import (
     Springs,
     State,
     from_lecture_state,
+    kepler_orbit,
     lecture_derivative,
     lecture_state,
     projectile,
@@ -223,6 +225,55 @@ def test_friction_in_a_model_sees_the_sum_of_the_other_forces():
     assert_allclose(strong.net_force(0.0, q, v)[1], [-20.0 + MU_S * WEIGHT, 0, 0], atol=1e-12)
     assert_allclose(strong.acceleration(0.0, q, v)[1], [(-20.0 + MU_S * WEIGHT) / MASS, 0, 0], atol=1e-12)
     assert_array_equal(strong.acceleration(0.0, q, v)[0], 0.0)  # the anchor is pinned
+
+
+# --- central gravity (Kepler) ---------------------------------------------------------------
+
+
+def test_central_gravity_is_inverse_square_towards_the_center():
+    center = arr([1.0, 2.0, 3.0])
+    gravity = CentralGravity(4.0, center)
+    q = center + arr([[3, 4, 0], [0, 0, -2]])
+    f = gravity.force(np, q, np.zeros((2, 3)), arr([2.0, 1.0]))
+    # |F| = mu m / r^2 along -r: 4 * 2 / 25 towards the centre; 4 * 1 / 4 upwards
+    assert_allclose(f, [[-8 / 25 * 0.6, -8 / 25 * 0.8, 0], [0, 0, 1.0]], rtol=1e-15)
+    assert gravity.potential(np, q, arr([2.0, 1.0])) == pytest.approx(-(4 * 2 / 5 + 4 * 1 / 2), rel=1e-15)
+    at_center = gravity.force(np, center[None], np.zeros((1, 3)), arr([1.0]))
+    assert_array_equal(at_center, 0.0)  # no direction at r = 0: zero, not NaN
+    assert np.all(np.isfinite(gravity.jacobian(np, center[None], np.zeros((1, 3)), arr([1.0]))[0]))
+
+
+def test_central_gravity_jacobian_and_potential_match_autodiff(rng):
+    q, v, _, _, m = random_pairs_case(rng)
+    gravity = CentralGravity(3.0, arr([0.1, -0.2, 0.3]))
+    jq, jv = gravity.jacobian(np, q, v, m)
+    assert jv is None
+    assert_allclose(jq, central_difference(lambda x: gravity.force(np, x, v, m), q), rtol=1e-6, atol=1e-7)
+    g = gravity.cast(jnp, np.float64)
+    grad = jax.grad(lambda x: g.potential(jnp, x, jnp.asarray(m)))(jnp.asarray(q))
+    assert_allclose(g.force(jnp, jnp.asarray(q), jnp.asarray(v), jnp.asarray(m)), -np.asarray(grad), rtol=1e-13)
+
+
+def test_kepler_orbit_against_scipy_and_the_conservation_laws():
+    from scipy.integrate import solve_ivp
+
+    mu, q0, v0 = 2.5, arr([0.3, -1.1, 0.4]), arr([0.9, 0.5, -0.6])  # a bound, inclined orbit
+    times = np.linspace(0.0, 7.0, 15)
+
+    def rhs(t, y):
+        r = y[:3]
+        return np.concatenate([y[3:], -mu * r / np.linalg.norm(r) ** 3])
+
+    ref = solve_ivp(rhs, (0.0, 7.0), np.concatenate([q0, v0]), method="DOP853", rtol=1e-13, atol=1e-13,
+                    t_eval=times)
+    q, v = kepler_orbit(times + 4.0, q0, v0, mu, t_init=4.0)
+    assert_allclose(q, ref.y[:3].T, atol=1e-10)
+    assert_allclose(v, ref.y[3:].T, atol=1e-10)
+    energy = 0.5 * np.sum(v * v, axis=1) - mu / np.linalg.norm(q, axis=1)
+    assert_allclose(energy, energy[0], rtol=1e-13)
+    assert_allclose(np.cross(q, v), np.cross(q0, v0)[None].repeat(len(times), 0), atol=1e-13)
+    with pytest.raises(ValueError, match="bound"):
+        kepler_orbit(1.0, q0, 10 * v0, mu)  # hyperbolic
 
 
 # --- singular configurations ---------------------------------------------------------------

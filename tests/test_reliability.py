@@ -531,6 +531,28 @@ def test_cache_key_follows_the_source_code(tmp_path):
     assert runner.source_hash(tmp_path) != before
 
 
+def test_a_study_key_follows_only_the_study_modules_it_uses(tmp_path):
+    """Editing one study's module re-runs that study, not the others; a shared module re-runs all users."""
+    from studies import STUDIES
+
+    for package in runner.SOURCE_PACKAGES:
+        shutil.copytree(ROOT / package, tmp_path / package, ignore=shutil.ignore_patterns("__pycache__"))
+    stability, frame_rate = (runner.study_modules(STUDIES[name]) for name in ("stability", "frame_rate"))
+    assert {"studies.stability", "studies.stiffness", "studies.extremes", "studies.problems"} <= stability
+    assert "studies.stiffness" not in frame_rate and "studies.problems" in frame_rate
+
+    def keys():
+        return runner.source_hash(tmp_path, stability), runner.source_hash(tmp_path, frame_rate)
+
+    before = keys()
+    assert before == (runner.source_hash(ROOT, stability), runner.source_hash(ROOT, frame_rate))
+    for module, changes in (("stiffness", (True, False)), ("problems", (True, True))):
+        path = tmp_path / "studies" / f"{module}.py"
+        path.write_text(path.read_text() + "\n# an edit\n")
+        assert tuple(a != b for a, b in zip(keys(), before)) == changes
+        path.write_text((ROOT / "studies" / f"{module}.py").read_text())
+
+
 def test_real_study_killed_then_resumed_matches_a_clean_computation(tmp_path):
     """``steplab study frame_rate --quick`` (a real study with figures): SIGKILL, SIGINT, resume."""
     from studies import frame_rate

@@ -10,7 +10,7 @@ from studies import runner
 from studies.lecture import lecture_check
 from studies.plotting import plt, save_figure
 from studies.problems import oscillator_problem, true_final
-from studies.stability import measured_limit, theoretical_limit
+from studies.stability_limits import measured_limit, oscillator_mode, theoretical_limit
 from studies.truncation import error_curve, fit_order
 
 STEPPERS = [name for name, method in INTEGRATORS.items() if isinstance(method, Stepper)]
@@ -75,7 +75,7 @@ def test_theoretical_limit_matches_closed_form(key):
 @pytest.mark.parametrize("zeta", [0.0, 0.1])
 @pytest.mark.parametrize("method", STEPPERS)
 def test_measured_stability_limit_within_one_percent_of_theory(method, zeta):
-    measured = measured_limit(method, zeta, 5000)["omega_dt_max"]
+    measured = measured_limit(oscillator_mode(zeta), method, 5000)["omega_dt_max"]
     theory = theoretical_limit(method, zeta)
     if theory is None:
         assert measured is None
@@ -83,6 +83,100 @@ def test_measured_stability_limit_within_one_percent_of_theory(method, zeta):
         assert measured == 0
     else:
         assert measured == pytest.approx(theory, rel=0.01)
+
+
+# --- stiff springs, long runs and the extremes ------------------------------------------------
+
+
+def test_stable_dt_falls_as_one_over_sqrt_stiffness_on_the_soft_cube():
+    from studies.stiffness import stable_dt_against_stiffness
+
+    methods = ["semi-implicit-euler", "rk4", "euler", "implicit-euler"]
+    record = stable_dt_against_stiffness(methods, [100.0, 1e4], 2000, 1e-4)
+    for row in record["rows"]:
+        if row["integrator"] == "implicit-euler":
+            assert row["dt_max"] is None and row["dt_max_theory"] is None
+        elif row["integrator"] == "euler":
+            assert row["dt_max"] == 0  # undamped: unstable at every dt
+        else:
+            assert row["dt_max"] == pytest.approx(row["dt_max_theory"], rel=0.01)
+    for method in ("semi-implicit-euler", "rk4"):
+        assert record["slopes"][method] == pytest.approx(-0.5, abs=0.01)
+    # omega_max of the all-pairs cube, one corner pinned, from its eigenvalues: sqrt(k (4 + 2 sqrt 3)) / m
+    assert record["rows"][0]["omega"] == pytest.approx(np.sqrt(100.0 * (4 + 2 * np.sqrt(3))), rel=1e-12)
+
+
+def test_implicit_euler_pays_the_predicted_amplitude_per_period():
+    from studies.stiffness import implicit_euler_damping
+
+    for row in implicit_euler_damping([0.01, 0.3, 3.0, 30.0])["rows"]:
+        assert row["amplitude_kept_per_period"] == pytest.approx(row["theory"], rel=1e-6)
+
+
+def test_long_run_energy_on_the_kepler_orbit():
+    from studies.problems import kepler_problem
+    from studies.stability import energy_history
+
+    problem = kepler_problem()
+    verlet = energy_history(problem, "velocity-verlet", 20_000, 1e-3)  # 20 orbits
+    euler = energy_history(problem, "euler", 20_000, 1e-3)
+    rk4 = energy_history(problem, "rk4", 20_000, 1e-3)
+    assert verlet["max_relative_energy_error"] < 1e-3 and verlet["diverged_at_step"] is None
+    assert euler["final_relative_energy_error"] > 0.1  # explicit Euler gains energy orbit after orbit
+    assert rk4["final_relative_energy_error"] < 1e-7
+    # symplectic: the error at the end is no larger than within the first orbit (bounded, no drift)
+    first_orbit = [e for t, e in zip(verlet["t"], verlet["relative_energy_error"]) if t <= 1.0]
+    assert verlet["final_relative_energy_error"] <= 1.01 * max(first_orbit)
+    # the envelope of the compiled run is the energy after every step of the NumPy run
+    short = energy_history(problem, "velocity-verlet", 5000, 1e-3)
+    assert short["max_relative_energy_error"] == pytest.approx(
+        max(e for t, e in zip(verlet["t"], verlet["relative_energy_error"]) if t <= 5.0), rel=1e-3)
+
+
+def test_huge_dt_is_reported_as_divergence_at_the_predicted_step():
+    from studies.extremes import huge_dt
+
+    rows = huge_dt(STEPPERS, [3.0, 100.0], 1000)
+    for row in rows:
+        if row["integrator"] == "implicit-euler":
+            assert row["diverged_at_step"] is None and row["finite_output"] is True
+        else:
+            assert row["diverged_at_step"] is not None and "diverged" in row["message"]
+            assert abs(row["diverged_at_step"] - row["predicted_step"]) <= max(2, 0.1 * row["predicted_step"])
+
+
+def test_far_from_the_origin_stalls_exactly_where_rounding_predicts():
+    from studies.extremes import coasting, first_offset, oscillator_jitter, stall_edge
+
+    offsets = np.geomspace(1e3, 1e7, 9).tolist()
+    rows = coasting(offsets, [1e-3, 1e-2, 1.0], ["float32", "float64"], 30)
+    for row in rows:
+        assert row["stalled"] == row["predicted_stall"]
+        if not row["stalled"]:
+            assert row["speed_error"] == pytest.approx(row["predicted_speed_error"], rel=1e-6, abs=1e-12)
+    first = first_offset(rows, "stalled")
+    # float32: a 1 cm/s body (v dt = 1/6000 m) stalls where the spacing exceeds 2 v dt: 2^12 m and beyond
+    assert stall_edge(0.01, "float32") == 2.0**12
+    assert 2.0**12 <= first["float32"]["0.01"] <= 1e4
+    assert stall_edge(1.0, "float32") == 2.0**19  # the spacing passes 1/30 m at 2^19 m
+    assert first["float32"]["1"] == pytest.approx(1e6)
+    assert all(first["float64"][f"{v:g}"] is None for v in (1e-3, 1e-2, 1.0))
+    assert stall_edge(1e-3, "float64") == 2.0**38
+    jitter = {(r["precision"], r["offset"]): r["deviation"]
+              for r in oscillator_jitter([1e5, 1e7], ["float32", "float64"], 2)}
+    assert jitter[("float32", 1e5)] > 0.01  # over 1 % of the amplitude
+    assert jitter[("float64", 1e7)] < 1e-6
+
+
+def test_the_light_body_sets_the_stable_dt_across_mass_ratios():
+    from studies.extremes import mass_ratio
+
+    rows = mass_ratio(["semi-implicit-euler", "rk4"], [1.0, 1e6], 2000, 1e-4)
+    for row in rows:
+        assert row["dt_max"] == pytest.approx(row["dt_max_theory"], rel=0.01)
+    by = {(r["integrator"], r["mass_ratio"]): r["dt_max"] for r in rows}
+    # omega = sqrt(k (1/m1 + 1/m2)): 10^6 times lighter shrinks dt by sqrt((1 + 10^6) / 2)
+    assert by["rk4", 1.0] / by["rk4", 1e6] == pytest.approx(np.sqrt((1 + 1e6) / 2), rel=0.01)
 
 
 def _toy_study(calls, name="toy", scale=1.0, fail=False):
@@ -112,7 +206,7 @@ def test_cache_skips_unchanged_and_reruns_changed(tmp_path, monkeypatch):
     runner.run_study(_toy_study(calls, scale=2.0), tmp_path, quick=False)
     assert len(calls) == 3
     # changed code
-    monkeypatch.setattr(runner, "source_hash", lambda: "different code")
+    monkeypatch.setattr(runner, "source_hash", lambda *args, **kwargs: "different code")
     runner.run_study(_toy_study(calls, scale=2.0), tmp_path, quick=False)
     assert len(calls) == 4
     # a missing figure invalidates the cache too
