@@ -38,7 +38,7 @@ def animate(runs: list[tuple[str, object]], model, out: str | Path, fps: int = 3
     from matplotlib.collections import LineCollection, PatchCollection
     from matplotlib.patches import Circle
 
-    from physics import Springs
+    from physics import CentralGravity, Springs
 
     out = Path(out)
     writers = {".gif": lambda: animation.PillowWriter(fps=fps)}
@@ -56,6 +56,9 @@ def animate(runs: list[tuple[str, object]], model, out: str | Path, fps: int = 3
         axes_idx = sorted(np.argsort(spans)[-2:]) if spans.max() > 0 else [0, 2]
     radii = np.asarray(model.radii, dtype=float)
     springs = [f for f in model.forces if isinstance(f, Springs)]
+    # the fixed attracting masses of central gravity, drawn as stars (and kept in the window)
+    centers = np.array([np.asarray(f.center, dtype=float) for f in model.forces if isinstance(f, CentralGravity)])
+    centers = centers.reshape(-1, 3)
     pairs = np.concatenate([np.stack([np.asarray(f.i), np.asarray(f.j)], 1) for f in springs]) if springs else None
 
     frames = min(MAX_FRAMES, max(len(traj.t) for _, traj in runs))
@@ -64,8 +67,8 @@ def animate(runs: list[tuple[str, object]], model, out: str | Path, fps: int = 3
     artists = []
     for col, (label, traj) in enumerate(runs):
         ax, eax = grid[0][col], grid[1][col]
-        lo, hi = _window(np.concatenate([traj.positions[..., axes_idx].reshape(-1, 2), _extent(shapes)[:, axes_idx]]),
-                         radii.max())
+        lo, hi = _window(np.concatenate([traj.positions[..., axes_idx].reshape(-1, 2), _extent(shapes)[:, axes_idx],
+                                         centers[:, axes_idx]]), radii.max())
         ax.set_xlim(lo[0], hi[0])
         ax.set_ylim(lo[1], hi[1])
         ax.set_aspect("equal")
@@ -73,6 +76,10 @@ def animate(runs: list[tuple[str, object]], model, out: str | Path, fps: int = 3
         ax.set_ylabel(f"{AXIS_NAMES[axes_idx[1]]} (m)")
         ax.set_title(label, fontsize=10)
         _draw_shapes(ax, shapes, axes_idx, lo, hi)
+        if len(centers):
+            ax.plot(centers[:, axes_idx[0]], centers[:, axes_idx[1]], "*", color="tab:orange", ms=12,
+                    label="attracting mass")
+            ax.legend(loc="lower right", fontsize=8)
         lines = LineCollection([], colors="0.5", linewidths=0.8)
         ax.add_collection(lines)
         circles = PatchCollection([Circle((0, 0), r) for r in radii], facecolor="tab:blue", edgecolor="k",

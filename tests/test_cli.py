@@ -196,6 +196,19 @@ def test_animate_writes_a_gif_side_by_side(capsys, tmp_path):
     assert not [p for p in tmp_path.iterdir() if p.name.startswith(".")]
 
 
+def test_animate_marks_the_attracting_mass_of_central_gravity(capsys, tmp_path):
+    from PIL import Image
+
+    out = tmp_path / "k.gif"
+    status, _, _ = run(capsys, "animate", "kepler", "--t-end", "0.02", "--fps", "5", "--view", "xy", "--out", str(out))
+    assert status == 0
+    with Image.open(out) as gif:
+        frame = np.asarray(gif.convert("RGB"), dtype=int)
+    # the star is drawn in tab:orange (255, 127, 14); nothing else in the frame is orange
+    orange = (np.abs(frame - [255, 127, 14]).sum(axis=-1) < 60).sum()
+    assert orange > 20
+
+
 @pytest.mark.parametrize("argv,message", [
     (["animate", "oscillator", "--out", "a.txt"], "unknown animation format '.txt'"),
     (["animate", "oscillator", "--compare", "euler", "--out", "a.gif"], "--compare needs at least two"),
