@@ -249,28 +249,10 @@ def plot(record: dict, out) -> list[str]:
     ax.legend(fontsize=7)
 
     ax = axes[1, 0]
-    rows = record["mass_ratio"]["rows"]
-    for method in dict.fromkeys(r["integrator"] for r in rows):
-        mine = [r for r in rows if r["integrator"] == method]
-        style = plotting.style(method)
-        if all(r["dt_max"] is None for r in mine):
-            ax.plot([], [], label=style["label"] + ": stable at every dt", **{k: style[k] for k in ("color", "marker")})
-            continue
-        if all(r["dt_max"] == 0 for r in mine):
-            ax.plot([], [], linestyle="none", label=style["label"] + ": unstable at every dt",
-                    **{k: style[k] for k in ("color", "marker")})
-            continue
-        ratio = [r["mass_ratio"] for r in mine]
-        ax.loglog(ratio, [r["dt_max"] for r in mine], linestyle="none", ms=7, mfc="none", **style)
-        ax.loglog(ratio, [r["dt_max_theory"] for r in mine], color=style["color"], lw=0.8, alpha=0.7)
-    ax.axhline(GAME_DT, color="k", lw=0.8, ls=":")
-    ax.text(1.2, GAME_DT * 1.15, "dt = 1/60 s", fontsize=8)
-    ax.plot([], [], color="gray", lw=0.8, label="theory: limit / sqrt(k (1/m1 + 1/m2))")
+    plotting.stable_dt_panel(ax, record["mass_ratio"]["rows"], "mass_ratio", "theory: limit / sqrt(k (1/m1 + 1/m2))")
     ax.set_xlabel("mass ratio m_heavy / m_light (heavy body 1 kg)")
-    ax.set_ylabel("largest stable dt (s)")
     ax.set_title(f"Two bodies on one spring (k = {record['mass_ratio']['stiffness']:g} N/m): "
                  "the light body sets dt", fontsize=10)
-    ax.grid(True, which="both", alpha=0.3)
     ax.legend(fontsize=7)
 
     ax = axes[1, 1]

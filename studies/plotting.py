@@ -44,3 +44,30 @@ def save_figure(fig, out: Path, stem: str) -> list[str]:
         names.append(f"{stem}.{ext}")
     plt.close(fig)
     return names
+
+
+def stable_dt_panel(ax, rows: list[dict], x: str, theory_label: str, slopes: dict | None = None) -> None:
+    """Largest stable dt against ``x`` per integrator: measured (markers), theory (lines), 1/60 s.
+
+    ``rows`` hold ``integrator``, ``x``, ``dt_max`` and ``dt_max_theory`` (None: no limit,
+    0: unstable at every dt; such methods get a legend entry only).
+    """
+    for method in dict.fromkeys(r["integrator"] for r in rows):
+        mine = [r for r in rows if r["integrator"] == method]
+        entry = style(method)
+        if all(r["dt_max"] is None for r in mine) or all(r["dt_max"] == 0 for r in mine):
+            verdict = "stable at every dt" if mine[0]["dt_max"] is None else "unstable at every dt (undamped)"
+            ax.plot([], [], linestyle="none", color=entry["color"], marker=entry["marker"],
+                    label=f"{method}: {verdict}")
+            continue
+        if slopes and method in slopes:
+            entry["label"] += f" (slope {slopes[method]:.3f})"
+        xs = [r[x] for r in mine]
+        ax.loglog(xs, [r["dt_max"] for r in mine], linestyle="none", ms=7, mfc="none", **entry)
+        ax.loglog(xs, [r["dt_max_theory"] for r in mine], color=entry["color"], lw=0.8, alpha=0.7)
+    ax.axhline(1 / 60, color="k", lw=0.8, ls=":")
+    ax.text(min(r[x] for r in rows), 1 / 60 * 1.15, "dt = 1/60 s", fontsize=8)
+    ax.plot([], [], color="gray", lw=0.8, label=theory_label)
+    ax.set_ylabel("largest stable dt (s)")
+    ax.grid(True, which="both", alpha=0.3)
+

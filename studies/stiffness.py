@@ -79,30 +79,10 @@ def implicit_euler_damping(omega_dts) -> dict:
 def plot(record: dict, out) -> list[str]:
     plt = plotting.plt
     fig, (left, right) = plt.subplots(1, 2, figsize=(12, 4.8))
-    rows = record["rows"]
-    for method in dict.fromkeys(r["integrator"] for r in rows):
-        mine = [r for r in rows if r["integrator"] == method]
-        k = np.array([r["stiffness"] for r in mine])
-        style = plotting.style(method)
-        if all(r["dt_max"] is None for r in mine):
-            style["label"] += ": stable at every dt"
-            left.plot([], [], **style)
-            continue
-        if all(r["dt_max"] == 0 for r in mine):
-            style["label"] += ": unstable at every dt (undamped)"
-            left.plot([], [], linestyle="none", **style)
-            continue
-        slope = record["slopes"].get(method)
-        style["label"] += f" (slope {slope:.3f})" if slope is not None else ""
-        left.loglog(k, [r["dt_max"] for r in mine], linestyle="none", ms=7, mfc="none", **style)
-        left.loglog(k, [r["dt_max_theory"] for r in mine], color=style["color"], lw=0.8, alpha=0.7)
-    left.axhline(1 / 60, color="k", lw=0.8, ls=":")
-    left.text(k[0], 1 / 60 * 1.15, "dt = 1/60 s", fontsize=8)
-    left.plot([], [], color="gray", lw=0.8, label="theory: limit on the oscillator / omega_max(k)")
+    plotting.stable_dt_panel(left, record["rows"], "stiffness", "theory: limit on the oscillator / omega_max(k)",
+                             record["slopes"])
     left.set_xlabel("spring stiffness k (N/m)")
-    left.set_ylabel("largest stable dt (s)")
     left.set_title("Largest stable dt against the stiffness k\n(soft cube: 8 x 1 kg, a spring between every pair)")
-    left.grid(True, which="both", alpha=0.3)
     left.legend(fontsize=7, loc="lower left")
 
     damping = record["implicit_euler_damping"]

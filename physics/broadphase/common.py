@@ -166,33 +166,13 @@ def radix_argsort(key, limit):
 def sort_pairs(pairs, k, n):
     """The first ``k`` rows of ``pairs`` (each i < j, all < ``n``) sorted lexicographically.
 
-    A least-significant-digit radix sort of the keys i n + j, in passes of at most
-    :data:`RADIX_BITS` bits: O(k) per pass where a comparison sort would take O(k log k),
-    and each pass's counters fit in cache however large n is.
+    A radix sort (:func:`radix_argsort`) of the keys i n + j: O(k) per pass where a
+    comparison sort would take O(k log k).
     """
     key = np.empty(k, dtype=np.int64)
     for p in range(k):
         key[p] = pairs[p, 0] * n + pairs[p, 1]
-    bits = 1
-    while (1 << bits) < n * n:
-        bits += 1
-    passes = (bits + RADIX_BITS - 1) // RADIX_BITS
-    width = (bits + passes - 1) // passes
-    mask = (1 << width) - 1
-    other = np.empty(k, dtype=np.int64)
-    count = np.empty((1 << width) + 1, dtype=np.int64)
-    for step in range(passes):
-        shift = step * width
-        count[:] = 0
-        for p in range(k):
-            count[((key[p] >> shift) & mask) + 1] += 1
-        for d in range(1 << width):
-            count[d + 1] += count[d]
-        for p in range(k):
-            d = (key[p] >> shift) & mask
-            other[count[d]] = key[p]
-            count[d] += 1
-        key, other = other, key
+    _, key = radix_argsort(key, n * n)
     out = np.empty((k, 2), dtype=np.int64)
     for p in range(k):
         out[p, 0] = key[p] // n
