@@ -1,6 +1,6 @@
 """Fixed-step integrators and reference solvers, looked up by name in one registry.
 
->>> from integrators import get_integrator, simulate
+>>> from steplab.integrators import get_integrator, simulate
 >>> get_integrator("rk4").order
 4
 """

@@ -5,8 +5,7 @@ from __future__ import annotations
 import dataclasses
 
 import numpy as np
-
-from physics.projectile import projectile
+from steplab.physics.projectile import projectile
 
 from .base import Solver
 

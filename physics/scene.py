@@ -58,7 +58,7 @@ class Scene:
 
 def builtin_scenes() -> list[str]:
     """Names of the scenes shipped with steplab."""
-    folder = resources.files("physics") / "scenes"
+    folder = resources.files("steplab.physics") / "scenes"
     return sorted(p.name.removesuffix(".toml") for p in folder.iterdir() if p.name.endswith(".toml"))
 
 
@@ -66,7 +66,7 @@ def load_scene(scene: str | Path) -> Scene:
     """Load a scene by built-in name or by path to a TOML file."""
     path = Path(scene)
     if str(scene) in builtin_scenes():
-        text = (resources.files("physics") / "scenes" / f"{scene}.toml").read_bytes()
+        text = (resources.files("steplab.physics") / "scenes" / f"{scene}.toml").read_bytes()
         label = f"{scene} (built-in)"
     elif path.suffix == ".toml" or path.exists():
         try:

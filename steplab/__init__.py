@@ -11,19 +11,19 @@ from __future__ import annotations
 
 from importlib.metadata import PackageNotFoundError, version
 
-from integrators import INTEGRATORS as INTEGRATORS
-from integrators import DivergenceError as DivergenceError
-from integrators import GameLoop as GameLoop
-from integrators import Trajectory as Trajectory
-from integrators import get_integrator as get_integrator
-from integrators import simulate as simulate
-from physics import Model as Model
-from physics import projectile as projectile
-from physics.scene import Scene as Scene
-from physics.scene import SceneError as SceneError
-from physics.scene import builtin_scenes as builtin_scenes
-from physics.scene import load_scene as load_scene
-from physics.scene import parse_scene as parse_scene
+from steplab.integrators import INTEGRATORS as INTEGRATORS
+from steplab.integrators import DivergenceError as DivergenceError
+from steplab.integrators import GameLoop as GameLoop
+from steplab.integrators import Trajectory as Trajectory
+from steplab.integrators import get_integrator as get_integrator
+from steplab.integrators import simulate as simulate
+from steplab.physics import Model as Model
+from steplab.physics import projectile as projectile
+from steplab.physics.scene import Scene as Scene
+from steplab.physics.scene import SceneError as SceneError
+from steplab.physics.scene import builtin_scenes as builtin_scenes
+from steplab.physics.scene import load_scene as load_scene
+from steplab.physics.scene import parse_scene as parse_scene
 
 try:
     __version__ = version("steplab")

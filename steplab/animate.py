@@ -38,7 +38,7 @@ def animate(runs: list[tuple[str, object]], model, out: str | Path, fps: int = 3
     from matplotlib.collections import LineCollection, PatchCollection
     from matplotlib.patches import Circle
 
-    from physics import CentralGravity, Springs
+    from steplab.physics import CentralGravity, Springs
 
     out = Path(out)
     writers = {".gif": lambda: animation.PillowWriter(fps=fps)}
@@ -135,7 +135,7 @@ def _window(q, pad):
 
 def _extent(shapes) -> np.ndarray:
     """Corners (k, 3) of the static boxes, so that a panel's window shows them."""
-    from physics.collision import Box, OrientedBox
+    from steplab.physics.collision import Box, OrientedBox
 
     points = [np.zeros((0, 3))]
     for shape in shapes:
@@ -152,7 +152,7 @@ def _draw_shapes(ax, shapes, axes_idx, lo, hi):
     from matplotlib.patches import Polygon
     from scipy.spatial import ConvexHull
 
-    from physics.collision import Box, OrientedBox, Plane
+    from steplab.physics.collision import Box, OrientedBox, Plane
 
     for shape in shapes:
         if isinstance(shape, (Box, OrientedBox)):

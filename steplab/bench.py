@@ -227,8 +227,8 @@ def small_system(config: Config, record: Record, progress) -> None:
     """steplab's compiled loop against diffrax, Numba and a Python loop, method by method."""
     import jax.numpy as jnp
 
-    from integrators.simulate import final_state_function
-    from studies.problems import oscillator_problem
+    from steplab.integrators.simulate import final_state_function
+    from steplab.studies.problems import oscillator_problem
 
     from . import peers
 
@@ -283,7 +283,7 @@ def _diffrax_name(method: str) -> str:
 
 def particles_model(n: int, seed: int = SEED):
     """``n`` spheres under gravity and quadratic drag, and a random initial state (2, n, 3)."""
-    from physics import Drag, Gravity, Model
+    from steplab.physics import Drag, Gravity, Model
 
     rng = np.random.default_rng(seed)
     radii = rng.uniform(0.01, 0.1, n)
@@ -298,8 +298,8 @@ def cloth_model(side: int):
     1 g per particle and 50 N/m springs: stable with semi-implicit Euler at dt = 5e-4 s
     (omega dt < 0.5 for a particle held by eight springs).
     """
-    from physics import Gravity, Model
-    from physics.soft_body import connect, grid
+    from steplab.physics import Gravity, Model
+    from steplab.physics.soft_body import connect, grid
 
     mesh = grid(side, side, 1.0 / side, origin=(0.0, 0.0, 2.0))
     springs, dampers = connect(mesh.vertices, mesh.edges, stiffness=50.0, damping=0.005)
@@ -350,7 +350,7 @@ def _large_system(label: str, what: str, model, y0, dt: float, config: Config, r
     """
     import jax.numpy as jnp
 
-    from integrators.simulate import final_state_function
+    from steplab.integrators.simulate import final_state_function
 
     from . import peers
 
@@ -408,7 +408,7 @@ def _unchecked_loop(model, method: str):
     import jax
     from jax import lax
 
-    from integrators import get_integrator
+    from steplab.integrators import get_integrator
 
     integrator = get_integrator(method)
 
@@ -429,7 +429,7 @@ def _fixed_step_search(problem, method: str, truth, tol: float, max_log2: int):
     """Fewest steps (to 1/64) with final position error <= tol, or None within 2^max_log2 steps."""
     import jax.numpy as jnp
 
-    from integrators.simulate import final_state_function
+    from steplab.integrators.simulate import final_state_function
 
     run = final_state_function(problem.model.cast(jnp), method)
     y0 = jnp.asarray(problem.y0)
@@ -473,7 +473,7 @@ def _tolerance_search(solve, tol: float):
 
 def accuracy_matched(config: Config, record: Record, progress) -> None:
     """Time to a final position error of 1e-8 m: steplab's fastest method against scipy and diffrax."""
-    from studies.problems import oscillator_problem, scene_problem
+    from steplab.studies.problems import oscillator_problem, scene_problem
 
     # 100 periods and an eighth: at whole periods the mass is at rest at a turning point,
     # where a phase error hardly moves it and a method would look more accurate than it is
@@ -493,8 +493,8 @@ def _accuracy_problem(label: str, problem, config: Config, record: Record) -> di
     import jax.numpy as jnp
     from scipy.integrate import solve_ivp
 
-    from integrators import INTEGRATORS, Stepper
-    from studies.problems import true_final
+    from steplab.integrators import INTEGRATORS, Stepper
+    from steplab.studies.problems import true_final
 
     from . import peers
 
@@ -557,7 +557,7 @@ def _accuracy_problem(label: str, problem, config: Config, record: Record) -> di
 def broadphase(config: Config, record: Record, progress) -> None:
     """steplab's fastest broadphase method against scipy's cKDTree.query_pairs, uniform spheres."""
     try:
-        from physics.broadphase import METHODS, find_pairs
+        from steplab.physics.broadphase import METHODS, find_pairs
     except ImportError:  # the broadphase is not part of this checkout
         record.data["details"]["broadphase"] = "physics.broadphase.find_pairs is not available"
         return
@@ -597,8 +597,8 @@ def _exponent(n: int) -> str:
 
 def compile_times(config: Config, record: Record, progress) -> None:
     """JIT compilation of every built-in scene's compiled loop (simulate's ``compile_time``)."""
-    from integrators import Stepper, get_integrator, simulate
-    from physics.scene import builtin_scenes, load_scene
+    from steplab.integrators import Stepper, get_integrator, simulate
+    from steplab.physics.scene import builtin_scenes, load_scene
 
     for name in config.compile_scenes or builtin_scenes():
         scene = load_scene(name)
@@ -624,9 +624,9 @@ def batching(config: Config, record: Record, progress) -> None:
     import jax
     import jax.numpy as jnp
 
-    from integrators.simulate import final_state_function
-    from physics.scene import load_scene
-    from studies.problems import oscillator_problem
+    from steplab.integrators.simulate import final_state_function
+    from steplab.physics.scene import load_scene
+    from steplab.studies.problems import oscillator_problem
 
     b, n = config.batch, config.batch_steps
     projectile, oscillator = load_scene("drag-projectile"), oscillator_problem(0.0)
@@ -666,7 +666,7 @@ SECTIONS = (small_system, large_systems, accuracy_matched, broadphase, compile_t
 
 def run_bench(config: Config, quick: bool = False, progress: Callable[[str], None] | None = None) -> dict:
     """Run every comparison; returns the record ``--json`` writes."""
-    from studies.runner import provenance
+    from steplab.studies.runner import provenance
 
     progress = progress or (lambda message: None)
     record = Record(config, quick)

@@ -151,13 +151,13 @@ def main(argv=None) -> int:
 
 
 def _run_command(args) -> int:
-    from integrators import UnknownIntegratorError
-    from integrators.exact import NotConstantForceError
-    from integrators.references import ReferenceFailedError
-    from integrators.simulate import DivergenceError
-    from physics.scene import SceneError
+    from steplab.integrators import UnknownIntegratorError
+    from steplab.integrators.exact import NotConstantForceError
+    from steplab.integrators.references import ReferenceFailedError
+    from steplab.integrators.simulate import DivergenceError
     from steplab.paper import PaperError
-    from studies.work_precision import NoFixedStepError
+    from steplab.physics.scene import SceneError
+    from steplab.studies.work_precision import NoFixedStepError
 
     command = {"integrators": cmd_integrators, "scenes": cmd_scenes, "run": cmd_run,
                "animate": cmd_animate, "paper": cmd_paper, "recommend": cmd_recommend, "study": cmd_study,
@@ -193,7 +193,7 @@ def _version() -> str:
 
 
 def cmd_integrators(args) -> int:
-    from integrators import INTEGRATORS
+    from steplab.integrators import INTEGRATORS
 
     rows = [method.describe() for method in INTEGRATORS.values()]
     if args.json:
@@ -216,7 +216,7 @@ def _yes(flag: bool) -> str:
 
 
 def cmd_scenes(args) -> int:
-    from physics.scene import builtin_scenes, load_scene
+    from steplab.physics.scene import builtin_scenes, load_scene
 
     rows = []
     for name in builtin_scenes():
@@ -240,10 +240,10 @@ def cmd_scenes(args) -> int:
 def cmd_run(args) -> int:
     import numpy as np
 
-    from integrators import get_integrator, simulate
-    from integrators.simulate import MAX_STEPS
-    from physics.scene import load_scene
+    from steplab.integrators import get_integrator, simulate
+    from steplab.integrators.simulate import MAX_STEPS
     from steplab.io import check_trajectory_path, save_trajectory
+    from steplab.physics.scene import load_scene
 
     if args.out is not None:
         check_trajectory_path(args.out)  # before the run, not after it
@@ -293,7 +293,7 @@ def _collision_world(scene, detector, backend):
     world = scene.collisions
     if detector is not None:
         if world is None and detector != "none":
-            from physics.collision import CollisionWorld
+            from steplab.physics.collision import CollisionWorld
 
             world = CollisionWorld(detector=detector)  # bodies against each other, eps = 1
         elif world is not None:
@@ -343,10 +343,10 @@ def _vec(v) -> str:
 
 
 def cmd_animate(args) -> int:
-    from integrators import get_integrator, simulate
-    from physics.collision import DETECTOR_NAMES
-    from physics.scene import load_scene
     from steplab.animate import animate
+    from steplab.integrators import get_integrator, simulate
+    from steplab.physics.collision import DETECTOR_NAMES
+    from steplab.physics.scene import load_scene
 
     if args.out.suffix.lower() not in (".gif", ".mp4"):
         raise ValueError(f"--out {args.out}: unknown animation format {args.out.suffix or '(none)'!r}; use .gif")
@@ -402,9 +402,9 @@ def cmd_paper(args) -> int:
 def cmd_recommend(args) -> int:
     import numpy as np
 
-    from physics.scene import load_scene
-    from studies.problems import Problem
-    from studies.work_precision import recommend
+    from steplab.physics.scene import load_scene
+    from steplab.studies.problems import Problem
+    from steplab.studies.work_precision import recommend
 
     scene = load_scene(args.scene)
     t_end = args.t_end if args.t_end is not None else scene.t_end
@@ -412,7 +412,7 @@ def cmd_recommend(args) -> int:
         raise ValueError(f"--t-end {t_end:g} must be later than the scene's t_start = {scene.t_start:g}")
     problem = Problem(scene.name, scene.description, scene.model, scene.y0, scene.t_start, t_end)
     if scene.model.constant_acceleration is not None:  # the closed form is the truth
-        from physics import projectile
+        from steplab.physics import projectile
 
         accel = scene.model.constant_acceleration
 
@@ -439,7 +439,7 @@ def cmd_recommend(args) -> int:
 
 
 def cmd_study(args) -> int:
-    from studies import STUDIES, run_study
+    from steplab.studies import STUDIES, run_study
 
     if args.list or args.name is None:
         for study in STUDIES.values():
@@ -455,7 +455,7 @@ def cmd_study(args) -> int:
 def cmd_reproduce(args) -> int:
     from tqdm import tqdm
 
-    from studies import STUDIES, run_study
+    from steplab.studies import STUDIES, run_study
 
     records = []
     with tqdm(STUDIES.values(), desc="reproduce", unit="study", disable=None) as bar:
@@ -468,7 +468,7 @@ def cmd_reproduce(args) -> int:
 
 def _print_summary(records) -> None:
     for record in records:
-        from studies import STUDIES
+        from steplab.studies import STUDIES
 
         state = "cached" if record.get("cached") else "computed"
         print(f"{record['study']} ({state}): {record['title']}")

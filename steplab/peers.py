@@ -26,7 +26,7 @@ from typing import ClassVar  # at module level: dataclasses resolve the string a
 
 import numpy as np
 
-from physics import Dampers, Drag, Gravity, Springs
+from steplab.physics import Dampers, Drag, Gravity, Springs
 
 
 @dataclasses.dataclass(frozen=True)

@@ -25,10 +25,9 @@ import tracemalloc
 
 import numpy as np
 from scipy.spatial import cKDTree
-
-from physics.broadphase import BoundingVolumeHierarchy, CoherentSortAndSweep, find_pairs
-from physics.broadphase.common import as_spheres, bounds, padding
-from physics.broadphase.sweep_and_prune import sweep_axis
+from steplab.physics.broadphase import BoundingVolumeHierarchy, CoherentSortAndSweep, find_pairs
+from steplab.physics.broadphase.common import as_spheres, bounds, padding
+from steplab.physics.broadphase.sweep_and_prune import sweep_axis
 
 from . import plotting
 from .runner import Study

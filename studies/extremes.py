@@ -20,10 +20,9 @@ Part of the stability study.
 from __future__ import annotations
 
 import numpy as np
-
-from integrators import DivergenceError, simulate
-from integrators.simulate import divergence_limit
-from physics import Model, Springs
+from steplab.integrators import DivergenceError, simulate
+from steplab.integrators.simulate import divergence_limit
+from steplab.physics import Model, Springs
 
 from . import plotting
 from .problems import oscillator_problem

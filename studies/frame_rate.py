@@ -14,9 +14,8 @@ from __future__ import annotations
 import hashlib
 
 import numpy as np
-
-from integrators import GameLoop, get_integrator
-from integrators.game_loop import interpolate
+from steplab.integrators import GameLoop, get_integrator
+from steplab.integrators.game_loop import interpolate
 
 from . import plotting
 from .problems import oscillator_problem

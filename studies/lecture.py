@@ -9,10 +9,9 @@ mV = (19.2, 0, 72.5) kg m/s, g = 9.81 m/s^2, from t = 5 s.
 from __future__ import annotations
 
 import numpy as np
-
-from integrators import simulate
-from physics import lecture_state, projectile
-from physics.scene import load_scene
+from steplab.integrators import simulate
+from steplab.physics import lecture_state, projectile
+from steplab.physics.scene import load_scene
 
 #: "Explicit Euler Integration Example (2 of 2)": S after one step, numerical and exact,
 #: rows (mV_x, mV_y, mV_z, p_x, p_y, p_z)

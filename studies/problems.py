@@ -6,10 +6,9 @@ import dataclasses
 from collections.abc import Callable
 
 import numpy as np
-
-from integrators import get_integrator, simulate
-from physics import Dampers, Model, Springs, kepler_orbit, projectile
-from physics.scene import load_scene
+from steplab.integrators import get_integrator, simulate
+from steplab.physics import Dampers, Model, Springs, kepler_orbit, projectile
+from steplab.physics.scene import load_scene
 
 #: tolerance of the adaptive references used where no closed form exists
 REFERENCE_RTOL = 1e-13

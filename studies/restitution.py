@@ -17,11 +17,10 @@ import itertools
 import math
 
 import numpy as np
-
-from integrators import simulate
-from physics import Gravity, Model
-from physics.collision import CollisionWorld, PairProperties, Plane
-from physics.collision.response import impulse
+from steplab.integrators import simulate
+from steplab.physics import Gravity, Model
+from steplab.physics.collision import CollisionWorld, PairProperties, Plane
+from steplab.physics.collision.response import impulse
 
 from . import plotting
 from .runner import Study

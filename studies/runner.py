@@ -42,7 +42,7 @@ class Study:
 
 def source_hash(root: Path | None = None, studies: Iterable[str] | None = None) -> str:
     """SHA-256 of the source files of steplab's model and integrators, and of ``studies``
-    (module names such as ``studies.stability``; default: the whole studies package), under
+    (module names such as ``steplab.studies.stability``; default: the whole studies package), under
     ``root`` (default: this checkout)."""
     root = Path(root) if root is not None else Path(__file__).resolve().parent.parent
     files = []
@@ -69,9 +69,9 @@ def study_modules(study: Study) -> set[str]:
         seen.add(name)
         for value in vars(sys.modules[name]).values():
             used = value.__name__ if isinstance(value, types.ModuleType) else getattr(value, "__module__", None)
-            if isinstance(used, str) and used.startswith("studies."):
+            if isinstance(used, str) and used.startswith("steplab.studies."):
                 todo.append(used)
-    return {name for name in seen if name.startswith("studies.")}
+    return {name for name in seen if name.startswith("steplab.studies.")}
 
 
 def cache_key(study: Study, parameters: dict) -> str:

@@ -7,9 +7,8 @@ collisions; the others run on NumPy and JAX, and the two final states are compar
 from __future__ import annotations
 
 import numpy as np
-
-from integrators import simulate
-from physics.scene import builtin_scenes, load_scene
+from steplab.integrators import simulate
+from steplab.physics.scene import builtin_scenes, load_scene
 
 from .runner import Study
 

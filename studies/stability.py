@@ -13,8 +13,7 @@
 from __future__ import annotations
 
 import numpy as np
-
-from integrators import INTEGRATORS, Stepper
+from steplab.integrators import INTEGRATORS, Stepper
 
 from . import extremes, plotting, stiffness
 from .problems import kepler_problem, oscillator_problem
@@ -81,7 +80,7 @@ def _energy_after_every_step(problem, method: str, steps: int, dt: float) -> tup
     """
     integrator = INTEGRATORS[method]
     if steps <= SHORT_RUN_STEPS:
-        from integrators import DivergenceError, simulate
+        from steplab.integrators import DivergenceError, simulate
 
         try:
             traj, diverged = simulate(problem.model, method, problem.y0, 0.0, steps * dt, dt), None
@@ -93,8 +92,7 @@ def _energy_after_every_step(problem, method: str, steps: int, dt: float) -> tup
     import jax
     import jax.numpy as jnp
     from jax import lax
-
-    from integrators.simulate import divergence_limit
+    from steplab.integrators.simulate import divergence_limit
 
     model = problem.model.cast(jnp)
     limit = divergence_limit(problem.y0, np.float64)

@@ -20,9 +20,8 @@ import functools
 
 import numpy as np
 from scipy.optimize import brentq
-
-from integrators import INTEGRATORS, ExplicitRungeKutta
-from integrators.simulate import final_state_function
+from steplab.integrators import INTEGRATORS, ExplicitRungeKutta
+from steplab.integrators.simulate import final_state_function
 
 from .problems import oscillator_problem
 

@@ -16,8 +16,7 @@ same soft body mode, from the growth per step of the measured N-step map.
 from __future__ import annotations
 
 import numpy as np
-
-from physics import Model, soft_body
+from steplab.physics import Model, soft_body
 
 from . import plotting
 from .stability_limits import growth_function, stable_dt, stiffest_mode, worst_deviation

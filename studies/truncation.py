@@ -14,9 +14,8 @@ truncation C dt meets accumulated round-off eps T / dt near dt = sqrt(eps T / C)
 from __future__ import annotations
 
 import numpy as np
-
-from integrators import INTEGRATORS, DivergenceError, Stepper
-from integrators.simulate import final_state_function
+from steplab.integrators import INTEGRATORS, DivergenceError, Stepper
+from steplab.integrators.simulate import final_state_function
 
 from . import plotting
 from .lecture import lecture_check

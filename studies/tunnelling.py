@@ -23,12 +23,11 @@ import math
 import time
 
 import numpy as np
-
-from integrators import simulate
-from physics import Model
-from physics.collision import BoundingSphere, Box, CollisionWorld, PairProperties, collide, overlaps
-from physics.collision.shapes import Sphere
-from physics.collision.time_of_impact import lecture_sphere_sphere, sphere_sphere
+from steplab.integrators import simulate
+from steplab.physics import Model
+from steplab.physics.collision import BoundingSphere, Box, CollisionWorld, PairProperties, collide, overlaps
+from steplab.physics.collision.shapes import Sphere
+from steplab.physics.collision.time_of_impact import lecture_sphere_sphere, sphere_sphere
 
 from . import plotting
 from .runner import Study

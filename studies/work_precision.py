@@ -13,9 +13,8 @@ from __future__ import annotations
 import time
 
 import numpy as np
-
-from integrators import INTEGRATORS, Stepper
-from integrators.simulate import final_state_function
+from steplab.integrators import INTEGRATORS, Stepper
+from steplab.integrators.simulate import final_state_function
 
 from . import plotting
 from .problems import Problem, oscillator_problem, scene_problem, true_final

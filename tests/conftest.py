@@ -22,8 +22,7 @@ import jax  # noqa: E402
 # creates a JAX array, so no test depends on import order.
 jax.config.update("jax_enable_x64", True)
 import helpers  # noqa: E402
-
-import physics  # noqa: E402, F401
+import steplab.physics  # noqa: E402, F401
 
 
 def pytest_configure(config):

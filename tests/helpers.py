@@ -12,11 +12,10 @@ import math
 from collections.abc import Callable
 
 import numpy as np
-
-import physics  # noqa: F401  (turns on jax_enable_x64 before any JAX array exists)
-from integrators import INTEGRATORS, Solver, Stepper
-from physics import Dampers, Drag, Gravity, Model, Springs
-from physics.soft_body import all_pairs, connect
+import steplab.physics  # noqa: F401  (turns on jax_enable_x64 before any JAX array exists)
+from steplab.integrators import INTEGRATORS, Solver, Stepper
+from steplab.physics import Dampers, Drag, Gravity, Model, Springs
+from steplab.physics.soft_body import all_pairs, connect
 
 # --- integrator lists, read from the registry so a new integrator is tested automatically --
 

@@ -10,14 +10,14 @@ import json
 
 import numpy as np
 import pytest
+from steplab.integrators import RK4
+from steplab.integrators.simulate import final_state_function
+from steplab.physics import Drag, Friction, Gravity, Model
+from steplab.physics.scene import load_scene
+from steplab.studies.problems import oscillator_problem
 
-from integrators import RK4
-from integrators.simulate import final_state_function
-from physics import Drag, Friction, Gravity, Model
-from physics.scene import load_scene
 from steplab import bench, peers
 from steplab.cli import main
-from studies.problems import oscillator_problem
 
 #: a bench run small enough for a unit test (seconds, not minutes)
 TINY = bench.Config(small_steps=300, particles=500, cloth_side=6, broadphase_n=2_000, periods=1,

@@ -15,10 +15,9 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 from hypothesis.extra.numpy import arrays
-
-from physics import find_pairs as physics_find_pairs
-from physics.broadphase import METHODS, BoundingVolumeHierarchy, CoherentSortAndSweep, find_pairs
-from physics.broadphase.common import MAX_COORDINATE
+from steplab.physics import find_pairs as physics_find_pairs
+from steplab.physics.broadphase import METHODS, BoundingVolumeHierarchy, CoherentSortAndSweep, find_pairs
+from steplab.physics.broadphase.common import MAX_COORDINATE
 
 FAST = [m for m in METHODS if m != "brute"]
 
@@ -114,7 +113,7 @@ def test_boundary_cases(method):
 
 
 def scene_of(distribution: str, n: int, seed: int):
-    from studies.broadphase import parameters, scene
+    from steplab.studies.broadphase import parameters, scene
 
     return scene(distribution, n, parameters(True), np.random.default_rng(seed))
 
@@ -268,7 +267,7 @@ def test_coherent_and_bvh_check_input_too():
 
 
 def test_study_record_and_figures(tmp_path):
-    from studies.broadphase import STUDY
+    from steplab.studies.broadphase import STUDY
 
     params = STUDY.parameters(True)
     params.update(sizes=[100, 300], repeats=1, coherence={**params["coherence"], "n": 300, "frames": 4,

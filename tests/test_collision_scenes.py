@@ -5,10 +5,10 @@ import math
 
 import numpy as np
 import pytest
+from steplab.integrators import simulate
+from steplab.physics.collision import Box, OrientedBox, Plane
+from steplab.physics.scene import load_scene, parse_scene
 
-from integrators import simulate
-from physics.collision import Box, OrientedBox, Plane
-from physics.scene import load_scene, parse_scene
 from steplab.cli import main
 
 BALL = """

@@ -11,11 +11,10 @@ import numpy as np
 import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
-
-from integrators import INTEGRATORS, Stepper, simulate
-from integrators.semi_implicit_euler import SemiImplicitEuler
-from physics import Drag, Gravity, Model
-from physics.collision import (
+from steplab.integrators import INTEGRATORS, Stepper, simulate
+from steplab.integrators.semi_implicit_euler import SemiImplicitEuler
+from steplab.physics import Drag, Gravity, Model
+from steplab.physics.collision import (
     AABB,
     OBB,
     PAIR_TESTS,
@@ -35,7 +34,7 @@ from physics.collision import (
     rotation_matrix,
     time_of_impact,
 )
-from physics.collision.time_of_impact import lecture_sphere_sphere, sphere_sphere
+from steplab.physics.collision.time_of_impact import lecture_sphere_sphere, sphere_sphere
 
 FIXED_STEP = [name for name, m in INTEGRATORS.items() if isinstance(m, Stepper)]
 FLOOR = Plane(np.array([0.0, 0.0, 1.0]), 0.0, name="floor")
@@ -521,7 +520,7 @@ def test_trigger_records_entry_only_and_epilogue_can_remove_a_body():
 
 
 def test_same_run_same_bytes():
-    from physics.scene import load_scene
+    from steplab.physics.scene import load_scene
 
     scene = load_scene("n-balls")
     a, b = (simulate(scene.model, scene.integrator, scene.y0, 0, 1.0, scene.dt, collisions=scene.collisions)

@@ -10,8 +10,7 @@ import numpy as np
 import pytest
 from helpers import LECTURE_G, LECTURE_MASS, LECTURE_P0, LECTURE_V0, mixed_problem, soft_tetrahedron
 from numpy.testing import assert_allclose, assert_array_equal
-
-from physics import (
+from steplab.physics import (
     CentralGravity,
     Dampers,
     Drag,
@@ -26,8 +25,8 @@ from physics import (
     lecture_state,
     projectile,
 )
-from physics.drag import AIR_DENSITY
-from physics.friction import CONTACT_DISTANCE
+from steplab.physics.drag import AIR_DENSITY
+from steplab.physics.friction import CONTACT_DISTANCE
 
 BACKENDS = [pytest.param(np, id="numpy"), pytest.param(jnp, id="jax")]
 

@@ -35,8 +35,8 @@ import pytest
 from helpers import ONE_BODY_SCENE, TWO_BODY_SCENE
 from hypothesis import given, settings
 from hypothesis import strategies as st
+from steplab.physics.scene import MAX_BODIES, MAX_PAIRS, MAX_SCENE_BYTES, SceneError, parse_scene
 
-from physics.scene import MAX_BODIES, MAX_PAIRS, MAX_SCENE_BYTES, SceneError, parse_scene
 from steplab.cli import main
 
 SCALE = int(os.environ.get("STEPLAB_FUZZ_SCALE", "1"))

@@ -9,10 +9,9 @@ import numpy as np
 import pytest
 from helpers import soft_tetrahedron
 from numpy.testing import assert_allclose
-
-from integrators import INTEGRATORS, GameLoop
-from integrators.game_loop import interpolate
-from physics import Model
+from steplab.integrators import INTEGRATORS, GameLoop
+from steplab.integrators.game_loop import interpolate
+from steplab.physics import Model
 
 DT = 2.0**-6  # 15.625 ms, a binary fraction: multiples of it are exact in floating point
 

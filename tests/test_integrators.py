@@ -27,8 +27,7 @@ from helpers import (
     soft_tetrahedron,
 )
 from numpy.testing import assert_allclose, assert_array_equal
-
-from integrators import (
+from steplab.integrators import (
     INTEGRATORS,
     ButcherTableau,
     DivergenceError,
@@ -39,8 +38,8 @@ from integrators import (
     get_integrator,
     simulate,
 )
-from physics import Model, from_lecture_state, lecture_state, projectile
-from physics.friction import Friction
+from steplab.physics import Model, from_lecture_state, lecture_state, projectile
+from steplab.physics.friction import Friction
 
 OMEGA = 2 * math.pi  # of helpers.oscillator() (period 1 s)
 RUNGE_KUTTA = [name for name in FIXED_STEP if isinstance(INTEGRATORS[name], ExplicitRungeKutta)]
@@ -264,7 +263,7 @@ def test_float32_jax_within_float32_precision(name, mixed_numpy_runs):
 def test_backends_agree_with_ground_friction(name):
     """The reactive (ground contact) path: a block sliding on the ground, tied by a
     spring to a pinned post, under gravity."""
-    from physics import Gravity, Springs
+    from steplab.physics import Gravity, Springs
 
     radii = np.array([0.05, 0.1])
     model = Model([1.0, 2.0], radii,

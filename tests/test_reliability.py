@@ -29,16 +29,15 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 from numpy.testing import assert_allclose, assert_array_equal
+from steplab.integrators import INTEGRATORS, Stepper, simulate
+from steplab.integrators.simulate import check_time_advances
+from steplab.physics import Dampers, Drag, Friction, Gravity, Model, Springs
+from steplab.physics.friction import REST_SPEED
+from steplab.physics.scene import parse_scene
+from steplab.physics.soft_body import all_pairs
+from steplab.studies import runner
+from steplab.studies.plotting import plt, save_figure
 from test_fuzz import toml_document, valid_scenes
-
-from integrators import INTEGRATORS, Stepper, simulate
-from integrators.simulate import check_time_advances
-from physics import Dampers, Drag, Friction, Gravity, Model, Springs
-from physics.friction import REST_SPEED
-from physics.scene import parse_scene
-from physics.soft_body import all_pairs
-from studies import runner
-from studies.plotting import plt, save_figure
 
 FIXED_STEP = [name for name, method in INTEGRATORS.items() if isinstance(method, Stepper)]
 EPS = np.finfo(float).eps
@@ -331,12 +330,12 @@ TOY_SCRIPT = textwrap.dedent("""
 
     import numpy as np
 
-    import studies
-    from integrators import simulate
+    from steplab import studies
+    from steplab.integrators import simulate
     from steplab import cli
-    from studies import runner
-    from studies.plotting import plt, save_figure
-    from studies.problems import oscillator_problem
+    from steplab.studies import runner
+    from steplab.studies.plotting import plt, save_figure
+    from steplab.studies.problems import oscillator_problem
 
 
     def make(k):
@@ -533,13 +532,14 @@ def test_cache_key_follows_the_source_code(tmp_path):
 
 def test_a_study_key_follows_only_the_study_modules_it_uses(tmp_path):
     """Editing one study's module re-runs that study, not the others; a shared module re-runs all users."""
-    from studies import STUDIES
+    from steplab.studies import STUDIES
 
     for package in runner.SOURCE_PACKAGES:
         shutil.copytree(ROOT / package, tmp_path / package, ignore=shutil.ignore_patterns("__pycache__"))
     stability, frame_rate = (runner.study_modules(STUDIES[name]) for name in ("stability", "frame_rate"))
-    assert {"studies.stability", "studies.stiffness", "studies.extremes", "studies.problems"} <= stability
-    assert "studies.stiffness" not in frame_rate and "studies.problems" in frame_rate
+    assert {"steplab.studies.stability", "steplab.studies.stiffness", "steplab.studies.extremes",
+            "steplab.studies.problems"} <= stability
+    assert "steplab.studies.stiffness" not in frame_rate and "steplab.studies.problems" in frame_rate
 
     def keys():
         return runner.source_hash(tmp_path, stability), runner.source_hash(tmp_path, frame_rate)
@@ -555,7 +555,7 @@ def test_a_study_key_follows_only_the_study_modules_it_uses(tmp_path):
 
 def test_real_study_killed_then_resumed_matches_a_clean_computation(tmp_path):
     """``steplab study frame_rate --quick`` (a real study with figures): SIGKILL, SIGINT, resume."""
-    from studies import frame_rate
+    from steplab.studies import frame_rate
 
     out = tmp_path / "results"
     argv = ["study", "frame_rate", "--quick", "--out", str(out)]
@@ -605,8 +605,7 @@ def energy_error_envelope(n_steps: int, integrator: str = "velocity-verlet"):
     import jax
     import jax.numpy as jnp
     from jax import lax
-
-    from physics.scene import load_scene
+    from steplab.physics.scene import load_scene
 
     scene = load_scene("oscillator")
     model = scene.model.cast(jnp, np.float64)
@@ -769,7 +768,7 @@ def ball_sets(draw, n_max=10):
 
 def box_of_planes(half: float = 2.0):
     """Six walls, the room [-half, half]^3 (a plane is the solid half-space normal . x <= offset)."""
-    from physics.collision import Plane
+    from steplab.physics.collision import Plane
 
     return tuple(Plane(sign * np.eye(3)[k], -half, name=f"wall{k}{'+' if sign > 0 else '-'}")
                  for k in range(3) for sign in (1.0, -1.0))
@@ -779,7 +778,7 @@ def box_of_planes(half: float = 2.0):
 @given(balls=ball_sets(), detector=st.sampled_from(["swept", "overlap"]), eps=st.floats(0, 1),
        friction=st.sampled_from([0.0, 0.4]))
 def test_collisions_between_bodies_conserve_momentum(balls, detector, eps, friction):
-    from physics.collision import CollisionWorld, PairProperties
+    from steplab.physics.collision import CollisionWorld, PairProperties
 
     model, y0 = balls
     world = CollisionWorld(detector, pair_properties=PairProperties(eps, friction))
@@ -796,7 +795,7 @@ def test_collisions_between_bodies_conserve_momentum(balls, detector, eps, frict
 def test_collisions_with_eps_at_most_one_never_add_energy(balls, detector, eps, friction):
     """Balls bouncing off each other and the six walls of a room: with no forces the motion
     between collisions is exact, so the kinetic energy may only fall (eps < 1, friction)."""
-    from physics.collision import CollisionWorld, PairProperties
+    from steplab.physics.collision import CollisionWorld, PairProperties
 
     model, y0 = balls
     world = CollisionWorld(detector, box_of_planes(), pair_properties=PairProperties(eps, friction))
@@ -814,7 +813,7 @@ def test_swept_detection_never_lets_a_sphere_through_a_wall(exponent, angle, tur
                                                             wall, eps):
     """At any speed (1 cm/s to 10^7 m/s), any angle, any wall thickness: the centre never
     gets past the wall's near face. (Overlap testing misses such walls: test_collisions.py.)"""
-    from physics.collision import Box, CollisionWorld, OrientedBox, PairProperties, Plane, rotation_matrix
+    from steplab.physics.collision import Box, CollisionWorld, OrientedBox, PairProperties, Plane, rotation_matrix
 
     speed = 10.0**exponent
     rotation = rotation_matrix([0.0, 0.0, 1.0], turn)
@@ -842,8 +841,8 @@ def test_swept_detection_never_lets_a_sphere_through_a_wall(exponent, angle, tur
 def test_every_broadphase_gives_the_same_trajectory_and_collisions(detector):
     """The whole pipeline with each broadphase method: bit-identical states and events
     (find_pairs itself is checked against brute force in test_broadphase.py)."""
-    from physics.broadphase import METHODS
-    from physics.collision import CollisionWorld, PairProperties
+    from steplab.physics.broadphase import METHODS
+    from steplab.physics.collision import CollisionWorld, PairProperties
 
     rng = np.random.default_rng(11)
     n = 40
@@ -863,7 +862,7 @@ def test_every_broadphase_gives_the_same_trajectory_and_collisions(detector):
 @pytest.mark.parametrize("detector", ["swept", "overlap"])
 def test_coincident_spheres_collide_without_nan(detector):
     """Two balls with the same centre have no normal between them: +x by convention."""
-    from physics.collision import CollisionWorld
+    from steplab.physics.collision import CollisionWorld
 
     y0 = np.array([[[0.0, 0.0, 0.0], [0.0, 0.0, 0.0]], [[1.0, 0.5, 0.0], [-1.0, 0.0, 0.2]]])
     model = Model([1.0, 3.0], [0.1, 0.2])
@@ -877,7 +876,7 @@ def test_coincident_spheres_collide_without_nan(detector):
 def test_game_loop_with_a_subnormal_dt_or_a_huge_frame_stays_bounded():
     """The accumulator loop is exact (rational lag), so t + dt == t cannot stall it, and the
     per-frame cap bounds a frame's work even when 10^321 steps are owed."""
-    from integrators import GameLoop
+    from steplab.integrators import GameLoop
 
     steps = []
     loop = GameLoop(lambda: steps.append(1), 5e-324, max_steps_per_frame=1000)

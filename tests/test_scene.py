@@ -3,8 +3,7 @@
 import numpy as np
 import pytest
 from helpers import TWO_BODY_SCENE
-
-from physics.scene import SceneError, builtin_scenes, load_scene, parse_scene
+from steplab.physics.scene import SceneError, builtin_scenes, load_scene, parse_scene
 
 
 def test_builtins_exist():
@@ -143,7 +142,7 @@ def test_pinned_bodies_never_move():
     with pytest.raises(SceneError, match="bodies\\[0\\].velocity: a pinned body never moves"):
         parse_scene(TWO_BODY_SCENE.replace("position = [0.0, 0.0, 0.0]", "position = [0.0, 0.0, 0.0]\n"
                                     "velocity = [1.0, 0.0, 0.0]\npinned = true", 1))
-    from integrators import simulate
+    from steplab.integrators import simulate
 
     scene = parse_scene('[simulation]\ndt = 0.01\nt_end = 1.0\n[[soft_bodies]]\nname = "c"\nshape = "box"\n'
                         "mass = 8.0\nstiffness = 100.0\nvelocity = [1.0, 0.0, 0.0]\npinned = [7]\n")

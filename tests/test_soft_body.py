@@ -8,11 +8,10 @@ import numpy as np
 import pytest
 from helpers import tetrahedron
 from numpy.testing import assert_allclose, assert_array_equal
-
-from integrators import simulate
-from physics import Gravity, Model
-from physics.soft_body import all_pairs, box, connect, grid
-from physics.state import lecture_state
+from steplab.integrators import simulate
+from steplab.physics import Gravity, Model
+from steplab.physics.soft_body import all_pairs, box, connect, grid
+from steplab.physics.state import lecture_state
 
 # --- connections ---------------------------------------------------------------------------
 

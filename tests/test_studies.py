@@ -4,14 +4,13 @@ import json
 
 import numpy as np
 import pytest
-
-from integrators import INTEGRATORS, Stepper
-from studies import runner
-from studies.lecture import lecture_check
-from studies.plotting import plt, save_figure
-from studies.problems import oscillator_problem, true_final
-from studies.stability_limits import measured_limit, oscillator_mode, theoretical_limit
-from studies.truncation import error_curve, fit_order
+from steplab.integrators import INTEGRATORS, Stepper
+from steplab.studies import runner
+from steplab.studies.lecture import lecture_check
+from steplab.studies.plotting import plt, save_figure
+from steplab.studies.problems import oscillator_problem, true_final
+from steplab.studies.stability_limits import measured_limit, oscillator_mode, theoretical_limit
+from steplab.studies.truncation import error_curve, fit_order
 
 STEPPERS = [name for name, method in INTEGRATORS.items() if isinstance(method, Stepper)]
 
@@ -89,7 +88,7 @@ def test_measured_stability_limit_within_one_percent_of_theory(method, zeta):
 
 
 def test_stable_dt_falls_as_one_over_sqrt_stiffness_on_the_soft_cube():
-    from studies.stiffness import stable_dt_against_stiffness
+    from steplab.studies.stiffness import stable_dt_against_stiffness
 
     methods = ["semi-implicit-euler", "rk4", "euler", "implicit-euler"]
     record = stable_dt_against_stiffness(methods, [100.0, 1e4], 2000, 1e-4)
@@ -107,15 +106,15 @@ def test_stable_dt_falls_as_one_over_sqrt_stiffness_on_the_soft_cube():
 
 
 def test_implicit_euler_pays_the_predicted_amplitude_per_period():
-    from studies.stiffness import implicit_euler_damping
+    from steplab.studies.stiffness import implicit_euler_damping
 
     for row in implicit_euler_damping([0.01, 0.3, 3.0, 30.0])["rows"]:
         assert row["amplitude_kept_per_period"] == pytest.approx(row["theory"], rel=1e-6)
 
 
 def test_long_run_energy_on_the_kepler_orbit():
-    from studies.problems import kepler_problem
-    from studies.stability import energy_history
+    from steplab.studies.problems import kepler_problem
+    from steplab.studies.stability import energy_history
 
     problem = kepler_problem()
     verlet = energy_history(problem, "velocity-verlet", 20_000, 1e-3)  # 20 orbits
@@ -134,7 +133,7 @@ def test_long_run_energy_on_the_kepler_orbit():
 
 
 def test_huge_dt_is_reported_as_divergence_at_the_predicted_step():
-    from studies.extremes import huge_dt
+    from steplab.studies.extremes import huge_dt
 
     rows = huge_dt(STEPPERS, [3.0, 100.0], 1000)
     for row in rows:
@@ -146,7 +145,7 @@ def test_huge_dt_is_reported_as_divergence_at_the_predicted_step():
 
 
 def test_far_from_the_origin_stalls_exactly_where_rounding_predicts():
-    from studies.extremes import coasting, first_offset, oscillator_jitter, stall_edge
+    from steplab.studies.extremes import coasting, first_offset, oscillator_jitter, stall_edge
 
     offsets = np.geomspace(1e3, 1e7, 9).tolist()
     rows = coasting(offsets, [1e-3, 1e-2, 1.0], ["float32", "float64"], 30)
@@ -169,7 +168,7 @@ def test_far_from_the_origin_stalls_exactly_where_rounding_predicts():
 
 
 def test_the_light_body_sets_the_stable_dt_across_mass_ratios():
-    from studies.extremes import mass_ratio
+    from steplab.studies.extremes import mass_ratio
 
     rows = mass_ratio(["semi-implicit-euler", "rk4"], [1.0, 1e6], 2000, 1e-4)
     for row in rows:
@@ -230,9 +229,9 @@ def test_interrupted_run_leaves_no_partial_files_and_resumes(tmp_path):
 
 def test_recommend_meets_the_tolerance_when_run_independently():
     """Re-run what `recommend` picks on the NumPy path: the error stays under the tolerance."""
-    from integrators import simulate
-    from studies.problems import scene_problem
-    from studies.work_precision import recommend
+    from steplab.integrators import simulate
+    from steplab.studies.problems import scene_problem
+    from steplab.studies.work_precision import recommend
 
     problem = scene_problem("drag-projectile", 2.0, "drag")
     truth, _ = true_final(problem)
@@ -246,7 +245,7 @@ def test_recommend_meets_the_tolerance_when_run_independently():
 
 
 def test_recommend_names_the_reference_when_no_fixed_step_gets_there():
-    from studies.work_precision import recommend
+    from steplab.studies.work_precision import recommend
 
     choice = recommend(oscillator_problem(t_end=0.3), 1e-12)
     assert choice["integrator"] in ("rk4", "diffrax-dopri8")
@@ -255,7 +254,7 @@ def test_recommend_names_the_reference_when_no_fixed_step_gets_there():
 
 
 def test_pareto_front():
-    from studies.work_precision import pareto
+    from steplab.studies.work_precision import pareto
 
     points = [{"error": 1.0, "seconds": 1.0}, {"error": 0.5, "seconds": 2.0}, {"error": 2.0, "seconds": 3.0},
               {"error": None, "seconds": 0.1}]
@@ -263,7 +262,7 @@ def test_pareto_front():
 
 
 def test_frame_rate_fixed_step_is_bit_identical_and_naive_is_not():
-    from studies.frame_rate import compute, parameters
+    from steplab.studies.frame_rate import compute, parameters
 
     record = compute(parameters(quick=True))
     assert record["fixed_bit_identical"]

@@ -10,8 +10,7 @@ from __future__ import annotations
 import functools
 
 import numpy as np
-
-from integrators.simulate import final_state_function
+from steplab.integrators.simulate import final_state_function
 
 from .common import STEPPERS
 
@@ -23,7 +22,7 @@ ORDER_STEPS = (128, 256, 512, 1024)
 
 @functools.cache
 def _problems():
-    from studies.problems import oscillator_problem, scene_problem
+    from steplab.studies.problems import oscillator_problem, scene_problem
 
     return {"oscillator": oscillator_problem(0.0),
             "drag-projectile": scene_problem("drag-projectile", 2.0, "football with quadratic drag")}
@@ -56,7 +55,7 @@ class GlobalError:
     timeout = 300
 
     def setup_cache(self):
-        from studies.problems import true_final
+        from steplab.studies.problems import true_final
 
         return {name: true_final(problem)[0] for name, problem in _problems().items()}
 

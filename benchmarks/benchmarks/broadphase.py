@@ -10,7 +10,7 @@ from __future__ import annotations
 import numpy as np
 
 try:
-    from physics.broadphase import METHODS, find_pairs
+    from steplab.physics.broadphase import METHODS, find_pairs
 except ImportError:  # not in this version of steplab
     METHODS, find_pairs = {}, None
 

@@ -6,8 +6,8 @@ neither, ``setup`` raises ``NotImplementedError`` and asv records the benchmark 
 
 from __future__ import annotations
 
-from integrators import simulate
-from physics.scene import builtin_scenes, load_scene
+from steplab.integrators import simulate
+from steplab.physics.scene import builtin_scenes, load_scene
 
 #: steps per timed run
 STEPS = 100

@@ -3,11 +3,10 @@
 from __future__ import annotations
 
 import numpy as np
-
-import physics  # noqa: F401  (float64 JAX before any array exists)
-from integrators import INTEGRATORS, Stepper
-from physics import Drag, Friction, Gravity, Model, Springs
-from physics.soft_body import connect, grid
+import steplab.physics  # noqa: F401  (float64 JAX before any array exists)
+from steplab.integrators import INTEGRATORS, Stepper
+from steplab.physics import Drag, Friction, Gravity, Model, Springs
+from steplab.physics.soft_body import connect, grid
 
 SEED = 20240611
 #: every fixed-step integrator, from the registry: a new one is benchmarked when registered

@@ -2,8 +2,8 @@
 
 from __future__ import annotations
 
-from integrators import get_integrator
-from integrators.simulate import final_state_function
+from steplab.integrators import get_integrator
+from steplab.integrators.simulate import final_state_function
 
 from .common import STEPPERS, particle_chain, ready
 

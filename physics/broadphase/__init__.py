@@ -1,6 +1,6 @@
 """Broadphase: which pairs of bounding spheres overlap, without testing all n^2 pairs.
 
->>> from physics.broadphase import find_pairs
+>>> from steplab.physics.broadphase import find_pairs
 >>> find_pairs([[0, 0, 0], [1.5, 0, 0], [9, 9, 9]], [1.0, 0.5, 1.0], method="grid")
 array([[0, 1]])
 

@@ -1,6 +1,6 @@
 """Collisions: shapes, narrow phase, bounding volumes, time of impact, detectors, response, events.
 
->>> from physics.collision import Sphere, Plane, collide
+>>> from steplab.physics.collision import Sphere, Plane, collide
 >>> import numpy as np
 >>> contact = collide(Sphere(np.array([0.0, 0.0, 0.05]), np.array(0.1)), Plane(np.array([0.0, 0.0, 1.0])))
 >>> float(contact.penetration_depth)
