@@ -7,7 +7,9 @@ Two kinds share one driver (:func:`integrators.simulate`):
   what a method keeps between steps (velocity Verlet keeps the last acceleration so it
   evaluates the force once per step), ``None`` for most. Steppers only combine
   evaluations of ``model.acceleration`` / ``model.vector_field``: they never know what a
-  spring is.
+  spring is. They build arrays with ``model.xp`` (``model.xp.stack([q1, v1])``): it is
+  ``numpy``, or ``jax.numpy`` on the compiled backend, where ``q`` and ``v`` are tracers
+  that ``np.stack`` cannot convert (``TracerArrayConversionError``).
 - a :class:`Solver` returns the solution at requested times (the closed form, or an
   adaptive reference from diffrax or scipy at a recorded tolerance).
 """
@@ -15,7 +17,12 @@ Two kinds share one driver (:func:`integrators.simulate`):
 from __future__ import annotations
 
 import dataclasses
+from collections.abc import Callable
 from typing import ClassVar
+
+import numpy as np
+
+from . import linear_stability
 
 
 @dataclasses.dataclass(frozen=True)
@@ -30,6 +37,9 @@ class Integrator:
     symplectic: ClassVar[bool] = False
     implicit: ClassVar[bool] = False
     kind: ClassVar[str] = "fixed-step"
+    #: matplotlib (colour, marker), so a method looks the same in every figure; None: the
+    #: figures pick one from the name
+    style: ClassVar[tuple[str, str] | None] = None
 
     def describe(self) -> dict:
         """Machine-readable properties, as ``steplab integrators --json`` prints them."""
@@ -46,12 +56,52 @@ class Integrator:
 
 
 class Stepper(Integrator):
+    """A fixed-step method: ``step`` plus what it does to the linear test equation.
+
+    The theory is derived from ``step`` itself (:mod:`.linear_stability`): a new method
+    has its amplification matrix, spectral radius and stability limit without writing
+    any. A method with a scalar stability function R(z) (growth factor on y' = lambda y,
+    z = lambda dt) states it as ``stability_function``, which the stability-region
+    figure draws.
+    """
+
+    #: the stability limit in closed form, in words (the studies print it beside the number)
+    stability_note: ClassVar[str] = ""
+    #: ``R(z)`` for a method that has a scalar stability function; None for one whose map
+    #: on the oscillator is a matrix (partitioned methods act on u and v differently)
+    stability_function: ClassVar[Callable | None] = None
+
     def init(self, model, t, y):
         """The carry before the first step (``None`` unless the method keeps something)."""
         return None
 
     def step(self, model, t, y, dt, carry):
         raise NotImplementedError
+
+    def linear_map(self, omega_dt: float, zeta: float = 0.0) -> np.ndarray:
+        """One-step matrix on u'' = -u - 2 zeta u' (omega = 1, dt = omega_dt), carry included.
+
+        Derived from :meth:`step` on :class:`.linear_stability.LinearTestModel`; shape
+        (2, 2) acting on (u, v), or (3, 3) on (u, v, carry) for a method that carries an
+        array shaped like q.
+        """
+        return linear_stability.linear_map(self, omega_dt, zeta)
+
+    def spectral_radius(self, omega_dt: float, zeta: float = 0.0) -> float:
+        """Largest |eigenvalue| of the one-step map: |R(omega_dt lambda)| for a method with R."""
+        return linear_stability.spectral_radius(self, omega_dt, zeta)
+
+    def stability_limit(self, zeta: float = 0.0) -> float | None:
+        """Largest stable omega dt on the oscillator: 0.0 if unstable at every dt, None if unbounded."""
+        return linear_stability.stability_limit(self, zeta)
+
+    def describe(self) -> dict:
+        out = super().describe()
+        try:  # None: stable at every dt; left out where the map cannot be derived
+            out["stability_limit_omega_dt"] = self.stability_limit(0.0)
+        except (TypeError, AttributeError):  # a carry or a model attribute the linear test lacks
+            pass
+        return out
 
 
 class Solver(Integrator):

@@ -18,9 +18,10 @@ class NotConstantForceError(ValueError):
 class Exact(Solver):
     """Exact closed-form projectile solution, for scenes whose total force is constant.
 
-    p(t) = p0 + v0 (t - t0) + 1/2 g (t - t0)^2, evaluated from the initial state at
-    every requested time, so no error accumulates over steps. The reference for error
-    studies on the projectile.
+    p(t) = p0 + v0 (t - t0) + 1/2 a (t - t0)^2, with a = g + F/m the model's constant
+    acceleration (gravity and every other constant force, ``model.constant_acceleration``),
+    evaluated from the initial state at every requested time, so no error accumulates over
+    steps. The reference for error studies on the projectile.
     """
 
     name = "exact"

@@ -37,6 +37,12 @@ class ImplicitEuler(Stepper):
     order = 1
     evaluations = 1
     implicit = True
+    style = ("tab:brown", "X")
+    stability_note = "none: |1 / (1 - z)| <= 1 on the whole left half-plane (A-stable)"
+
+    def stability_function(self, z):
+        """R(z) = 1 / (1 - z): v1 = v + dt a(v1) on y' = lambda y gives y1 = y / (1 - lambda dt)."""
+        return 1 / (1 - z)
 
     def step(self, model, t, y, dt, carry):
         xp = model.xp

@@ -8,7 +8,7 @@ scenes; the implicit ones (Kvaerno5, Radau) stiff spring systems.
 from __future__ import annotations
 
 import dataclasses
-from typing import ClassVar
+from typing import NamedTuple
 
 import numpy as np
 
@@ -22,36 +22,131 @@ class ReferenceFailedError(RuntimeError):
     """The reference solver did not reach the end of the interval."""
 
 
+#: the library and its solver class / solve_ivp method, by reference name
+ADAPTIVE_METHODS = {"diffrax-dopri8": ("diffrax", "Dopri8"), "diffrax-tsit5": ("diffrax", "Tsit5"),
+                    "diffrax-kvaerno5": ("diffrax", "Kvaerno5"), "scipy-dop853": ("scipy", "DOP853"),
+                    "scipy-radau": ("scipy", "Radau"), "scipy-rk45": ("scipy", "RK45")}
+
+
+class AdaptiveSolution(NamedTuple):
+    """What one adaptive solve returns.
+
+    Attributes
+    ----------
+    ys : array, shape (K, 2, N, 3)
+        The states at the saved times (K = len(ts)), or the end state alone (K = 1).
+    steps : int or array
+        Steps the solver took (accepted and rejected for diffrax; scipy: None with
+        saved times, since solve_ivp then reports the saved times, not its steps).
+    evaluations : int or None
+        Vector-field evaluations (scipy's ``nfev``; None for diffrax, which does not count).
+    success : bool or array
+        Whether the solve reached the end (an array inside ``jax.jit``).
+    message : str
+    """
+
+    ys: object
+    steps: object
+    evaluations: object
+    success: object
+    message: str
+
+
+def solve_adaptive(vector_field, ts, y0, method: str, rtol, atol, *, at_saved_times: bool = True,
+                   jacobian=None, max_steps: int = MAX_REFERENCE_STEPS) -> AdaptiveSolution:
+    """Solve dy/dt = vector_field(t, y) over [ts[0], ts[-1]] with an adaptive reference method.
+
+    The one place steplab calls diffrax's ``diffeqsolve`` or scipy's ``solve_ivp``
+    adaptively: the reference solvers, the work-precision study and the bench.
+
+    Parameters
+    ----------
+    vector_field : callable
+        ``vector_field(t, y) -> dy/dt`` for y of the shape of ``y0``; JAX-traceable for diffrax.
+    ts : array, shape (K,)
+        Times to save at, increasing; K >= 2.
+    y0 : array, shape (2, N, 3)
+    method : str
+        A name of :data:`ADAPTIVE_METHODS`, e.g. ``"diffrax-dopri8"``, ``"scipy-dop853"``.
+    rtol, atol : float
+        The PID controller's tolerances; may be traced (diffrax inside ``jax.jit``).
+    at_saved_times : bool
+        True: step exactly onto every saved time and return the states there. False: a
+        plain solve from ts[0] to ts[-1] that returns the end state only, the solver's
+        own cost (what the work-precision study and the bench time).
+    jacobian : callable, optional
+        ``jacobian(t, y) -> d(dy/dt)/dy`` on the flat state (scipy's implicit methods).
+    max_steps : int
+        diffrax's step budget.
+
+    Notes
+    -----
+    diffrax runs with ``throw=False``: a failed solve is reported in ``success``, so the
+    call can sit inside ``jax.jit``; the caller decides what a failure means.
+    """
+    if method not in ADAPTIVE_METHODS:
+        raise ValueError(f"unknown adaptive method {method!r}; valid: {', '.join(ADAPTIVE_METHODS)}")
+    library, solver = ADAPTIVE_METHODS[method]
+    if library == "diffrax":
+        import diffrax
+
+        # Step exactly onto every saved time: diffrax would otherwise fill SaveAt(ts) by
+        # interpolating inside steps, and the Dopri8 / Kvaerno5 interpolants are
+        # 100-1000x less accurate than the steps themselves.
+        controller = diffrax.PIDController(rtol=rtol, atol=atol)
+        if at_saved_times:
+            controller = diffrax.ClipStepSizeController(controller, step_ts=ts)
+        sol = diffrax.diffeqsolve(
+            diffrax.ODETerm(lambda t, y, args: vector_field(t, y)), getattr(diffrax, solver)(), t0=ts[0], t1=ts[-1],
+            dt0=None, y0=y0, saveat=diffrax.SaveAt(ts=ts) if at_saved_times else diffrax.SaveAt(t1=True),
+            stepsize_controller=controller, max_steps=max_steps, throw=False)
+        return AdaptiveSolution(sol.ys, sol.stats["num_steps"], None, sol.result == diffrax.RESULTS.successful,
+                                str(sol.result))
+    from scipy.integrate import solve_ivp
+
+    y0 = np.asarray(y0, dtype=float)
+    shape = y0.shape
+
+    def fun(t, y):
+        return np.asarray(vector_field(t, y.reshape(shape))).ravel()
+
+    kwargs = {} if jacobian is None else {"jac": jacobian}
+    sol = solve_ivp(fun, (ts[0], ts[-1]), y0.ravel(), method=solver, t_eval=ts if at_saved_times else None,
+                    rtol=rtol, atol=atol, **kwargs)
+    ys = sol.y.T.reshape((-1,) + shape)
+    return AdaptiveSolution(ys if at_saved_times else ys[-1:], None if at_saved_times else int(sol.t.size - 1),
+                            int(sol.nfev), bool(sol.success), sol.message)
+
+
 @dataclasses.dataclass(frozen=True)
-class DiffraxReference(Solver):
-    """Adaptive diffrax solve with a PID step-size controller."""
+class AdaptiveReference(Solver):
+    """An adaptive reference solve (:func:`solve_adaptive`) under the registry name ``name``."""
 
     rtol: float = 1e-12
     atol: float = 1e-12
 
-    solver_name: ClassVar[str]
-    backend = "jax"
     evaluations = None
 
     def solve(self, model, ts, y0):
-        import diffrax
-        import jax.numpy as jnp
+        if self.backend == "jax":
+            import jax.numpy as jnp
 
-        term = diffrax.ODETerm(lambda t, y, args: model.vector_field(t, y))
-        ts = jnp.asarray(ts, dtype=model.dtype)
-        sol = diffrax.diffeqsolve(
-            term, getattr(diffrax, self.solver_name)(), t0=ts[0], t1=ts[-1], dt0=None,
-            y0=jnp.asarray(y0, dtype=model.dtype), saveat=diffrax.SaveAt(ts=ts),
-            # Step exactly onto every saved time: diffrax would otherwise fill SaveAt(ts) by
-            # interpolating inside steps, and the Dopri8 / Kvaerno5 interpolants are
-            # 100-1000x less accurate than the steps themselves.
-            stepsize_controller=diffrax.ClipStepSizeController(
-                diffrax.PIDController(rtol=self.rtol, atol=self.atol), step_ts=ts),
-            max_steps=MAX_REFERENCE_STEPS, throw=False,
-        )
-        if sol.result != diffrax.RESULTS.successful:
-            raise ReferenceFailedError(f"{self.name} failed: {sol.result}")
+            ts, y0 = jnp.asarray(ts, dtype=model.dtype), jnp.asarray(y0, dtype=model.dtype)
+        jacobian = None
+        if self.implicit and self.backend == "numpy":  # scipy's implicit methods take the Jacobian
+            shape = np.shape(y0)
+            jacobian = lambda t, y: _first_order_jacobian(model, t, y.reshape(shape))  # noqa: E731
+        sol = solve_adaptive(model.vector_field, ts, y0, self.name, self.rtol, self.atol, jacobian=jacobian)
+        if not sol.success:
+            raise ReferenceFailedError(f"{self.name} failed: {sol.message}")
         return np.asarray(sol.ys)
+
+
+@dataclasses.dataclass(frozen=True)
+class DiffraxReference(AdaptiveReference):
+    """Adaptive diffrax solve with a PID step-size controller."""
+
+    backend = "jax"
 
 
 @dataclasses.dataclass(frozen=True)
@@ -60,7 +155,6 @@ class DiffraxDopri8(DiffraxReference):
 
     name = "diffrax-dopri8"
     order = 8
-    solver_name = "Dopri8"
 
 
 @dataclasses.dataclass(frozen=True)
@@ -69,7 +163,6 @@ class DiffraxTsit5(DiffraxReference):
 
     name = "diffrax-tsit5"
     order = 5
-    solver_name = "Tsit5"
 
 
 @dataclasses.dataclass(frozen=True)
@@ -82,36 +175,11 @@ class DiffraxKvaerno5(DiffraxReference):
     name = "diffrax-kvaerno5"
     order = 5
     implicit = True
-    solver_name = "Kvaerno5"
 
 
 @dataclasses.dataclass(frozen=True)
-class ScipyReference(Solver):
+class ScipyReference(AdaptiveReference):
     """Adaptive ``scipy.integrate.solve_ivp``."""
-
-    rtol: float = 1e-12
-    atol: float = 1e-12
-
-    method: ClassVar[str]
-    evaluations = None
-
-    def solve(self, model, ts, y0):
-        from scipy.integrate import solve_ivp
-
-        y0 = np.asarray(y0, dtype=float)
-        shape = y0.shape
-
-        def fun(t, y):
-            return np.asarray(model.vector_field(t, y.reshape(shape))).ravel()
-
-        kwargs = {}
-        if self.implicit:
-            kwargs["jac"] = lambda t, y: _first_order_jacobian(model, t, y.reshape(shape))
-        sol = solve_ivp(fun, (ts[0], ts[-1]), y0.ravel(), method=self.method, t_eval=ts,
-                        rtol=self.rtol, atol=self.atol, **kwargs)
-        if not sol.success:
-            raise ReferenceFailedError(f"{self.name} failed: {sol.message}")
-        return sol.y.T.reshape((len(ts),) + shape)
 
 
 def _first_order_jacobian(model, t, y):
@@ -127,7 +195,6 @@ class ScipyDOP853(ScipyReference):
 
     name = "scipy-dop853"
     order = 8
-    method = "DOP853"
 
 
 @dataclasses.dataclass(frozen=True)
@@ -140,4 +207,3 @@ class ScipyRadau(ScipyReference):
     name = "scipy-radau"
     order = 5
     implicit = True
-    method = "Radau"

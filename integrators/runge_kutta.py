@@ -85,6 +85,10 @@ class ExplicitRungeKutta(Stepper):
     def step(self, model, t, y, dt, carry):
         return rk_step(model.vector_field, t, y, dt, self.tableau), carry
 
+    def stability_function(self, z):
+        """R(z) of the tableau: one step multiplies y' = lambda y by R(lambda dt)."""
+        return self.tableau.stability_function(z)
+
 
 @dataclasses.dataclass(frozen=True)
 class RK4(ExplicitRungeKutta):
@@ -96,6 +100,8 @@ class RK4(ExplicitRungeKutta):
     name = "rk4"
     order = 4
     evaluations = 4
+    style = ("tab:blue", "*")
+    stability_note = "2 sqrt(2) = 2.8284 undamped"
     tableau = ButcherTableau(
         a_lower=((1 / 2,), (0.0, 1 / 2), (0.0, 0.0, 1.0)),
         b=(1 / 6, 1 / 3, 1 / 3, 1 / 6),
@@ -110,6 +116,8 @@ class Heun(ExplicitRungeKutta):
     name = "heun"
     order = 2
     evaluations = 2
+    style = ("tab:purple", "D")
+    stability_note = "0 undamped (|R(i y)|^2 = 1 + y^4 / 4)"
     tableau = ButcherTableau(a_lower=((1.0,),), b=(1 / 2, 1 / 2), c=(1.0,))
 
 
@@ -120,4 +128,6 @@ class Midpoint(ExplicitRungeKutta):
     name = "midpoint"
     order = 2
     evaluations = 2
+    style = ("tab:pink", "P")
+    stability_note = "0 undamped (same R as Heun)"
     tableau = ButcherTableau(a_lower=((1 / 2,),), b=(0.0, 1.0), c=(1 / 2,))

@@ -21,6 +21,8 @@ class SemiImplicitEuler(Stepper):
     order = 1
     evaluations = 1
     symplectic = True
+    style = ("tab:orange", "s")
+    stability_note = "2 undamped; 2 sqrt(1 + zeta^2) - 2 zeta damped"
 
     def step(self, model, t, y, dt, carry):
         q, v = y[0], y[1]

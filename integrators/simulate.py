@@ -8,6 +8,7 @@ import time
 import numpy as np
 
 from .base import Solver, Stepper
+from .loop import compiled_loop
 
 #: default step budget of one run; a larger run must ask for it explicitly
 MAX_STEPS = 10_000_000
@@ -112,10 +113,10 @@ def divergence_limit(y0, dtype) -> float:
     return min(DIVERGENCE_FACTOR * scale, float(np.sqrt(np.finfo(dtype).max)))
 
 
-def simulate(model, integrator, y0, t_start: float, t_end: float, dt: float, *,
-             backend: str = "numpy", dtype=None, save_every: int = 1, max_steps: int = MAX_STEPS,
-             progress: bool = False, collisions=None) -> Trajectory:
-    """Integrate ``model`` from ``y0`` over [t_start, t_end] with fixed steps of ``dt``.
+def simulate(model, integrator, y0, t_start: float, t_end: float | None = None, dt: float | None = None, *,
+             n_steps: int | None = None, backend: str = "numpy", dtype=None, save_every: int = 1,
+             max_steps: int = MAX_STEPS, progress: bool = False, stepper=None, collisions=None) -> Trajectory:
+    """Integrate ``model`` from ``y0`` with fixed steps of ``dt``, to ``t_end`` or for ``n_steps``.
 
     Parameters
     ----------
@@ -123,9 +124,16 @@ def simulate(model, integrator, y0, t_start: float, t_end: float, dt: float, *,
     integrator : str or Integrator
         A registry name or an integrator object.
     y0 : array, shape (2, N, 3)
+    t_start, t_end : float
+        The interval, s: the run takes the whole steps of ``dt`` that fit (see :func:`step_count`).
+    dt : float
+        The step, s (for a solver: the spacing of the saved times).
+    n_steps : int, optional
+        Exactly this many steps instead of ``t_end`` (give one of the two): the run ends
+        at ``t_start + n_steps dt`` whatever the rounding of ``t_end / dt``.
     backend : {"numpy", "jax"}
         ``numpy`` steps in Python (readable, for teaching); ``jax`` compiles the whole
-        loop (jit + lax.scan). Solvers use the backend they need.
+        loop (:func:`.loop.compiled_loop`). Solvers use the backend they need.
     dtype : float64 (default: the model's) or float32
     save_every : int
         Keep every ``save_every``-th state (the last state is always kept).
@@ -133,9 +141,16 @@ def simulate(model, integrator, y0, t_start: float, t_end: float, dt: float, *,
         Refuse runs longer than this (a guard against typos such as dt = 1e-9).
     progress : bool
         Show a progress bar (NumPy steppers).
+    stepper : callable, optional
+        ``stepper(model, integrator) -> step`` builds, once before the loop, the step the
+        loop calls instead of the integrator's own: ``step(t, y, dt, carry) -> (y, carry)``,
+        with an attribute ``log`` the trajectory keeps as ``collisions`` (None: nothing to
+        add to the integrator's step). It receives the model on the run's backend and
+        precision, and raises ValueError for an integrator or backend it cannot serve.
+        Such a step runs in the NumPy loop.
     collisions : physics.collision.CollisionWorld, optional
-        Detect and resolve collisions after every step (fixed-step integrators on the
-        NumPy backend); the trajectory's ``collisions`` is the log of the run.
+        Shorthand for ``stepper=collisions.stepper``: detect and resolve collisions after
+        every step; the trajectory's ``collisions`` is the log of the run.
 
     Raises
     ------
@@ -147,13 +162,14 @@ def simulate(model, integrator, y0, t_start: float, t_end: float, dt: float, *,
     integrator = get_integrator(integrator)
     if backend not in ("numpy", "jax"):
         raise ValueError(f"backend must be 'numpy' or 'jax', got {backend!r}")
-    if collisions is not None and collisions.detector == "none":
-        collisions = None  # the detector "none": no collision handling at all
+    if dt is None:
+        raise ValueError("simulate needs the step dt")
     if collisions is not None:
-        _check_collisions(integrator, backend)
+        if stepper is not None:
+            raise ValueError("give collisions or stepper, not both")
+        stepper = collisions.stepper
     dtype = np.dtype(dtype or model.dtype)
-    check_time_advances(t_start, t_end, dt, dtype)
-    n = step_count(t_start, t_end, dt)
+    n = _requested_steps(t_start, t_end, n_steps, dt, dtype)
     if n > max_steps:
         raise ValueError(f"{n} steps of dt = {dt:g} s exceed the limit of {max_steps} "
                          f"(raise it with max_steps / --max-steps)")
@@ -171,6 +187,8 @@ def simulate(model, integrator, y0, t_start: float, t_end: float, dt: float, *,
     if not largest <= limit:  # also NaN
         raise ValueError(f"the initial state is non-finite or too large to integrate in {dtype.name} (largest "
                          f"|component| {largest:g}; states beyond {limit:g} count as diverged)")
+    # the step the loop calls, built once with its context (a collision world's log, ...)
+    step = None if stepper is None else stepper(_on_backend(model, backend, dtype), integrator)
 
     if isinstance(integrator, Solver):
         backend = integrator.backend
@@ -185,21 +203,23 @@ def simulate(model, integrator, y0, t_start: float, t_end: float, dt: float, *,
 
     assert isinstance(integrator, Stepper)
     model = _on_backend(model, backend, dtype)
-    if collisions is not None:
-        return _run_numpy(model, integrator, np.asarray(y0, dtype=dtype), t_start, dt, n, save_every,
-                          saves, ts, limit, progress, collisions)
-    run = _run_numpy if backend == "numpy" else _run_jax
+    run = _run_numpy if backend == "numpy" or step is not None else _run_jax
     return run(model, integrator, np.asarray(y0, dtype=dtype), t_start, dt, n, save_every,
-               saves, ts, limit, progress)
+               saves, ts, limit, progress, step)
 
 
-def _check_collisions(integrator, backend):
-    if isinstance(integrator, Solver):
-        raise ValueError(f"collisions need a fixed-step integrator, not the {integrator.kind} solver "
-                         f"'{integrator.name}' (use the detector 'none')")
-    if backend != "numpy":
-        raise ValueError(f"collision detection runs on the NumPy backend only, not {backend!r} "
-                         f"(use backend 'numpy', or the detector 'none')")
+def _requested_steps(t_start, t_end, n_steps, dt, dtype) -> int:
+    """The number of steps of a run given by its end time or by its count (exactly one of them)."""
+    if (t_end is None) == (n_steps is None):
+        raise ValueError("give the end of the run as t_end or as n_steps (a whole number of steps), "
+                         f"exactly one of them (got t_end = {t_end}, n_steps = {n_steps})")
+    if n_steps is not None:
+        if isinstance(n_steps, bool) or not isinstance(n_steps, (int, np.integer)) or n_steps < 1:
+            raise ValueError(f"n_steps must be a whole number of steps >= 1, got {n_steps!r}")
+        check_time_advances(t_start, t_start + int(n_steps) * dt, dt, dtype)
+        return int(n_steps)
+    check_time_advances(t_start, t_end, dt, dtype)
+    return step_count(t_start, t_end, dt)
 
 
 def _on_backend(model, backend, dtype):
@@ -214,20 +234,20 @@ def _on_backend(model, backend, dtype):
     return model.cast(xp, dtype)
 
 
-def _run_numpy(model, integrator, y, t_start, dt, n, save_every, saves, ts, limit, progress,
-               collisions=None):
-    log = collisions.new_log() if collisions is not None else None
+def _run_numpy(model, integrator, y, t_start, dt, n, save_every, saves, ts, limit, progress, step=None):
     out = np.empty((len(saves),) + y.shape, dtype=y.dtype)
     out[0] = y
     saved = 1
     bar = _progress_bar(n, progress)
+    if step is None:  # the plain ODE step
+
+        def step(t, y, dt, carry):
+            return integrator.step(model, t, y, dt, carry)
+
     start = time.perf_counter()
     carry = integrator.init(model, t_start, y)
     for k in range(n):
-        if log is None:
-            y, carry = integrator.step(model, t_start + k * dt, y, dt, carry)
-        else:  # integrate, then detect and resolve collisions (physics.collision.step)
-            y, carry = collisions.step(log, model, integrator, t_start + k * dt, y, dt, carry)
+        y, carry = step(t_start + k * dt, y, dt, carry)
         # one reduction: NaN fails the comparison, so this also catches non-finite states
         if not np.abs(y).max() <= limit:
             raise DivergenceError(integrator.name, dt, k + 1, t_start + (k + 1) * dt)
@@ -239,7 +259,7 @@ def _run_numpy(model, integrator, y, t_start, dt, n, save_every, saves, ts, limi
     wall = time.perf_counter() - start
     if bar is not None:
         bar.close()
-    return Trajectory(ts, out, integrator.name, dt, n, "numpy", wall, collisions=log)
+    return Trajectory(ts, out, integrator.name, dt, n, "numpy", wall, collisions=getattr(step, "log", None))
 
 
 def _progress_bar(n, enabled):
@@ -250,42 +270,10 @@ def _progress_bar(n, enabled):
     return tqdm(total=n, unit="step", unit_scale=True, leave=False)
 
 
-def compile_run(model, integrator, save_every: int, chunks: int):
-    """A jitted ``run(y0, t_start, dt, n) -> (saved states, first bad step)``.
-
-    The loop is ``chunks`` scan iterations of up to ``save_every`` fixed steps each
-    (fori_loop), saving the state after every chunk, so memory grows with the number of
-    saved states only. ``first bad step`` is the 1-based index of the first non-finite or
-    diverged state, or -1.
-    """
-    import jax
-    import jax.numpy as jnp
-    from jax import lax
-
-    def run(y0, t_start, dt, n, limit):
-        def one_step(k, state):
-            y, carry, bad = state
-            y, carry = integrator.step(model, t_start + k * dt, y, dt, carry)
-            ok = jnp.all(jnp.abs(y) <= limit)
-            return y, carry, jnp.where((bad < 0) & ~ok, k + 1, bad)
-
-        def chunk(state, c):
-            first = c * save_every
-            state = lax.fori_loop(first, jnp.minimum(first + save_every, n), one_step, state)
-            return state, state[0]
-
-        state = (y0, integrator.init(model, t_start, y0), jnp.asarray(-1))
-        (_, _, bad), ys = lax.scan(chunk, state, jnp.arange(chunks))
-        return ys, bad
-
-    return jax.jit(run)
-
-
-def _run_jax(model, integrator, y, t_start, dt, n, save_every, saves, ts, limit, progress):
+def _run_jax(model, integrator, y, t_start, dt, n, save_every, saves, ts, limit, progress, step=None):
     import jax.numpy as jnp
 
-    chunks = len(saves) - 1
-    run = compile_run(model, integrator, save_every, chunks)
+    run = compiled_loop(model, integrator, chunks=len(saves) - 1, save_every=save_every)
     args = (jnp.asarray(y), jnp.asarray(t_start, y.dtype), jnp.asarray(dt, y.dtype), n,
             jnp.asarray(limit, y.dtype))
     start = time.perf_counter()
@@ -302,31 +290,22 @@ def _run_jax(model, integrator, y, t_start, dt, n, save_every, saves, ts, limit,
     return Trajectory(ts, out, integrator.name, dt, n, "jax", wall, compile_time)
 
 
-def final_state_function(model, integrator):
+def final_state_function(model, integrator, check: bool = True):
     """A jitted ``f(y0, t_start, dt, n) -> (y_n, first bad step or -1)`` for sweeps over dt.
 
     ``dt`` and ``n`` are traced, so one compilation serves a whole error-versus-dt or
     stability sweep (per model, integrator and precision). Studies time it with
-    ``block_until_ready`` after a warm-up call.
+    ``block_until_ready`` after a warm-up call. ``check=False`` leaves out the per-step
+    divergence check (the bench measures what it costs); the bad step is then -1.
     """
     import jax
     import jax.numpy as jnp
-    from jax import lax
 
-    integrator = _stepper(integrator)
+    loop = compiled_loop(model, _stepper(integrator), check=check)
 
     def run(y0, t_start, dt, n):
-        limit = DIVERGENCE_FACTOR * jnp.maximum(1, jnp.max(jnp.abs(y0)))
-
-        def one_step(k, state):
-            y, carry, bad = state
-            y, carry = integrator.step(model, t_start + k * dt, y, dt, carry)
-            ok = jnp.all(jnp.abs(y) <= limit)
-            return y, carry, jnp.where((bad < 0) & ~ok, k + 1, bad)
-
-        state = (y0, integrator.init(model, t_start, y0), jnp.asarray(-1, dtype=jnp.int64))
-        y, _, bad = lax.fori_loop(0, n, one_step, state)
-        return y, bad
+        # the divergence limit of divergence_limit(), traced (without its overflow cap)
+        return loop(y0, t_start, dt, n, DIVERGENCE_FACTOR * jnp.maximum(1, jnp.max(jnp.abs(y0))))
 
     return jax.jit(run)
 

@@ -21,6 +21,8 @@ class VelocityVerlet(Stepper):
     order = 2
     evaluations = 1
     symplectic = True
+    style = ("tab:green", "^")
+    stability_note = "2 undamped (trace 2 - y^2, det 1)"
 
     def init(self, model, t, y):
         return model.acceleration(t, y[0], y[1])
@@ -47,6 +49,8 @@ class PositionVerlet(Stepper):
     order = 2
     evaluations = 1
     symplectic = True
+    style = ("tab:olive", "v")
+    stability_note = "2 undamped"
 
     def init(self, model, t, y):
         return model.acceleration(t, y[0], y[1])

@@ -13,9 +13,12 @@ jax.config.update("jax_enable_x64", True)
 from .broadphase import find_pairs as find_pairs  # noqa: E402
 from .central_gravity import CentralGravity as CentralGravity  # noqa: E402
 from .central_gravity import kepler_orbit as kepler_orbit  # noqa: E402
+from .constant_force import ConstantForce as ConstantForce  # noqa: E402
 from .dampers import Dampers as Dampers  # noqa: E402
 from .drag import Drag as Drag  # noqa: E402
 from .force import Force as Force  # noqa: E402
+from .forces import FORCES as FORCES  # noqa: E402
+from .forces import register_force as register_force  # noqa: E402
 from .friction import Friction as Friction  # noqa: E402
 from .gravity import Gravity as Gravity  # noqa: E402
 from .model import Model as Model  # noqa: E402

@@ -9,6 +9,7 @@ import numpy as np
 
 from ._array import block_diagonal, norm
 from .force import Force
+from .scene_toml import REQUIRED
 
 
 @dataclasses.dataclass(frozen=True)
@@ -35,6 +36,12 @@ class CentralGravity(Force):
     center: np.ndarray = dataclasses.field(default_factory=lambda: np.zeros(3))
 
     name: ClassVar[str] = "central_gravity"
+
+    @classmethod
+    def from_scene(cls, table, bodies) -> CentralGravity:
+        """``[forces.central_gravity]`` with ``mu`` (m^3/s^2) and ``center`` (default the origin)."""
+        table.allow("mu", "center")
+        return cls(table.number("mu", REQUIRED, positive=True), table.vector("center", [0.0, 0.0, 0.0]))
 
     def __post_init__(self):
         for field in ("mu", "center"):  # plain numbers become arrays, so cast() changes their precision

@@ -9,6 +9,7 @@ import numpy as np
 
 from ._array import norm, safe_unit, scatter_pair_blocks, scatter_pairs
 from .force import Force
+from .scene_toml import REQUIRED
 
 
 @dataclasses.dataclass(frozen=True)
@@ -31,6 +32,19 @@ class Dampers(Force):
     damping: np.ndarray
 
     name: ClassVar[str] = "dampers"
+    array_of_tables: ClassVar[bool] = True
+
+    @classmethod
+    def from_scene(cls, tables, bodies) -> Dampers:
+        """``[[forces.dampers]]``: ``bodies = ["a", "b"]`` and ``damping`` (N s/m)."""
+        i, j, c = [], [], []
+        for d in tables:
+            d.allow("bodies", "damping")
+            a, b = bodies.pair(d)
+            i.append(a)
+            j.append(b)
+            c.append(d.number("damping", REQUIRED, nonnegative=True))
+        return cls(np.array(i), np.array(j), np.array(c))
 
     def _terms(self, xp, q, v):
         delta = q[self.j] - q[self.i]

@@ -33,6 +33,15 @@ class Drag(Force):
     name: ClassVar[str] = "drag"
 
     @classmethod
+    def from_scene(cls, table, bodies) -> Drag:
+        """``[forces.drag]``: ``density`` (kg/m^3, default air), ``drag_coefficient`` (default 0.4)
+        and ``bodies`` (default: all)."""
+        table.allow("density", "drag_coefficient", "bodies")
+        mask = bodies.mask(table, "bodies")
+        return cls.from_coefficients(bodies.radii, table.number("density", AIR_DENSITY, positive=True),
+                                     table.number("drag_coefficient", 0.4, nonnegative=True), mask)
+
+    @classmethod
     def from_coefficients(cls, radii, density=AIR_DENSITY, drag_coefficient=0.4, mask=None):
         """Drag on spheres of the given radii in a fluid of ``density`` (kg/m^3)."""
         radii = np.asarray(radii, dtype=float)

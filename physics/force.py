@@ -3,6 +3,10 @@
 A force is small immutable data (its parameters as arrays) and pure functions of the
 state. It never knows which integrator calls it. Forces are evaluated with an explicit
 array namespace ``xp`` so the same formula serves the NumPy and the JAX paths.
+
+A force declarable in scene files also says how: its ``name`` is its key under
+``[forces]`` and its ``from_scene`` reads its own table; the registry
+(:data:`steplab.physics.forces.FORCES`) maps the key to the class.
 """
 
 from __future__ import annotations
@@ -17,16 +21,48 @@ import numpy as np
 class Force:
     """Base class: a force on N bodies, vectorised over bodies or over pairs."""
 
-    #: name used in scene files and reports
+    #: name used in scene files (the key under [forces]) and reports
     name: ClassVar[str] = "force"
+    #: True when a scene declares it as an array of tables ([[forces.springs]], one per element)
+    array_of_tables: ClassVar[bool] = False
     #: True when the force is independent of state and time (the ``exact`` integrator needs it)
     constant: ClassVar[bool] = False
     #: True when the force reacts to the sum of the other forces (ground contact)
     reactive: ClassVar[bool] = False
 
+    @classmethod
+    def from_scene(cls, table, bodies) -> Force:
+        """The force a scene file declares under ``[forces.<name>]``.
+
+        Parameters
+        ----------
+        table : steplab.physics.scene_toml.Table, or a list of them
+            The force's table, checked key by key (``table.allow(...)``, ``table.number(...)``);
+            a list of the elements when ``array_of_tables`` (never empty).
+        bodies : steplab.physics.scene.SceneBodies
+            The scene's bodies: ``masses``, ``radii``, ``positions`` (N,), (N,), (N, 3) arrays,
+            ``n``, and the lookups ``indices(table, key)``, ``pair(table)``, ``mask(table, key)``.
+        """
+        raise NotImplementedError(f"{cls.__qualname__} cannot be declared in a scene file")
+
     def force(self, xp, q, v, m):
         """Force on each body, shape (N, 3), for positions ``q`` and velocities ``v`` (N, 3)."""
         raise NotImplementedError
+
+    def constant_acceleration(self, m) -> np.ndarray:
+        """For a ``constant`` force: the acceleration F / m it gives each body, float64 NumPy.
+
+        Shape (N, 3), or (3,) when the same for every body. The model adds it once as a field
+        instead of evaluating F and dividing by m on every evaluation.
+
+        Parameters
+        ----------
+        m : ndarray, shape (N,)
+            Masses, kg.
+        """
+        m = np.asarray(m, dtype=float)
+        rest = np.zeros((m.shape[0], 3))  # a constant force does not depend on q or v
+        return np.asarray(self.cast(np, np.float64).force(np, rest, rest, m), dtype=float) / m[:, None]
 
     def jacobian(self, xp, q, v, m):
         """``(dF/dq, dF/dv)``, each (N, 3, N, 3) or ``None`` when identically zero.

@@ -9,6 +9,7 @@ import numpy as np
 
 from ._array import norm, safe_unit
 from .force import Force
+from .scene_toml import REQUIRED
 
 #: a body whose surface is within this distance of the plane touches it, m
 CONTACT_DISTANCE = 1e-6
@@ -51,6 +52,16 @@ class Friction(Force):
 
     name: ClassVar[str] = "friction"
     reactive: ClassVar[bool] = True
+
+    @classmethod
+    def from_scene(cls, table, bodies) -> Friction:
+        """``[forces.friction]``: ``mu_static``, ``mu_dynamic``, the plane's ``normal`` (default +z)
+        and ``height`` (default 0)."""
+        table.allow("mu_static", "mu_dynamic", "height", "normal")
+        normal = table.direction("normal", [0, 0, 1])
+        mu_s = table.number("mu_static", REQUIRED, nonnegative=True)
+        mu_d = table.number("mu_dynamic", REQUIRED, nonnegative=True)
+        return cls(mu_s, mu_d, normal, table.number("height", 0.0), np.array(bodies.radii))
 
     def force(self, xp, q, v, m, applied):
         n = self.normal

@@ -28,8 +28,18 @@ class Gravity(Force):
     name: ClassVar[str] = "gravity"
     constant: ClassVar[bool] = True
 
+    @classmethod
+    def from_scene(cls, table, bodies) -> Gravity:
+        """``[forces.gravity]`` with ``g = [x, y, z]`` (default: Earth's, -z)."""
+        table.allow("g")
+        return cls(table.vector("g", list(EARTH_GRAVITY)))
+
     def force(self, xp, q, v, m):
         return m[:, None] * self.g
+
+    def constant_acceleration(self, m) -> np.ndarray:
+        # a field: g itself, not m g / m (which would round)
+        return np.asarray(self.g, dtype=float)
 
     def potential(self, xp, q, m):
         # W = -grad U with U = -m g . q

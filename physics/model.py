@@ -3,7 +3,8 @@ Newton's second law that every integrator sees.
 
 ``a(t, q, v) = F_net(t, q, v) / m``. Only declared forces are evaluated: a gravity-only
 model's acceleration is the constant g, with no spring arrays and no branches for
-absent forces (the force sum is assembled once, when the model is built).
+absent forces (the force sum is assembled once, when the model is built). All constant
+forces (gravity, a steady wind) are one acceleration field, added once.
 """
 
 from __future__ import annotations
@@ -13,7 +14,6 @@ from collections.abc import Sequence
 import numpy as np
 
 from .force import Force
-from .gravity import Gravity
 
 
 class Model:
@@ -52,14 +52,15 @@ class Model:
 
         self._applied = tuple(f for f in self.forces if not f.reactive)
         self._reactive = tuple(f for f in self.forces if f.reactive)
-        gravity = [f for f in self._applied if isinstance(f, Gravity)]
-        self._field_forces = tuple(f for f in self._applied if not isinstance(f, Gravity))
-        # Gravity is an acceleration field: add g directly instead of m g / m.
-        # Pinned bodies must not fall, so there the field is masked per body.
-        field = sum((np.asarray(f.g, dtype=float) for f in gravity), np.zeros(3))
+        constant = [f for f in self._applied if f.constant]
+        self._varying = tuple(f for f in self._applied if not f.constant)
+        # The constant forces are one acceleration field, summed once: gravity's is g itself
+        # (not m g / m), another's F / m. Pinned bodies must not move, so there the field is
+        # masked per body.
+        field = sum((f.constant_acceleration(masses) for f in constant), np.zeros(3))
         if pinned.any():
             field = np.where(pinned[:, None], 0.0, np.broadcast_to(field, (n, 3)))
-        self._field = xp.asarray(field, dtype=self.dtype) if gravity else None
+        self._field = xp.asarray(field, dtype=self.dtype) if constant else None
         self.acceleration = self._assemble_acceleration()
 
     @property
@@ -86,7 +87,7 @@ class Model:
 
     def _assemble_acceleration(self):
         xp, m, inv_m, field = self.xp, self.masses, self.inverse_masses, self._field
-        terms = self._field_forces
+        terms = self._varying
         if self._reactive:
             # Ground contact needs the sum of all other forces, gravity included.
             return lambda t, q, v: self.net_force(t, q, v) * inv_m[:, None]
@@ -110,7 +111,11 @@ class Model:
 
     @property
     def constant_acceleration(self):
-        """The acceleration (N, 3) when the total force is constant, else ``None``."""
+        """The acceleration (N, 3) when the total force is constant, else ``None``.
+
+        The sum of every constant force's acceleration (gravity's field g, another's F / m),
+        zero on pinned bodies: what the ``exact`` integrator and ``recommend`` solve in closed form.
+        """
         if any(not f.constant for f in self.forces):
             return None
         if self._field is None:
@@ -141,7 +146,7 @@ class Model:
         return 0.5 * self.xp.sum(self.masses[:, None] * v * v)
 
     def potential_energy(self, q):
-        """Sum of the potentials of the conservative forces (gravity, springs), J."""
+        """Sum of the potentials of the conservative forces (gravity, springs, constant forces), J."""
         total = 0.0
         for term in self.forces:
             u = term.potential(self.xp, q, self.masses)

@@ -9,6 +9,7 @@ import numpy as np
 
 from ._array import norm, safe_unit, scatter_pair_blocks, scatter_pairs
 from .force import Force
+from .scene_toml import REQUIRED
 
 
 @dataclasses.dataclass(frozen=True)
@@ -38,6 +39,22 @@ class Springs(Force):
     rest_length: np.ndarray
 
     name: ClassVar[str] = "springs"
+    array_of_tables: ClassVar[bool] = True
+
+    @classmethod
+    def from_scene(cls, tables, bodies) -> Springs:
+        """``[[forces.springs]]``: ``bodies = ["a", "b"]``, ``stiffness`` (N/m) and ``rest_length``
+        (m; default: the initial distance, so the spring starts relaxed)."""
+        i, j, k, rest = [], [], [], []
+        for s in tables:
+            s.allow("bodies", "stiffness", "rest_length")
+            a, b = bodies.pair(s)
+            i.append(a)
+            j.append(b)
+            k.append(s.number("stiffness", REQUIRED, positive=True))
+            initial = float(np.linalg.norm(bodies.positions[b] - bodies.positions[a]))
+            rest.append(s.number("rest_length", initial, nonnegative=True))
+        return cls(np.array(i), np.array(j), np.array(k), np.array(rest))
 
     def _geometry(self, xp, q):
         delta = q[self.j] - q[self.i]

@@ -39,6 +39,7 @@ def animate(runs: list[tuple[str, object]], model, out: str | Path, fps: int = 3
     from matplotlib.patches import Circle
 
     from steplab.physics import CentralGravity, Springs
+    from steplab.studies.records import write_with
 
     out = Path(out)
     writers = {".gif": lambda: animation.PillowWriter(fps=fps)}
@@ -109,13 +110,11 @@ def animate(runs: list[tuple[str, object]], model, out: str | Path, fps: int = 3
 
     fig.tight_layout()
     anim = animation.FuncAnimation(fig, draw, frames=frames, interval=1000 / fps, blit=False)
-    out.parent.mkdir(parents=True, exist_ok=True)
-    tmp = out.with_name(f".{out.name}.tmp{out.suffix}")
     try:
-        anim.save(tmp, writer=writers[out.suffix.lower()]())
-        tmp.replace(out)  # atomic: never a half-written animation under the real name
+        # the writers need a real file (Pillow and ffmpeg pick the format from its name):
+        # the one atomic writer hands them a temporary one and moves it into place
+        write_with(out, lambda tmp: anim.save(tmp, writer=writers[out.suffix.lower()]()))
     finally:
-        tmp.unlink(missing_ok=True)
         plt.close(fig)
     return out
 

@@ -12,6 +12,7 @@ import dataclasses
 import json
 import math
 import sys
+import warnings
 from pathlib import Path
 
 EXIT_BAD_INPUT = 2
@@ -55,6 +56,8 @@ def _count(text: str) -> int:
 
 
 def build_parser() -> argparse.ArgumentParser:
+    from steplab.physics.collision.detectors import DETECTOR_NAMES
+
     parser = _Parser(prog="steplab", description="How wrong, how unstable and how slow is a "
                      "game-physics step? Integrators, scenes and studies.")
     parser.add_argument("--version", action="version", version=f"steplab {_version()}")
@@ -70,7 +73,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("scene", help="built-in scene name (see `steplab scenes`) or path to a TOML file")
     p.add_argument("--integrator", help="integrator name (default: the scene's)")
     p.add_argument("--dt", type=_positive, help="time step, s (default: the scene's)")
-    p.add_argument("--t-end", type=_finite, help="end time, s (default: the scene's)")
+    ends = p.add_mutually_exclusive_group()
+    ends.add_argument("--t-end", type=_finite, help="end time, s (default: the scene's)")
+    ends.add_argument("--steps", type=_count, metavar="N", help="run exactly N steps of dt instead of to --t-end")
     p.add_argument("--backend", choices=("numpy", "jax"), default="numpy",
                    help="numpy: step by step; jax: compiled loop (default: numpy)")
     p.add_argument("--precision", choices=("float64", "float32"), default="float64",
@@ -81,17 +86,23 @@ def build_parser() -> argparse.ArgumentParser:
                    help="refuse runs of more than N steps (default: 10,000,000)")
     p.add_argument("--out", type=Path, help="write the trajectory to FILE.npz or FILE.csv (and the "
                    "collisions, if any, to FILE.collisions.csv)")
-    p.add_argument("--detector", choices=("none", "overlap", "swept"),
-                   help="collision detection: none, overlap testing with bisection, or swept "
-                   "intersection testing (default: the scene's [collisions], else none)")
+    p.add_argument("--detector", choices=DETECTOR_NAMES,
+                   help="collision detection (overlap: overlap testing with bisection; swept: intersection "
+                   "testing; default: the scene's [collisions], else none)")
     p.add_argument("--json", action="store_true", help="print the summary as JSON")
+
+    p = sub.add_parser("check", help="predict the largest stable dt of each fixed-step integrator on a scene")
+    p.add_argument("scene", help="built-in scene name or path to a TOML file")
+    p.add_argument("--integrator", help="only this integrator (default: every fixed-step one)")
+    p.add_argument("--dt", type=_positive, help="the dt to check, s (default: the scene's)")
+    p.add_argument("--json", action="store_true", help="print machine-readable JSON")
 
     p = sub.add_parser("animate", help="render a simulation as an animation (GIF), alone or side by side")
     p.add_argument("scene", help="built-in scene name or path to a TOML file")
     p.add_argument("--integrator", help="integrator name (default: the scene's)")
     p.add_argument("--compare", metavar="A,B",
                    help="side by side: integrators (euler,velocity-verlet) or detectors (overlap,swept)")
-    p.add_argument("--detector", choices=("none", "overlap", "swept"), help="collision detector (default: the scene's)")
+    p.add_argument("--detector", choices=DETECTOR_NAMES, help="collision detector (default: the scene's)")
     p.add_argument("--dt", type=_positive, help="time step, s (default: the scene's)")
     p.add_argument("--t-end", type=_finite, help="end time, s (default: the scene's)")
     p.add_argument("--fps", type=_count, default=30, help="frames per second (default: 30)")
@@ -143,8 +154,13 @@ def main(argv=None) -> int:
         command = args.command
         import numpy as np
 
-        # runs detect non-finite states themselves: no floating-point warnings on stderr
-        with np.errstate(all="ignore"):
+        from steplab.physics.plugins import PluginWarning
+
+        # runs detect non-finite states themselves: no floating-point warnings on stderr;
+        # a skipped plugin is one warning line, not a warning with its source line
+        with np.errstate(all="ignore"), warnings.catch_warnings():
+            warnings.showwarning = _show_warning
+            warnings.simplefilter("default", PluginWarning)
             return _run_command(args)
     except KeyboardInterrupt:
         return _fail(command, "interrupted", EXIT_INTERRUPTED)
@@ -157,9 +173,13 @@ def _run_command(args) -> int:
     from steplab.integrators.simulate import DivergenceError
     from steplab.paper import PaperError
     from steplab.physics.scene import SceneError
-    from steplab.studies.work_precision import NoFixedStepError
+    from steplab.studies.recommend import NoFixedStepError
 
-    command = {"integrators": cmd_integrators, "scenes": cmd_scenes, "run": cmd_run,
+    # `--integrator package.module:Name` finds a module of the current folder, as `python -m`
+    # would; appended, never first, so a folder there never shadows an installed package
+    if str(Path.cwd()) not in sys.path:
+        sys.path.append(str(Path.cwd()))
+    command = {"integrators": cmd_integrators, "scenes": cmd_scenes, "run": cmd_run, "check": cmd_check,
                "animate": cmd_animate, "paper": cmd_paper, "recommend": cmd_recommend, "study": cmd_study,
                "reproduce": cmd_reproduce, "bench": cmd_bench}[args.command]
     try:
@@ -174,6 +194,16 @@ def _run_command(args) -> int:
     except MemoryError:
         return _fail(args.command, "out of memory (try a smaller scene, a shorter run or --save-every)",
                      EXIT_BAD_INPUT)
+
+
+def _show_warning(message, category, filename, lineno, file=None, line=None):
+    """A plugin warning as one line on stderr; any other warning as Python prints it."""
+    from steplab.physics.plugins import PluginWarning
+
+    if issubclass(category, PluginWarning):
+        print(f"steplab: warning: {message}", file=sys.stderr)
+    else:
+        sys.stderr.write(warnings.formatwarning(message, category, filename, lineno, line))
 
 
 def _fail(command: str | None, message: str, status: int) -> int:
@@ -195,7 +225,8 @@ def _version() -> str:
 def cmd_integrators(args) -> int:
     from steplab.integrators import INTEGRATORS
 
-    rows = [method.describe() for method in INTEGRATORS.values()]
+    # where each comes from: "steplab", or the plugin's distribution and entry point
+    rows = [method.describe() | {"source": INTEGRATORS.origin(name)} for name, method in INTEGRATORS.items()]
     if args.json:
         print(json.dumps(rows, indent=2))
         return 0
@@ -207,7 +238,8 @@ def cmd_integrators(args) -> int:
         if r["implicit"] and r["kind"] == "fixed-step":
             evals += "/iter"
         print(f"{r['name']:<20} {r['kind']:<11} {order:>5} {evals:>10}  {_yes(r['symplectic']):<10} "
-              f"{_yes(r['implicit']):<8} {r['description']}")
+              f"{_yes(r['implicit']):<8} {r['description']}"
+              + ("" if r["source"] == "steplab" else f" [plugin: {r['source']}]"))
     return 0
 
 
@@ -242,6 +274,7 @@ def cmd_run(args) -> int:
 
     from steplab.integrators import get_integrator, simulate
     from steplab.integrators.simulate import MAX_STEPS
+    from steplab.integrators.stable_dt import dt_warning
     from steplab.io import check_trajectory_path, save_trajectory
     from steplab.physics.scene import load_scene
 
@@ -255,7 +288,11 @@ def cmd_run(args) -> int:
         raise ValueError(f"--t-end {t_end:g} must be later than the scene's t_start = {scene.t_start:g}")
     dtype = np.dtype(args.precision)
     world = _collision_world(scene, args.detector, args.backend)
-    traj = simulate(scene.model, integrator, scene.y0, scene.t_start, t_end, dt, backend=args.backend,
+    warning = dt_warning(scene.model, scene.y0[0], integrator, dt)  # before the run: it may be long
+    if warning is not None:
+        print(f"steplab run: warning: {warning}", file=sys.stderr)
+    end = {"n_steps": args.steps} if args.steps is not None else {"t_end": t_end}
+    traj = simulate(scene.model, integrator, scene.y0, scene.t_start, dt=dt, **end, backend=args.backend,
                     dtype=dtype, save_every=args.save_every, max_steps=args.max_steps or MAX_STEPS,
                     progress=not args.json and sys.stderr.isatty(), collisions=world)
     energy_start = float(scene.model.energy(scene.y0))
@@ -276,7 +313,7 @@ def cmd_run(args) -> int:
             "collisions")})
         summary["out"] = str(args.out)
         if traj.collisions is not None:
-            from steplab.io import write_atomic
+            from steplab.studies.records import write_atomic
 
             path = args.out.with_name(args.out.stem + ".collisions.csv")
             write_atomic(path, traj.collisions.to_csv().encode())
@@ -337,6 +374,56 @@ def _print_run(s: dict) -> None:
 
 def _vec(v) -> str:
     return "(" + ", ".join(f"{x:10.5g}" for x in v) + ")"
+
+
+# --- check --------------------------------------------------------------------------
+
+
+def cmd_check(args) -> int:
+    from steplab.integrators import INTEGRATORS, Stepper, get_integrator
+    from steplab.integrators.stable_dt import stable_steps
+    from steplab.physics.scene import load_scene
+
+    scene = load_scene(args.scene)
+    if args.integrator is not None:
+        steppers = [get_integrator(args.integrator)]
+        if not isinstance(steppers[0], Stepper):
+            raise ValueError(f"--integrator {args.integrator}: {steppers[0].name} is not a fixed-step integrator "
+                             "(it has no step size to limit)")
+    else:
+        steppers = [m for m in INTEGRATORS.values() if isinstance(m, Stepper)]
+    dt = args.dt if args.dt is not None else scene.dt
+    mode, rows = stable_steps(scene.model, scene.y0[0], steppers)
+    report = {"scene": scene.name, "dt": dt, "omega_max": mode.omega, "damping_ratio": mode.damping_ratio,
+              "integrators": [dataclasses.asdict(r) | {"stable": r.stable(dt)} for r in rows]}
+    if args.json:
+        print(json.dumps(report, indent=2))
+        return 0
+    if mode.omega is None:
+        print(f"{scene.name}: no oscillating mode (no springs or other restoring force): the model sets "
+              f"no limit on dt = {dt:g} s")
+        return 0
+    damped = f", damping ratio {mode.damping_ratio:.3g}" if mode.damping_ratio else ", undamped"
+    print(f"{scene.name}: stiffest mode omega_max = {mode.omega:.6g} rad/s{damped}; dt = {dt:g} s "
+          f"(omega_max dt = {mode.omega * dt:.4g})")
+    print(f"  {'integrator':<20} {'limit omega dt':>14} {'dt_max (s)':>11} {'damped dt_max':>13}  dt")
+    for r in report["integrators"]:
+        limit = "none" if r["omega_dt_max"] is None else f"{r['omega_dt_max']:.4g}"
+        print(f"  {r['integrator']:<20} {limit:>14} {_seconds(r['dt_max']):>11} "
+              f"{_seconds(r['dt_max_damped']):>13}  {_verdict(dt, r['dt_max_damped'])}")
+    return 0
+
+
+def _seconds(dt_max) -> str:
+    return "none" if dt_max is None else "0 (any dt)" if dt_max == 0 else f"{dt_max:.4g}"
+
+
+def _verdict(dt: float, dt_max) -> str:
+    if dt_max is None:
+        return "stable (no limit)"
+    if dt_max == 0:
+        return "grows at every dt"
+    return f"{'stable' if dt <= dt_max else 'UNSTABLE'} ({dt / dt_max:.3g} x dt_max)"
 
 
 # --- animate ------------------------------------------------------------------------
@@ -404,7 +491,7 @@ def cmd_recommend(args) -> int:
 
     from steplab.physics.scene import load_scene
     from steplab.studies.problems import Problem
-    from steplab.studies.work_precision import recommend
+    from steplab.studies.recommend import recommend
 
     scene = load_scene(args.scene)
     t_end = args.t_end if args.t_end is not None else scene.t_end
@@ -442,8 +529,9 @@ def cmd_study(args) -> int:
     from steplab.studies import STUDIES, run_study
 
     if args.list or args.name is None:
-        for study in STUDIES.values():
-            print(f"{study.name:<16} {study.title}")
+        for name, study in STUDIES.items():
+            origin = STUDIES.origin(name)
+            print(f"{study.name:<16} {study.title}" + ("" if origin == "steplab" else f" [plugin: {origin}]"))
         return 0
     if args.name not in STUDIES:
         raise ValueError(f"unknown study {args.name!r}; valid: {', '.join(STUDIES)}")
@@ -455,10 +543,10 @@ def cmd_study(args) -> int:
 def cmd_reproduce(args) -> int:
     from tqdm import tqdm
 
-    from steplab.studies import STUDIES, run_study
+    from steplab.studies import builtin_studies, run_study
 
-    records = []
-    with tqdm(STUDIES.values(), desc="reproduce", unit="study", disable=None) as bar:
+    records = []  # steplab's own studies, the paper's records; a plugin's study runs by name
+    with tqdm(builtin_studies(), desc="reproduce", unit="study", disable=None) as bar:
         for study in bar:
             bar.set_postfix_str(study.name)
             records.append(run_study(study, args.out, quick=args.quick, force=args.force))

@@ -1,68 +1,21 @@
-"""Writing results: trajectories (NPZ or CSV) and JSON records, always atomically.
+"""``steplab run``'s output: a trajectory as NPZ or CSV, written atomically.
 
-A file is written to a temporary name beside its destination and renamed into place
-(``os.replace`` is atomic on POSIX), so a reader never sees a half-written file even if
-the process is killed mid-write.
+The files go through :func:`steplab.studies.records.write_atomic`, the one writer of
+every result file, so a reader never sees a half-written trajectory.
 """
 
 from __future__ import annotations
 
-import contextlib
 import csv
 import io
 import json
-import os
-import tempfile
 from pathlib import Path
 
 import numpy as np
 
+from steplab.studies.records import write_atomic
+
 TRAJECTORY_FORMATS = (".npz", ".csv")
-#: the names write_atomic gives its temporary files: ``.<name>.<random>.tmp``
-TEMPORARY_PATTERN = ".*.*.tmp"
-
-
-def write_atomic(path: str | Path, data: bytes) -> None:
-    """Write ``data`` to ``path`` so that ``path`` is either the old file or the whole new one."""
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
-    try:
-        os.chmod(tmp, 0o666 & ~_umask())  # mkstemp makes 0600; results are for everyone to read
-        with os.fdopen(fd, "wb") as f:
-            f.write(data)
-            f.flush()
-            os.fsync(f.fileno())
-        os.replace(tmp, path)
-    except BaseException:
-        with contextlib.suppress(FileNotFoundError):
-            os.unlink(tmp)
-        raise
-
-
-def _umask() -> int:
-    mask = os.umask(0)
-    os.umask(mask)
-    return mask
-
-
-def remove_temporary_files(folder: str | Path) -> list[Path]:
-    """Delete the temporary files a killed writer left in ``folder`` (SIGKILL skips clean-up).
-
-    Call it when a run starts, not while another process writes into the same folder.
-    Returns what was deleted.
-    """
-    removed = []
-    for path in sorted(Path(folder).glob(TEMPORARY_PATTERN)):
-        with contextlib.suppress(FileNotFoundError, IsADirectoryError, PermissionError):
-            if path.is_file():
-                path.unlink()
-                removed.append(path)
-    return removed
-
-
-def write_json(path: str | Path, record) -> None:
-    write_atomic(path, (json.dumps(record, indent=2, sort_keys=True) + "\n").encode())
 
 
 def check_trajectory_path(path: str | Path) -> Path:

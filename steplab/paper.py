@@ -2,7 +2,7 @@
 
 The paper's text lives in ``paper/paper.template.md``. Every number in it is a
 placeholder, ``{{study/key/.../key:format}}``, a path into a study's JSON record; every
-table is ``{{table:NAME}}``, drawn by a function below from a slice of the records. The
+table is ``{{table:NAME}}``, which a study draws from a slice of its record. The
 build collects exactly the values and slices the template uses into
 ``paper/data/numbers.json`` (small, committed), renders ``paper/paper.md`` from the
 template and that file alone, copies the figures it references from the results, runs
@@ -17,9 +17,9 @@ import json
 import re
 from pathlib import Path
 
-import numpy as np
-
-from steplab.io import write_atomic
+from steplab.studies import STUDIES
+from steplab.studies.records import write_atomic
+from steplab.studies.tables import Table, format_value, markdown_table
 
 PLACEHOLDER = re.compile(r"\{\{\s*([^{}]+?)\s*\}\}")
 FIGURE = re.compile(r"\]\((figures/[^)\s]+)\)")
@@ -49,118 +49,12 @@ def lookup(records: dict, path: str):
     return node
 
 
-def format_value(value, spec: str) -> str:
-    if value is None:
-        return "none"
-    if isinstance(value, bool):
-        return "yes" if value else "no"
-    return format(value, spec) if spec else str(value)
-
-
 # --- tables -------------------------------------------------------------------------
+# Each study gives the tables it prints (``Study.tables``, studies/tables.py); the paper
+# only collects them. The bench is not a study: its table is kept here, beside them.
 
 
-def _markdown_table(header: list[str], rows: list[list[str]]) -> str:
-    lines = ["| " + " | ".join(header) + " |", "|" + "---|" * len(header)]
-    lines += ["| " + " | ".join(str(c).replace("|", "\\|") for c in row) + " |" for row in rows]
-    return "\n".join(lines)
-
-
-def _orders(data):
-    problems = list(data["orders"])
-    header = ["integrator", "declared"] + problems
-    rows = [[m, str(data["declared"][m])] + [format_value(data["orders"][p].get(m), ".2f") for p in problems]
-            for m in data["declared"]]
-    return _markdown_table(header, rows) + "\n\n(\"none\": the method is exact for that problem, " \
-                                            "its error is round-off.)"
-
-
-def _misprints(data):
-    rows = [[m["where"], m["printed"], format_value(m["computed"], "g"), m["note"]] for m in data]
-    return _markdown_table(["where", "printed", "computed", "why"], rows)
-
-
-def _stability(data):
-    zetas = list(data)
-    header = ["integrator"] + [f"{kind}, zeta = {z}" for z in zetas for kind in ("measured", "theory")]
-    methods = list(data[zetas[0]]["measured"])
-    rows = [[m] + [format_value(data[z][kind][m], ".4f") for z in zetas for kind in ("measured", "theory")]
-            for m in methods]
-    return _markdown_table(header, rows) + "\n\n(0: unstable for every dt > 0; none: no limit found.)"
-
-
-def _huge_dt(data):
-    ys = list(dict.fromkeys(r["omega_dt"] for r in data))
-    cells = {(r["integrator"], r["omega_dt"]): "no divergence" if r["diverged_at_step"] is None
-             else f"{r['diverged_at_step']} ({r['predicted_step']})" for r in data}
-    methods = list(dict.fromkeys(r["integrator"] for r in data))
-    return _markdown_table(["integrator"] + [f"omega dt = {y:g}" for y in ys],
-                           [[m] + [cells[m, y] for y in ys] for m in methods])
-
-
-def _far_from_origin(data):
-    edges = data["stall_edge"]
-    rows = [[f"{speed} m/s", f"{float(speed) / 60:.2g} m", format_value(first, ".3g"),
-             f"2^{np.log2(edges['float32'][speed]):.0f} m"] for speed, first in data["first_stall"]["float32"].items()]
-    slowest = min(edges["float64"], key=float)
-    stalls64 = [x for x in data["first_stall"]["float64"].values() if x is not None]
-    note = (f"float64 stalls at {min(stalls64):.0e} m" if stalls64 else "float64 stalls nowhere up to 10^7 m") + \
-        f"; at {slowest} m/s the rounding model puts its edge at 2^{np.log2(edges['float64'][slowest]):.0f} m."
-    return _markdown_table(["speed", "step v dt", "first stalled x0 of 1e3..1e7 m", "rounding model: stalls from"],
-                           rows) + f"\n\n(float32, dt = 1/60 s; {note})"
-
-
-def _mass_ratio(data):
-    ratios = sorted({r["mass_ratio"] for r in data})
-    shown = sorted({ratios[0], ratios[len(ratios) // 2], ratios[-1]})
-    cells = {(r["integrator"], r["mass_ratio"]): r for r in data}
-    methods = list(dict.fromkeys(r["integrator"] for r in data))
-
-    def cell(m, ratio):
-        r = cells[m, ratio]
-        if r["dt_max"] is None or r["dt_max"] == 0:
-            return "any dt" if r["dt_max"] is None else "none"
-        return f"{r['dt_max']:.3g} s ({r['dt_max_theory']:.3g})"
-
-    return _markdown_table(["integrator"] + [f"mass ratio {x:g}" for x in shown],
-                           [[m] + [cell(m, x) for x in shown] for m in methods]) + \
-        "\n\n(largest stable dt measured (theory); none: unstable at every dt; any dt: no limit.)"
-
-
-def _frame_rate(data):
-    rows = [[r["sequence"], str(r["frames"]), f"{r['longest_frame'] * 1e3:.1f}", f"{r['fixed_error']:.2g}",
-             f"{r['naive_error']:.2g}"] for r in data]
-    return _markdown_table(["frame sequence", "frames", "longest frame (ms)", "fixed-step error (m)",
-                            "naive error (m)"], rows)
-
-
-def _least_error(data):
-    columns = [(problem, precision) for problem in data for precision in ("float64", "float32")]
-    methods = list(next(iter(data.values())))
-
-    def cell(problem, method, precision):
-        p = data[problem][method].get(precision)
-        if p is None:
-            return "-"
-        return f"{p['error']:.0e} at {p['dt']:.0e}" + ("" if p["floor_reached"] else "*")
-
-    rows = [[m] + [cell(problem, m, precision) for problem, precision in columns] for m in methods]
-    return _markdown_table(["integrator"] + [f"{problem}, {precision}" for problem, precision in columns], rows) + \
-        "\n\n(least error in m, at dt in s; *: still falling at the smallest dt tried, the floor is further down.)"
-
-
-def _lecture_errors(data):
-    rows = [[e["where"], e["printed"], e["correct"], e["evidence"]] for e in data]
-    return _markdown_table(["where", "printed", "correct", "evidence (computed by steplab)"], rows)
-
-
-def _restitution(data):
-    rows = [[r["object"], f"{r['cor_lecture']:.3f}"] + [f"{r['cor_measured'][d]:.4f}" for d in data["detectors"]]
-            for r in data["rows"]]
-    return _markdown_table(["ball", "lecture c.o.r."] + [f"measured, {d}" for d in data["detectors"]], rows)
-
-
-def _bench(data):
+def _bench_table(data: dict) -> str:
     rows = []
     for name in data["order"]:
         x = data["seconds"][name]
@@ -168,7 +62,7 @@ def _bench(data):
         verdict = "-" if target is None else f"<= {target['target']:g}: {'met' if target['met'] else 'missed'}"
         rows.append([x["what"], x["peer_name"], _seconds(x["steplab"]), _seconds(x["peer"]),
                      f"{data['ratios'][name]:.3g}", verdict])
-    return _markdown_table(["comparison", "peer", "steplab", "peer time", "ratio", "target"], rows) + \
+    return markdown_table(["comparison", "peer", "steplab", "peer time", "ratio", "target"], rows) + \
         "\n\n(medians of interleaved rounds; ratio = steplab / peer, below 1: steplab is faster.)"
 
 
@@ -176,43 +70,36 @@ def _seconds(t: float) -> str:
     return f"{t * 1e3:.3g} ms" if t < 1 else f"{t:.3g} s"
 
 
-def _broadphase_targets(data):
-    rows = []
-    for name, t in data.items():
-        if "target_bytes" in t:
-            value, limit = f"{t['beyond_output_bytes'] / 2**20:.0f} MiB", f"{t['target_bytes'] / 2**20:.0f} MiB"
-        else:
-            value, limit = f"{t.get('ratio', t.get('slope')):.2f}", f"{t['target']:g}"
-        method = f" ({t['method']})" if "method" in t else ""
-        rows.append([name.replace("_", " ") + method, value, limit, "met" if t.get("met") else "missed"])
-    return _markdown_table(["target", "measured", "limit", ""], rows)
+#: the table of ``steplab bench --json results/bench.json``'s record
+BENCH_TABLE = Table("bench", lambda r: {k: r[k] for k in ("order", "seconds", "ratios", "targets")}, _bench_table)
 
 
-#: name -> (slice of the records the table needs, how to draw it)
-TABLES = {
-    "orders": (lambda r: {"orders": r["truncation"]["orders"], "declared": r["truncation"]["declared_orders"]},
-               _orders),
-    "misprints": (lambda r: r["truncation"]["misprints"], _misprints),
-    "least_error": (lambda r: {p: r["truncation"]["least_error"][p] for p in ("oscillator", "drag-projectile")
-                               if p in r["truncation"]["least_error"]}, _least_error),
-    "stability": (lambda r: {z: {k: v[k] for k in ("measured", "theory")}
-                             for z, v in r["stability"]["by_damping_ratio"].items()}, _stability),
-    "huge_dt": (lambda r: [{k: row[k] for k in ("integrator", "omega_dt", "diverged_at_step", "predicted_step")}
-                           for row in r["stability"]["extremes"]["huge_dt"]], _huge_dt),
-    "far_from_origin": (lambda r: {k: r["stability"]["extremes"]["far_from_origin"][k]
-                                   for k in ("first_stall", "stall_edge")}, _far_from_origin),
-    "mass_ratio": (lambda r: r["stability"]["extremes"]["mass_ratio"]["rows"], _mass_ratio),
-    "frame_rate": (lambda r: r["frame_rate"]["runs"], _frame_rate),
-    "restitution": (lambda r: {"rows": [{k: row[k] for k in ("object", "cor_lecture", "cor_measured")}
-                                        for row in r["restitution"]["rows"]],
-                               "detectors": list(r["restitution"]["rows"][0]["cor_measured"])}, _restitution),
-    "bench": (lambda r: {k: r["bench"][k] for k in ("order", "seconds", "ratios", "targets")}, _bench),
-    "broadphase_targets": (lambda r: r["broadphase"]["targets"], _broadphase_targets),
-    "lecture_errors": (lambda r: [{k: e[k] for k in ("where", "printed", "correct", "evidence")}
-                                  for study in ("restitution", "tunnelling") for e in r[study]["lecture_errors"]
-                                  if e.get("is_error", True) and not e["correct"].startswith("checked")],
-                       _lecture_errors),
-}
+def paper_tables() -> dict[str, tuple[list[str], Table]]:
+    """Every table the paper can print: name -> (the records it reads, in run order; the table).
+
+    A table several studies give (the same :class:`Table`) reads each of their records.
+    Read when the paper is built, so studies registered by plugins are included.
+    """
+    tables: dict[str, tuple[list[str], Table]] = {}
+    for record, table in [(s.name, t) for s in STUDIES.values() for t in s.tables] + [("bench", BENCH_TABLE)]:
+        records, known = tables.setdefault(table.name, ([], table))
+        if known is not table:
+            raise PaperError(f"two different tables are named {table.name!r} (studies {records[0]!r} and {record!r})")
+        records.append(record)
+    return tables
+
+
+def table_slice(name: str, records: dict):
+    """What table ``name`` needs from ``records``: its study's slice, or the rows of each study's joined."""
+    tables = paper_tables()
+    if name not in tables:
+        raise PaperError(f"unknown table {name!r}; known: {', '.join(tables)}")
+    sources, table = tables[name]
+    missing = [study for study in sources if study not in records]
+    if missing:
+        raise PaperError(f"the table {name!r} needs the results of {', '.join(missing)}")
+    parts = [table.select(records[study]) for study in sources]
+    return parts[0] if len(parts) == 1 else [row for part in parts for row in part]
 
 
 # --- build --------------------------------------------------------------------------
@@ -224,9 +111,7 @@ def collect(template: str, records: dict) -> dict:
     for token in PLACEHOLDER.findall(template):
         if token.startswith("table:"):
             name = token.removeprefix("table:")
-            if name not in TABLES:
-                raise PaperError(f"unknown table {name!r}; known: {', '.join(TABLES)}")
-            numbers["tables"][name] = TABLES[name][0](records)
+            numbers["tables"][name] = table_slice(name, records)
         else:
             path = token.split(":", 1)[0]
             numbers["values"][path] = lookup(records, path)
@@ -235,12 +120,13 @@ def collect(template: str, records: dict) -> dict:
 
 def render(template: str, numbers: dict) -> str:
     """The paper's Markdown: every placeholder replaced from ``numbers`` alone."""
+    tables = paper_tables()
 
     def fill(match):
         token = match.group(1)
         if token.startswith("table:"):
             name = token.removeprefix("table:")
-            return TABLES[name][1](numbers["tables"][name])
+            return tables[name][1].draw(numbers["tables"][name])
         path, _, spec = token.partition(":")
         return format_value(numbers["values"][path], spec)
 

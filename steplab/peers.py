@@ -231,6 +231,8 @@ def _diffrax_rk4_class():
     return _RK4_CLASS
 
 
+#: diffrax's step budget of one adaptive solve in a tolerance search
+ADAPTIVE_MAX_STEPS = 2**20
 #: steplab method name -> what diffrax calls the same method
 DIFFRAX_METHODS = ("semi-implicit-euler", "euler", "rk4")
 
@@ -272,22 +274,22 @@ def diffrax_fixed_step(model, method: str, t_start: float, dt: float, n: int):
     return run
 
 
-def diffrax_adaptive(model, solver_name: str, t_start: float, t_end: float):
+def diffrax_adaptive(model, method: str, t_start: float, t_end: float):
     """A jitted ``f(y0, rtol) -> (y(t_end), steps)``: an adaptive diffrax solve, atol = rtol.
 
-    The tolerance is traced, so one compilation serves a whole tolerance search.
+    ``method`` is a reference name (``"diffrax-tsit5"``); the solve is
+    :func:`steplab.integrators.references.solve_adaptive`'s. The tolerance is traced, so
+    one compilation serves a whole tolerance search.
     """
-    import diffrax
     import jax
 
-    term = diffrax.ODETerm(lambda t, y, args: model.vector_field(t, y))
+    from steplab.integrators.references import solve_adaptive
 
     @jax.jit
     def run(y0, rtol):
-        sol = diffrax.diffeqsolve(term, getattr(diffrax, solver_name)(), t_start, t_end, None, y0,
-                                  stepsize_controller=diffrax.PIDController(rtol=rtol, atol=rtol),
-                                  max_steps=2**20, throw=False)
-        return sol.ys[-1], sol.stats["num_steps"]
+        sol = solve_adaptive(model.vector_field, (t_start, t_end), y0, method, rtol, rtol, at_saved_times=False,
+                             max_steps=ADAPTIVE_MAX_STEPS)
+        return sol.ys[-1], sol.steps
 
     return run
 

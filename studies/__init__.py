@@ -6,12 +6,29 @@ Each study module defines ``STUDY`` (a :class:`studies.runner.Study`) and is lis
 
 from __future__ import annotations
 
+from steplab.physics.plugins import BUILTIN, PluginError, Registry
+
 from . import broadphase, frame_rate, restitution, scene_tour, stability, truncation, tunnelling, work_precision
 from .runner import Study as Study
 from .runner import run_study as run_study
 
-#: every study, by name, in the order ``steplab reproduce`` runs them
-STUDIES: dict[str, Study] = {s.name: s for s in (
+
+def _as_study(obj) -> tuple[str, Study]:
+    """A registry entry from what a "steplab.studies" entry point names: a Study."""
+    if not isinstance(obj, Study):
+        raise PluginError(f"{obj!r} is a {type(obj).__name__}, not a steplab.studies.Study")
+    return obj.name, obj
+
+
+#: every study, by name: steplab's own, in the order ``steplab reproduce`` runs them, then
+#: those of installed plugins ("steplab.studies" entry points), which ``steplab study NAME``
+#: runs and ``reproduce`` leaves out (it reproduces the paper's records)
+STUDIES: Registry = Registry("steplab.studies", "study", [(s.name, s) for s in (
     truncation.STUDY, stability.STUDY, work_precision.STUDY, frame_rate.STUDY, scene_tour.STUDY,
     restitution.STUDY, tunnelling.STUDY, broadphase.STUDY,
-)}
+)], _as_study)
+
+
+def builtin_studies() -> list[Study]:
+    """steplab's own studies, in the order ``steplab reproduce`` runs them."""
+    return [study for name, study in STUDIES.items() if STUDIES.origin(name) == BUILTIN]

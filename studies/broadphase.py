@@ -31,6 +31,7 @@ from steplab.physics.broadphase.sweep_and_prune import sweep_axis
 
 from . import plotting
 from .runner import Study
+from .tables import Table, markdown_table
 
 DISTRIBUTIONS = ("uniform", "clustered", "one-cell", "layer", "mixed")
 #: the methods timed against n ("sap-coherent" is timed in the coherence experiment,
@@ -514,5 +515,24 @@ def summary(record: dict) -> list[tuple[str, str]]:
     return rows
 
 
+# --- the paper's tables -------------------------------------------------------------
+
+
+def targets_table(data: dict) -> str:
+    """Each broadphase target: what was measured, its limit, and whether it was met."""
+    rows = []
+    for name, t in data.items():
+        if "target_bytes" in t:
+            value, limit = f"{t['beyond_output_bytes'] / 2**20:.0f} MiB", f"{t['target_bytes'] / 2**20:.0f} MiB"
+        else:
+            value, limit = f"{t.get('ratio', t.get('slope')):.2f}", f"{t['target']:g}"
+        method = f" ({t['method']})" if "method" in t else ""
+        rows.append([name.replace("_", " ") + method, value, limit, "met" if t.get("met") else "missed"])
+    return markdown_table(["target", "measured", "limit", ""], rows)
+
+
+TABLES = (Table("broadphase_targets", lambda r: r["targets"], targets_table),)
+
+
 STUDY = Study("broadphase", "Broadphase: brute force, grid, hash, sort and sweep, BVH against n; cKDTree as peer",
-              parameters, compute, plot, summary)
+              parameters, compute, plot, summary, tables=TABLES)

@@ -20,13 +20,14 @@ Part of the stability study.
 from __future__ import annotations
 
 import numpy as np
-from steplab.integrators import DivergenceError, simulate
+from steplab.integrators import DivergenceError, get_integrator, simulate
 from steplab.integrators.simulate import divergence_limit
 from steplab.physics import Model, Springs
 
 from . import plotting
 from .problems import oscillator_problem
-from .stability_limits import Mode, spectral_radius, stable_dt, worst_deviation
+from .stability_limits import Mode, stable_dt, worst_deviation
+from .tables import Table, format_value, markdown_table
 
 #: the game step of the far-from-origin runs, s
 GAME_DT = 1 / 60
@@ -57,7 +58,7 @@ def huge_dt(methods, omega_dts, max_steps: int) -> list[dict]:
     for method in methods:
         for y in omega_dts:
             dt = y / omega
-            rho = spectral_radius(method, y, 0.0)
+            rho = get_integrator(method).spectral_radius(y, 0.0)
             predicted = int(np.ceil(np.log(limit / amplitude) / np.log(rho))) if rho > 1 else None
             row = {"integrator": method, "omega_dt": y, "growth_factor": rho, "predicted_step": predicted,
                    "diverged_at_step": None, "message": None, "finite_output": None}
@@ -277,3 +278,57 @@ def plot(record: dict, out) -> list[str]:
     ax.legend(fontsize=7)
     fig.tight_layout()
     return plotting.save_figure(fig, out, "stability_extremes")
+
+
+# --- the paper's tables -------------------------------------------------------------
+
+
+def huge_dt_table(data: list[dict]) -> str:
+    """The step each method diverges at, per omega dt, and (in brackets) the step rho predicts."""
+    ys = list(dict.fromkeys(r["omega_dt"] for r in data))
+    cells = {(r["integrator"], r["omega_dt"]): "no divergence" if r["diverged_at_step"] is None
+             else f"{r['diverged_at_step']} ({r['predicted_step']})" for r in data}
+    methods = list(dict.fromkeys(r["integrator"] for r in data))
+    return markdown_table(["integrator"] + [f"omega dt = {y:g}" for y in ys],
+                          [[m] + [cells[m, y] for y in ys] for m in methods])
+
+
+def far_from_origin_table(data: dict) -> str:
+    """Where a coasting float32 body first stalls, per speed, against the rounding model."""
+    edges = data["stall_edge"]
+    rows = [[f"{speed} m/s", f"{float(speed) / 60:.2g} m", format_value(first, ".3g"),
+             f"2^{np.log2(edges['float32'][speed]):.0f} m"] for speed, first in data["first_stall"]["float32"].items()]
+    slowest = min(edges["float64"], key=float)
+    stalls64 = [x for x in data["first_stall"]["float64"].values() if x is not None]
+    note = (f"float64 stalls at {min(stalls64):.0e} m" if stalls64 else "float64 stalls nowhere up to 10^7 m") + \
+        f"; at {slowest} m/s the rounding model puts its edge at 2^{np.log2(edges['float64'][slowest]):.0f} m."
+    return markdown_table(["speed", "step v dt", "first stalled x0 of 1e3..1e7 m", "rounding model: stalls from"],
+                          rows) + f"\n\n(float32, dt = 1/60 s; {note})"
+
+
+def mass_ratio_table(data: list[dict]) -> str:
+    """Largest stable dt, measured and theory, at the smallest, middle and largest mass ratio."""
+    ratios = sorted({r["mass_ratio"] for r in data})
+    shown = sorted({ratios[0], ratios[len(ratios) // 2], ratios[-1]})
+    cells = {(r["integrator"], r["mass_ratio"]): r for r in data}
+    methods = list(dict.fromkeys(r["integrator"] for r in data))
+
+    def cell(m, ratio):
+        r = cells[m, ratio]
+        if r["dt_max"] is None or r["dt_max"] == 0:
+            return "any dt" if r["dt_max"] is None else "none"
+        return f"{r['dt_max']:.3g} s ({r['dt_max_theory']:.3g})"
+
+    return markdown_table(["integrator"] + [f"mass ratio {x:g}" for x in shown],
+                          [[m] + [cell(m, x) for x in shown] for m in methods]) + \
+        "\n\n(largest stable dt measured (theory); none: unstable at every dt; any dt: no limit.)"
+
+
+#: the tables of the extremes' record (``record["extremes"]`` of the stability study)
+TABLES = (
+    Table("huge_dt", lambda r: [{k: row[k] for k in ("integrator", "omega_dt", "diverged_at_step", "predicted_step")}
+                                for row in r["huge_dt"]], huge_dt_table),
+    Table("far_from_origin", lambda r: {k: r["far_from_origin"][k] for k in ("first_stall", "stall_edge")},
+          far_from_origin_table),
+    Table("mass_ratio", lambda r: r["mass_ratio"]["rows"], mass_ratio_table),
+)

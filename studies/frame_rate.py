@@ -20,6 +20,7 @@ from steplab.integrators.game_loop import interpolate
 from . import plotting
 from .problems import oscillator_problem
 from .runner import Study
+from .tables import Table, markdown_table
 
 INTEGRATOR = "semi-implicit-euler"
 PHYSICS_DT = 1 / 120
@@ -169,5 +170,19 @@ def summary(record: dict) -> list[tuple[str, str]]:
     return rows
 
 
+# --- the paper's tables -------------------------------------------------------------
+
+
+def frame_rate_table(data: list[dict]) -> str:
+    """Each frame sequence's longest frame and the final error of the fixed and the naive step."""
+    rows = [[r["sequence"], str(r["frames"]), f"{r['longest_frame'] * 1e3:.1f}", f"{r['fixed_error']:.2g}",
+             f"{r['naive_error']:.2g}"] for r in data]
+    return markdown_table(["frame sequence", "frames", "longest frame (ms)", "fixed-step error (m)",
+                           "naive error (m)"], rows)
+
+
+TABLES = (Table("frame_rate", lambda r: r["runs"], frame_rate_table),)
+
+
 STUDY = Study("frame_rate", "Frame-rate independence: fixed-step accumulator against a naive variable step",
-              parameters, compute, plot, summary)
+              parameters, compute, plot, summary, tables=TABLES)

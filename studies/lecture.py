@@ -13,6 +13,8 @@ from steplab.integrators import simulate
 from steplab.physics import lecture_state, projectile
 from steplab.physics.scene import load_scene
 
+from .tables import Table, markdown_table
+
 #: "Explicit Euler Integration Example (2 of 2)": S after one step, numerical and exact,
 #: rows (mV_x, mV_y, mV_z, p_x, p_y, p_z)
 ONE_STEP = {
@@ -124,3 +126,22 @@ def lecture_check() -> dict:
                 "form has a t^2 / 2",
     })
     return {"lecture_table": table, "multi_step": rows, "misprints": misprints}
+
+
+# --- the paper's table of the lecture's errors ---------------------------------------
+
+
+def _errors_to_print(record: dict) -> list[dict]:
+    """The lecture errors a study found that the paper lists: real errors, not checks it passed."""
+    return [{k: e[k] for k in ("where", "printed", "correct", "evidence")} for e in record["lecture_errors"]
+            if e.get("is_error", True) and not e["correct"].startswith("checked")]
+
+
+def lecture_errors_table(data: list[dict]) -> str:
+    rows = [[e["where"], e["printed"], e["correct"], e["evidence"]] for e in data]
+    return markdown_table(["where", "printed", "correct", "evidence (computed by steplab)"], rows)
+
+
+#: one table of the lecture's errors, given by each study that checks a chapter (restitution:
+#: the response chapter, tunnelling: the detection chapter), their rows joined
+LECTURE_ERRORS_TABLE = Table("lecture_errors", _errors_to_print, lecture_errors_table)

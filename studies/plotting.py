@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import io
+import zlib
 from pathlib import Path
 
 import matplotlib
@@ -11,24 +12,31 @@ matplotlib.use("Agg")
 # fixed SVG element ids: the same record gives byte-identical figures
 matplotlib.rcParams["svg.hashsalt"] = "steplab"
 import matplotlib.pyplot as plt  # noqa: E402
+from steplab.integrators import UnknownIntegratorError, get_integrator  # noqa: E402
 
-from steplab.io import write_atomic  # noqa: E402
+from .records import write_atomic  # noqa: E402
 
-#: one colour and marker per integrator, so a method looks the same in every figure
-STYLE = {
-    "euler": ("tab:red", "o"),
-    "semi-implicit-euler": ("tab:orange", "s"),
-    "velocity-verlet": ("tab:green", "^"),
-    "position-verlet": ("tab:olive", "v"),
-    "heun": ("tab:purple", "D"),
-    "midpoint": ("tab:pink", "P"),
-    "rk4": ("tab:blue", "*"),
-    "implicit-euler": ("tab:brown", "X"),
-}
+#: colours and markers for a method that states no ``style`` (a plugin, a test stepper):
+#: the ones steplab's own methods leave free, picked by a stable checksum of the name
+#: (not Python's hash(), which is salted per process), so a figure is the same every run
+SPARE_COLOURS = ("tab:gray", "tab:cyan", "black", "darkgoldenrod", "navy", "crimson", "teal")
+SPARE_MARKERS = ("h", "p", "d", "<", ">", "8", "H")
 
 
 def style(name: str) -> dict:
-    colour, marker = STYLE.get(name, ("tab:gray", "."))
+    """Keyword arguments that draw integrator ``name`` in its own colour and marker.
+
+    The method states them (``Integrator.style``); any other name gets a spare pair.
+    """
+    try:
+        colour_marker = get_integrator(name).style
+    except UnknownIntegratorError:  # not an integrator (a reference drawn under another name)
+        colour_marker = None
+    if colour_marker is None:
+        k = zlib.crc32(name.encode())
+        colour = SPARE_COLOURS[k % len(SPARE_COLOURS)]
+        colour_marker = colour, SPARE_MARKERS[k // len(SPARE_COLOURS) % len(SPARE_MARKERS)]
+    colour, marker = colour_marker
     return {"color": colour, "marker": marker, "label": name}
 
 

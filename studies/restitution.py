@@ -23,7 +23,9 @@ from steplab.physics.collision import CollisionWorld, PairProperties, Plane
 from steplab.physics.collision.response import impulse
 
 from . import plotting
+from .lecture import LECTURE_ERRORS_TABLE
 from .runner import Study
+from .tables import Table, markdown_table
 
 #: the lecture's drop height, cm
 H_CM = 92.0
@@ -315,5 +317,23 @@ def summary(record: dict) -> list[tuple[str, str]]:
     return out
 
 
+# --- the paper's tables -------------------------------------------------------------
+
+
+def restitution_table(data: dict) -> str:
+    """The lecture's coefficient of restitution of each ball against each detector's measurement."""
+    rows = [[r["object"], f"{r['cor_lecture']:.3f}"] + [f"{r['cor_measured'][d]:.4f}" for d in data["detectors"]]
+            for r in data["rows"]]
+    return markdown_table(["ball", "lecture c.o.r."] + [f"measured, {d}" for d in data["detectors"]], rows)
+
+
+TABLES = (
+    Table("restitution", lambda r: {"rows": [{k: row[k] for k in ("object", "cor_lecture", "cor_measured")}
+                                             for row in r["rows"]],
+                                    "detectors": list(r["rows"][0]["cor_measured"])}, restitution_table),
+    LECTURE_ERRORS_TABLE,
+)
+
+
 STUDY = Study("restitution", "Restitution: the lecture's drop table reproduced by each collision detector",
-              parameters, compute, plot, summary)
+              parameters, compute, plot, summary, tables=TABLES)

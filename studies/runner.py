@@ -2,10 +2,11 @@
 
 A :class:`Study` is three plain functions: ``parameters(quick)`` gives the parameters,
 ``compute(parameters, progress)`` turns them into a JSON-able record (all the numbers),
-and ``plot(record, out)`` draws figures from the record alone. The runner adds
-provenance, writes the figures and then the JSON (each atomically, JSON last), and
-skips a study whose JSON carries the same cache key: a hash of its parameters and of
-the source code it runs (physics, integrators and the study modules it uses). So an
+and ``plot(record, out)`` draws figures from the record alone; its ``tables`` are the
+tables ``steplab paper`` prints from the record (studies/tables.py). The runner adds
+provenance, writes the figures and then the JSON (each atomically, through
+studies/records.py, JSON last), and skips a study whose JSON carries the same cache
+key: a hash of its parameters and of the source code it runs (physics, integrators and the study modules it uses). So an
 interrupted ``steplab reproduce`` resumes where it stopped, and a change to the code or
 the parameters re-runs what it affects.
 """
@@ -23,7 +24,8 @@ import types
 from collections.abc import Callable, Iterable
 from pathlib import Path
 
-from steplab.io import remove_temporary_files, write_json
+from .records import remove_temporary_files, write_json
+from .tables import Table
 
 #: packages whose source is part of the cache keys (of studies: the modules a study uses)
 SOURCE_PACKAGES = ("physics", "integrators", "studies")
@@ -38,6 +40,8 @@ class Study:
     plot: Callable[[dict, Path], list[str]]
     #: ``summary(record) -> [(label, value), ...]`` for the table ``reproduce`` prints
     summary: Callable[[dict], list[tuple[str, str]]] = lambda record: []
+    #: the tables ``steplab paper`` prints from this study's record (studies/tables.py)
+    tables: tuple[Table, ...] = ()
 
 
 def source_hash(root: Path | None = None, studies: Iterable[str] | None = None) -> str:

@@ -1,8 +1,9 @@
 """Stability study: how large a step each integrator survives, and what it costs near the edge.
 
 * Limits on the oscillator: the largest stable omega dt of every method, undamped and
-  damped, measured on long runs and derived from its stability function
-  (studies/stability_limits.py), drawn on the stability regions |R(z)| <= 1.
+  damped, measured on long runs (studies/stability_limits.py) and stated by the method
+  itself (``Stepper.stability_limit``, from its stability function or its own step),
+  drawn on the stability regions |R(z)| <= 1 of the methods that have an R.
 * Energy over long runs (10^6 steps) on the oscillator and a Kepler orbit.
 * Stiff springs: the largest stable dt against the stiffness of the soft body, and the
   numerical damping implicit Euler pays for being stable at any dt (studies/stiffness.py).
@@ -13,23 +14,22 @@
 from __future__ import annotations
 
 import numpy as np
-from steplab.integrators import INTEGRATORS, Stepper
+from steplab.integrators import INTEGRATORS, Stepper, get_integrator
 
 from . import extremes, plotting, stiffness
 from .problems import kepler_problem, oscillator_problem
 from .runner import Study
-from .stability_limits import (
-    CLOSED_FORMS,
-    GROWTH_TOLERANCE,
-    LONG_RUN_STEPS,
-    measured_limit,
-    oscillator_mode,
-    theoretical_limit,
-)
+from .stability_limits import GROWTH_TOLERANCE, LONG_RUN_STEPS, measured_limit, oscillator_mode
+from .tables import Table, format_value, markdown_table
 
 #: energy runs up to this many steps use the NumPy backend; windows of an energy envelope
 SHORT_RUN_STEPS = 10_000
 ENVELOPE_WINDOWS = 200
+#: points of the complex plane on which two stability functions are compared: equal
+#: there (to round-off) means one region for both; R is a polynomial or a rational
+#: function of low degree, so a handful of generic points decide it
+SAME_REGION_PROBES = (0.3 + 0.1j, -1.1 + 0.7j, -2.3 - 1.9j, 0.05 - 2.9j, -3.7 + 0.2j, 1.7 + 2.3j, -0.6 - 0.4j)
+SAME_REGION_RTOL = 1e-12
 
 
 def parameters(quick: bool) -> dict:
@@ -83,40 +83,27 @@ def _energy_after_every_step(problem, method: str, steps: int, dt: float) -> tup
         from steplab.integrators import DivergenceError, simulate
 
         try:
-            traj, diverged = simulate(problem.model, method, problem.y0, 0.0, steps * dt, dt), None
+            traj, diverged = simulate(problem.model, method, problem.y0, 0.0, dt=dt, n_steps=steps), None
         except DivergenceError as err:
             diverged = err.step
-            traj = simulate(problem.model, method, problem.y0, 0.0, (err.step - 1) * dt, dt)
+            traj = simulate(problem.model, method, problem.y0, 0.0, dt=dt, n_steps=err.step - 1)
         return np.array([float(problem.model.energy(y)) for y in traj.y]), diverged
 
     import jax
     import jax.numpy as jnp
-    from jax import lax
+    from steplab.integrators.loop import fixed_step_loop
     from steplab.integrators.simulate import divergence_limit
 
     model = problem.model.cast(jnp)
+    # after every step, only the energy is kept; once diverged the loop stops stepping
+    loop = fixed_step_loop(model, integrator, chunks=steps, observe=model.energy, halt=True)
     limit = divergence_limit(problem.y0, np.float64)
-
-    @jax.jit
-    def run(y0):
-        def one_step(state, k):
-            y, carry, alive = state
-            # once diverged, stop stepping: a failed Newton iteration would otherwise spend its
-            # full iteration budget on NaN at every remaining step
-            y, carry = lax.cond(alive, lambda: integrator.step(model, k * dt, y, dt, carry), lambda: (y, carry))
-            ok = alive & jnp.all(jnp.abs(y) <= limit)
-            return (y, carry, ok), (model.energy(y), ok)
-
-        y0 = jnp.asarray(y0)
-        state = (y0, integrator.init(model, 0.0, y0), jnp.asarray(True))
-        _, (energy, ok) = lax.scan(one_step, state, jnp.arange(steps))
-        return jnp.concatenate([model.energy(y0)[None], energy]), ok
-
-    energy, ok = (np.asarray(x) for x in run(problem.y0))
-    if ok.all():
+    y0 = jnp.asarray(problem.y0)
+    energy, bad = jax.jit(lambda y0: loop(y0, 0.0, dt, steps, limit))(y0)  # dt a constant, as recorded
+    energy, bad = np.concatenate([[float(jax.jit(model.energy)(y0))], np.asarray(energy)]), int(bad)
+    if bad < 0:
         return energy, None
-    bad = int(np.argmin(ok))  # index of the first bad step (0-based): step bad + 1
-    return energy[:bad + 1], bad + 1
+    return energy[:bad], bad
 
 
 def compute(params: dict, progress=None) -> dict:
@@ -126,7 +113,7 @@ def compute(params: dict, progress=None) -> dict:
         measured[key], theory[key] = {}, {}
         for method in params["integrators"]:
             measured[key][method] = measured_limit(oscillator_mode(zeta), method, params["long_run_steps"])
-            theory[key][method] = theoretical_limit(method, zeta)
+            theory[key][method] = get_integrator(method).stability_limit(zeta)
             if progress is not None:
                 progress()
     oscillator, kepler = oscillator_problem(0.0), kepler_problem()
@@ -145,7 +132,7 @@ def compute(params: dict, progress=None) -> dict:
         "theory": theory[undamped],
         "by_damping_ratio": {z: {"measured": {m: r["omega_dt_max"] for m, r in measured[z].items()},
                                  "theory": theory[z], "details": measured[z]} for z in measured},
-        "closed_forms": CLOSED_FORMS,
+        "closed_forms": {m: get_integrator(m).stability_note for m in params["integrators"]},
         "energy": energy,
         "stiff_springs": stiff,
         "extremes": extremes.compute(params, progress),
@@ -162,18 +149,17 @@ def plot(record: dict, out) -> list[str]:
     fig, ax = plt.subplots(figsize=(7.5, 6.5))
     x, y = np.meshgrid(np.linspace(-4.5, 2.5, 400), np.linspace(-3.5, 3.5, 400))
     z = x + 1j * y  # the grid avoids z = 1, the pole of implicit Euler's R
-    regions = {"euler": np.abs(1 + z), "heun / midpoint": np.abs(INTEGRATORS["heun"].tableau.stability_function(z)),
-               "rk4": np.abs(INTEGRATORS["rk4"].tableau.stability_function(z)),
-               "implicit-euler": np.abs(1 / (1 - z))}
-    colours = {"euler": "tab:red", "heun / midpoint": "tab:purple", "rk4": "tab:blue",
-               "implicit-euler": "tab:brown"}
-    for name, r in regions.items():
-        implicit = name == "implicit-euler"
-        if not implicit:  # implicit Euler is stable *outside* its circle: shading would cover the plot
-            ax.contourf(x, y, r, levels=[0, 1], colors=[colours[name]], alpha=0.12)
-        ax.contour(x, y, r, levels=[1], colors=[colours[name]], linewidths=1.5)
-        label = f"|R(z)| = 1: {name}" + (" (stable outside)" if implicit else "")
-        ax.plot([], [], color=colours[name], lw=2, label=label)
+    for methods in stability_regions(record["parameters"]["integrators"]):
+        first = get_integrator(methods[0])
+        name, colour = " / ".join(methods), plotting.style(methods[0])["color"]
+        r = np.abs(first.stability_function(z))
+        # a stable region that holds z -> -infinity (implicit methods) lies outside its curve
+        outside = bool(abs(first.stability_function(-1e6)) <= 1)
+        if not outside:  # shading the outside would cover the plot
+            ax.contourf(x, y, r, levels=[0, 1], colors=[colour], alpha=0.12)
+        ax.contour(x, y, r, levels=[1], colors=[colour], linewidths=1.5)
+        label = f"|R(z)| = 1: {name}" + (" (stable outside)" if outside else "")
+        ax.plot([], [], color=colour, lw=2, label=label)
     # measured thresholds: on the imaginary axis (undamped) and on the damped ray
     for zeta, result in record["by_damping_ratio"].items():
         mu = complex(-float(zeta), np.sqrt(1 - float(zeta) ** 2))
@@ -224,6 +210,27 @@ def plot(record: dict, out) -> list[str]:
     return figures
 
 
+def stability_regions(methods) -> list[list[str]]:
+    """The methods that have a stability function R(z), grouped by R (one region each).
+
+    Two methods share a region when their R agree at SAME_REGION_PROBES (Heun and the
+    midpoint method: both 1 + z + z^2 / 2); the groups keep the order of ``methods``.
+    """
+    groups: list[tuple[np.ndarray, list[str]]] = []
+    for name in methods:
+        method = get_integrator(name)
+        if getattr(method, "stability_function", None) is None:
+            continue
+        values = np.asarray(method.stability_function(np.array(SAME_REGION_PROBES)), dtype=complex)
+        for probe_values, names in groups:
+            if np.allclose(values, probe_values, rtol=SAME_REGION_RTOL, atol=0):
+                names.append(name)
+                break
+        else:
+            groups.append((values, [name]))
+    return [names for _, names in groups]
+
+
 def summary(record: dict) -> list[tuple[str, str]]:
     rows = []
     for method, value in record["omega_dt_max"].items():
@@ -246,5 +253,24 @@ def summary(record: dict) -> list[tuple[str, str]]:
     return rows
 
 
+# --- the paper's tables -------------------------------------------------------------
+
+
+def stability_table(data: dict) -> str:
+    """Largest stable omega dt of each method, measured and theory, per damping ratio."""
+    zetas = list(data)
+    header = ["integrator"] + [f"{kind}, zeta = {z}" for z in zetas for kind in ("measured", "theory")]
+    methods = list(data[zetas[0]]["measured"])
+    rows = [[m] + [format_value(data[z][kind][m], ".4f") for z in zetas for kind in ("measured", "theory")]
+            for m in methods]
+    return markdown_table(header, rows) + "\n\n(0: unstable for every dt > 0; none: no limit found.)"
+
+
+TABLES = (
+    Table("stability", lambda r: {z: {k: v[k] for k in ("measured", "theory")}
+                                  for z, v in r["by_damping_ratio"].items()}, stability_table),
+) + tuple(table.within("extremes") for table in extremes.TABLES)
+
+
 STUDY = Study("stability", "Stability: largest stable omega dt, stability regions, long-run energy",
-              parameters, compute, plot, summary)
+              parameters, compute, plot, summary, tables=TABLES)

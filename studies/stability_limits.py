@@ -1,4 +1,4 @@
-"""Stability limits: the largest stable omega dt of an integrator on one mode, measured and derived.
+"""Stability limits: the largest stable omega dt of an integrator on one mode, measured.
 
 Measured: by bisection on long runs of the real integrator on a :class:`Mode` (the
 oscillator's, the stiffest mode of a spring network, the stretch of a spring between two
@@ -7,20 +7,18 @@ map exceeds GROWTH_TOLERANCE. Methods whose one-step amplification exceeds 1 at 
 smallest omega dt are recorded as 0 (unstable for every dt > 0); methods stable at
 omega dt = OMEGA_DT_MAX as None (no limit found).
 
-Derived: the largest y = omega dt with spectral radius <= 1 of each method's one-step
-map on the scalar test equation: |R(y mu)| <= 1 with mu = -zeta + i sqrt(1 - zeta^2) for
-Runge-Kutta methods (R from their Butcher tableau), and the 2x2 / 3x3 recurrence matrix
-for the partitioned methods (semi-implicit Euler, velocity and position Verlet).
+Derived: each method states its own (``Stepper.stability_limit``: the largest omega dt
+with spectral radius <= 1 of its one-step map on the damped oscillator, from its
+stability function or from its own ``step``; steplab.integrators.linear_stability).
 """
 
 from __future__ import annotations
 
 import dataclasses
-import functools
 
 import numpy as np
-from scipy.optimize import brentq
-from steplab.integrators import INTEGRATORS, ExplicitRungeKutta
+from steplab.integrators import get_integrator
+from steplab.integrators.linear_stability import OMEGA_DT_MAX, OMEGA_DT_MIN  # the theory's interval
 from steplab.integrators.simulate import final_state_function
 
 from .problems import oscillator_problem
@@ -34,88 +32,10 @@ from .problems import oscillator_problem
 LONG_RUN_STEPS = 20_000
 GROWTH_TOLERANCE = 1e-7
 PROBE = 1e-6
-#: search interval of omega dt, and the bisection's relative tolerance
-OMEGA_DT_MIN, OMEGA_DT_MAX = 1e-3, 100.0
+#: the bisection's relative tolerance
 BISECTION_RTOL = 1e-6
 #: a one-step spectral radius above 1 + this at omega dt = OMEGA_DT_MIN is growth, not round-off
 AMPLIFICATION_TOLERANCE = 1e-14
-THEORY_TOLERANCE = 1e-14
-
-
-# --- theory -------------------------------------------------------------------------
-
-
-def _partitioned_map(method: str, y: float, zeta: float) -> np.ndarray:
-    """One-step matrix of a partitioned method on u'' = -u - 2 zeta u' (omega = 1, h = y).
-
-    Written out from each method's definition (integrators/*.py docstrings), acting on
-    (u, v), or (u, v, carry) for the Verlet methods, which keep an acceleration between
-    steps: velocity Verlet its last evaluation (at the predicted velocity), position
-    Verlet the one it estimates the half-step velocity from.
-    """
-    h = y
-
-    def acc(u, v):
-        return -u - 2 * zeta * v
-
-    columns = []
-    size = 3 if method in ("velocity-verlet", "position-verlet") else 2
-    for basis in np.eye(size):
-        u, v = basis[0], basis[1]
-        if method == "semi-implicit-euler":
-            v1 = v + h * acc(u, v)
-            columns.append([u + h * v1, v1])
-        elif method == "velocity-verlet":
-            a0 = basis[2]
-            u1 = u + h * v + h * h / 2 * a0
-            a1 = acc(u1, v + h * a0)
-            columns.append([u1, v + h / 2 * (a0 + a1), a1])
-        else:  # position-verlet: drift, kick with the half-step velocity estimated from a_prev
-            u_half = u + h / 2 * v
-            a = acc(u_half, v + h / 2 * basis[2])
-            v1 = v + h * a
-            columns.append([u_half + h / 2 * v1, v1, a])
-    return np.array(columns).T
-
-
-def spectral_radius(method: str, y: float, zeta: float) -> float:
-    """Largest |growth factor| per step at omega dt = y (from the method's definition)."""
-    mu = complex(-zeta, np.sqrt(1 - zeta**2))
-    integrator = INTEGRATORS[method]
-    if isinstance(integrator, ExplicitRungeKutta):
-        return abs(integrator.tableau.stability_function(y * mu))
-    if method == "euler":
-        return abs(1 + y * mu)
-    if method == "implicit-euler":
-        return abs(1 / (1 - y * mu))
-    return float(np.max(np.abs(np.linalg.eigvals(_partitioned_map(method, y, zeta)))))
-
-
-@functools.cache
-def theoretical_limit(method: str, zeta: float) -> float | None:
-    """Largest omega dt with spectral radius <= 1: 0 if none, None if unbounded."""
-    ys = np.geomspace(OMEGA_DT_MIN, OMEGA_DT_MAX, 4000)
-    # |eigenvalue| = 1 exactly on the stable range of a symplectic method: allow round-off
-    excess = lambda y: spectral_radius(method, y, zeta) - 1 - THEORY_TOLERANCE  # noqa: E731
-    stable = np.array([excess(y) <= 0 for y in ys])
-    if not stable[0]:
-        return 0.0
-    if stable.all():
-        return None
-    k = int(np.argmin(stable))  # first unstable grid point
-    return float(brentq(excess, ys[k - 1], ys[k], xtol=1e-14))
-
-
-CLOSED_FORMS = {
-    "euler": "0 undamped (|1 + i y| > 1); 2 zeta damped",
-    "semi-implicit-euler": "2 undamped; 2 sqrt(1 + zeta^2) - 2 zeta damped",
-    "velocity-verlet": "2 undamped (trace 2 - y^2, det 1)",
-    "position-verlet": "2 undamped",
-    "heun": "0 undamped (|R(i y)|^2 = 1 + y^4 / 4)",
-    "midpoint": "0 undamped (same R as Heun)",
-    "rk4": "2 sqrt(2) = 2.8284 undamped",
-    "implicit-euler": "none: |1 / (1 - z)| <= 1 on the whole left half-plane (A-stable)",
-}
 
 
 # --- measurement --------------------------------------------------------------------
@@ -178,7 +98,7 @@ def stiffest_mode(model, q_rest) -> Mode:
     return Mode(model, float(np.sqrt(values[k].real)), np.stack([q_rest, np.zeros_like(q_rest)]), pattern, weights)
 
 
-def growth_function(mode: Mode, method: str, steps: int, probe: float = PROBE):
+def growth_function(mode: Mode, method, steps: int, probe: float = PROBE):
     """``growth(omega dt[, steps])``: log of the spectral radius of the measured N-step map, per step.
 
     Each call runs ``steps`` steps of the real integrator from two small deviations of
@@ -205,7 +125,7 @@ def growth_function(mode: Mode, method: str, steps: int, probe: float = PROBE):
     return growth
 
 
-def measured_limit(mode: Mode, method: str, steps: int, rtol: float = BISECTION_RTOL) -> dict:
+def measured_limit(mode: Mode, method, steps: int, rtol: float = BISECTION_RTOL) -> dict:
     """Largest stable omega dt of ``mode`` by bisection on long runs of the real integrator.
 
     A run is stable when its growth per step (:func:`growth_function`) is at most
@@ -229,11 +149,11 @@ def measured_limit(mode: Mode, method: str, steps: int, rtol: float = BISECTION_
     return {"omega_dt_max": lo, "bracket": [lo, hi]}
 
 
-def stable_dt(mode: Mode, method: str, steps: int, rtol: float) -> dict:
+def stable_dt(mode: Mode, method, steps: int, rtol: float) -> dict:
     """Largest stable dt on ``mode``, measured (:func:`measured_limit`) and from theory
     (the method's undamped limit on the oscillator over the mode's omega); None: no limit."""
     measured = measured_limit(mode, method, steps, rtol)["omega_dt_max"]
-    theory = theoretical_limit(method, 0.0)
+    theory = get_integrator(method).stability_limit(0.0)
     return {"omega": mode.omega, "dt_max": None if measured is None else measured / mode.omega,
             "dt_max_theory": None if theory is None else theory / mode.omega}
 
@@ -244,7 +164,7 @@ def worst_deviation(rows) -> float | None:
     return max(deviations, default=None)
 
 
-def _one_step_growth(mode: Mode, method: str, y: float) -> float:
+def _one_step_growth(mode: Mode, method, y: float) -> float:
     """Spectral radius of one real step of the integrator on the mode's (u, v).
 
     The step is linearised at the equilibrium by forward-mode autodiff through the
@@ -255,7 +175,7 @@ def _one_step_growth(mode: Mode, method: str, y: float) -> float:
     import jax
     import jax.numpy as jnp
 
-    integrator = INTEGRATORS[method]
+    integrator = get_integrator(method)
     model, dt = mode.model.cast(jnp), y / mode.omega
 
     def step(state):

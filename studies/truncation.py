@@ -14,13 +14,14 @@ truncation C dt meets accumulated round-off eps T / dt near dt = sqrt(eps T / C)
 from __future__ import annotations
 
 import numpy as np
-from steplab.integrators import INTEGRATORS, DivergenceError, Stepper
+from steplab.integrators import INTEGRATORS, DivergenceError, Stepper, get_integrator
 from steplab.integrators.simulate import final_state_function
 
 from . import plotting
 from .lecture import lecture_check
 from .problems import oscillator_problem, projectile_problem, scene_problem, true_final
 from .runner import Study
+from .tables import Table, format_value, markdown_table
 
 #: after the smallest error, keep halving dt this many times to show the round-off branch
 ROUNDOFF_POINTS = 3
@@ -69,7 +70,7 @@ def error_curve(problem, method: str, precision: str, truth, min_log2: int, max_
     run = final_state_function(model, method)
     y0 = jnp.asarray(problem.y0, dtype)
     span = problem.t_end - problem.t_start
-    if INTEGRATORS[method].implicit:
+    if get_integrator(method).implicit:
         max_log2 = min(max_log2, IMPLICIT_MAX_LOG2_STEPS)
     points, best, rising, falling, entered = [], np.inf, 0, 0, False
     for k in range(min_log2, max_log2 + 1):
@@ -143,7 +144,7 @@ def compute(params: dict, progress=None) -> dict:
                     orders[problem.name][method] = fit_order(points, noise)
             if progress is not None:
                 progress()
-    declared = {name: INTEGRATORS[name].order for name in params["integrators"]}
+    declared = {name: get_integrator(name).order for name in params["integrators"]}
     record.update(curves=curves, orders=orders, declared_orders=declared, least_error=best_dt,
                   references=references)
     return record
@@ -191,5 +192,50 @@ def summary(record: dict) -> list[tuple[str, str]]:
     return rows
 
 
+# --- the paper's tables -------------------------------------------------------------
+
+
+def orders_table(data: dict) -> str:
+    """Fitted order of each integrator on each problem, beside its declared order."""
+    problems = list(data["orders"])
+    header = ["integrator", "declared"] + problems
+    rows = [[m, str(data["declared"][m])] + [format_value(data["orders"][p].get(m), ".2f") for p in problems]
+            for m in data["declared"]]
+    return markdown_table(header, rows) + "\n\n(\"none\": the method is exact for that problem, " \
+                                          "its error is round-off.)"
+
+
+def misprints_table(data: list[dict]) -> str:
+    rows = [[m["where"], m["printed"], format_value(m["computed"], "g"), m["note"]] for m in data]
+    return markdown_table(["where", "printed", "computed", "why"], rows)
+
+
+def least_error_table(data: dict) -> str:
+    """The least error each method reaches, and at which dt, in float64 and float32."""
+    columns = [(problem, precision) for problem in data for precision in ("float64", "float32")]
+    methods = list(next(iter(data.values())))
+
+    def cell(problem, method, precision):
+        p = data[problem][method].get(precision)
+        if p is None:
+            return "-"
+        return f"{p['error']:.0e} at {p['dt']:.0e}" + ("" if p["floor_reached"] else "*")
+
+    rows = [[m] + [cell(problem, m, precision) for problem, precision in columns] for m in methods]
+    return markdown_table(["integrator"] + [f"{problem}, {precision}" for problem, precision in columns], rows) + \
+        "\n\n(least error in m, at dt in s; *: still falling at the smallest dt tried, the floor is further down.)"
+
+
+#: the problems whose least error the paper shows
+PAPER_LEAST_ERROR = ("oscillator", "drag-projectile")
+
+TABLES = (
+    Table("orders", lambda r: {"orders": r["orders"], "declared": r["declared_orders"]}, orders_table),
+    Table("misprints", lambda r: r["misprints"], misprints_table),
+    Table("least_error", lambda r: {p: r["least_error"][p] for p in PAPER_LEAST_ERROR if p in r["least_error"]},
+          least_error_table),
+)
+
+
 STUDY = Study("truncation", "Truncation error: the lecture's tables, global error against dt, round-off",
-              parameters, compute, plot, summary)
+              parameters, compute, plot, summary, tables=TABLES)

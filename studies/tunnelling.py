@@ -30,6 +30,7 @@ from steplab.physics.collision.shapes import Sphere
 from steplab.physics.collision.time_of_impact import lecture_sphere_sphere, sphere_sphere
 
 from . import plotting
+from .lecture import LECTURE_ERRORS_TABLE
 from .runner import Study
 
 #: the integrator: exact for straight-line motion, so every miss is the detector's
@@ -297,4 +298,4 @@ def summary(record: dict) -> list[tuple[str, str]]:
 
 
 STUDY = Study("tunnelling", "Tunnelling: overlap testing against swept testing, and bisection",
-              parameters, compute, plot, summary)
+              parameters, compute, plot, summary, tables=(LECTURE_ERRORS_TABLE,))

@@ -1,11 +1,12 @@
-"""Work-precision study and ``steplab recommend``: what accuracy each method buys per unit cost.
+"""Work-precision study: what accuracy each method buys per unit cost.
 
-Every fixed-step integrator runs over a range of dt, and the adaptive solvers (diffrax
-Tsit5 and Dopri8, scipy DOP853 and RK45) over a range of tolerances, on a small panel
+Every fixed-step integrator runs over a range of dt, and the adaptive solvers
+(diffrax-tsit5, diffrax-dopri8, scipy-dop853, scipy-rk45) over a range of tolerances, on a small panel
 of scenes. Each point records the final position error against the exact solution or
 the reference, the wall time, and the force evaluations. Compiled code is timed
 properly: compiled once (compile time recorded separately), warmed up, the median of
-TIMING_REPEATS calls, each ended with ``block_until_ready``.
+TIMING_REPEATS calls, each ended with ``block_until_ready`` (:mod:`.timing`); every
+adaptive solve goes through ``integrators.references.solve_adaptive``.
 """
 
 from __future__ import annotations
@@ -13,18 +14,22 @@ from __future__ import annotations
 import time
 
 import numpy as np
-from steplab.integrators import INTEGRATORS, Stepper
+from steplab.integrators import INTEGRATORS, Stepper, get_integrator
+from steplab.integrators.references import ReferenceFailedError, solve_adaptive
 from steplab.integrators.simulate import final_state_function
 
 from . import plotting
 from .problems import Problem, oscillator_problem, scene_problem, true_final
 from .runner import Study
+from .timing import first_call_seconds, median_time
 
 TIMING_REPEATS = 5
+#: timed solves of a scipy point (a Python loop: slower, and steadier, than compiled code)
+SCIPY_TIMING_REPEATS = 3
 #: new force evaluations per step of the FSAL diffrax solvers (stages - 1)
-DIFFRAX_EVALUATIONS = {"Tsit5": 6, "Dopri8": 13}
-#: the smallest step ``recommend`` considers sensible, as a fraction of the run
-DT_FLOOR_FRACTION = 2.0**-20
+DIFFRAX_EVALUATIONS = {"diffrax-tsit5": 6, "diffrax-dopri8": 13}
+#: diffrax's step budget per point (the tightest rtol of the panel takes ~10^4 steps)
+DIFFRAX_MAX_STEPS = 2**20
 
 
 def _panel(quick: bool) -> list[Problem]:
@@ -40,18 +45,7 @@ def parameters(quick: bool) -> dict:
     return {"scenes": [p.name for p in _panel(quick)], "integrators": steppers,
             "log2_steps": list(range(4, 13 if quick else 17, 2 if quick else 1)),
             "rtols": [10.0**-k for k in (range(3, 10, 3) if quick else range(3, 13))],
-            "adaptive": ["diffrax Tsit5", "diffrax Dopri8", "scipy DOP853", "scipy RK45"]}
-
-
-def _median_time(call) -> float:
-    """Median wall time of a warmed-up call that blocks until its result is ready."""
-    call()
-    times = []
-    for _ in range(TIMING_REPEATS):
-        start = time.perf_counter()
-        call()
-        times.append(time.perf_counter() - start)
-    return float(np.median(times))
+            "adaptive": ["diffrax-tsit5", "diffrax-dopri8", "scipy-dop853", "scipy-rk45"]}
 
 
 def _error(y, truth) -> float:
@@ -66,70 +60,65 @@ def fixed_step_point(problem: Problem, method: str, n: int, truth, run=None, tim
     y0 = jnp.asarray(problem.y0)
     dt = (problem.t_end - problem.t_start) / n
     y, bad = run(y0, problem.t_start, dt, n)
-    evaluations = None if INTEGRATORS[method].implicit else n * INTEGRATORS[method].evaluations
+    integrator = get_integrator(method)
+    evaluations = None if integrator.implicit else n * integrator.evaluations
     point = {"method": method, "dt": dt, "steps": n, "evaluations": evaluations}
     if int(bad) >= 0:
         return point | {"error": None, "seconds": None}
     if not timed:
         return point | {"error": _error(y, truth), "seconds": None}
-    seconds = _median_time(lambda: run(y0, problem.t_start, dt, n)[0].block_until_ready())
+    seconds = median_time(lambda: run(y0, problem.t_start, dt, n)[0].block_until_ready(), TIMING_REPEATS)
     return point | {"error": _error(y, truth), "seconds": seconds}
 
 
 def adaptive_point(problem: Problem, solver: str, rtol: float, truth, compiled: dict) -> dict:
-    """One point of an adaptive solver at ``rtol`` (atol = rtol x 1e-3 m)."""
-    library, name = solver.split()
-    if library == "scipy":
-        from scipy.integrate import solve_ivp
+    """One point of an adaptive solver (a name of ``ADAPTIVE_METHODS``) at ``rtol`` (atol = rtol x 1e-3 m)."""
+    ts = (problem.t_start, problem.t_end)
+    if solver.startswith("scipy"):
+        def call():
+            return solve_adaptive(problem.model.vector_field, ts, problem.y0, solver, rtol, rtol * 1e-3,
+                                  at_saved_times=False)
 
-        y0 = np.asarray(problem.y0, float)
-        fun = lambda t, y: np.asarray(problem.model.vector_field(t, y.reshape(y0.shape))).ravel()  # noqa: E731
-        call = lambda: solve_ivp(fun, (problem.t_start, problem.t_end), y0.ravel(), method=name,  # noqa: E731
-                                 rtol=rtol, atol=rtol * 1e-3)
         sol = call()
-        y = sol.y[:, -1].reshape(y0.shape)
-        seconds = float(np.median([_timed(call) for _ in range(3)]))
-        return {"method": solver, "rtol": rtol, "error": _error(y, truth), "seconds": seconds,
-                "evaluations": int(sol.nfev), "steps": int(sol.t.size - 1)}
+        seconds = median_time(call, SCIPY_TIMING_REPEATS)
+        return {"method": solver, "rtol": rtol, "error": _error(sol.ys[-1], truth), "seconds": seconds,
+                "evaluations": sol.evaluations, "steps": sol.steps}
     import jax.numpy as jnp
 
     if solver not in compiled:
-        compiled[solver] = _compile_diffrax(problem, name)
+        compiled[solver] = _compile_diffrax(problem, solver)
     run, compile_time = compiled[solver]
     rtol_arr = jnp.asarray(rtol)
     y, steps = run(rtol_arr)
-    seconds = _median_time(lambda: run(rtol_arr)[0].block_until_ready())
+    seconds = median_time(lambda: run(rtol_arr)[0].block_until_ready(), TIMING_REPEATS)
     return {"method": solver, "rtol": rtol, "error": _error(y, truth), "seconds": seconds,
-            "evaluations": int(steps) * DIFFRAX_EVALUATIONS[name] + 1, "steps": int(steps),
+            "evaluations": int(steps) * DIFFRAX_EVALUATIONS[solver] + 1, "steps": int(steps),
             "compile_seconds": compile_time}
 
 
-def _timed(call) -> float:
-    start = time.perf_counter()
-    call()
-    return time.perf_counter() - start
-
-
-def _compile_diffrax(problem: Problem, name: str):
+def _compile_diffrax(problem: Problem, solver: str):
     """A jitted diffrax solve with the tolerance as a traced argument (one compilation)."""
-    import diffrax
     import jax
     import jax.numpy as jnp
 
     model = problem.model.cast(jnp)
-    term = diffrax.ODETerm(lambda t, y, args: model.vector_field(t, y))
     y0 = jnp.asarray(problem.y0)
 
     @jax.jit
     def run(rtol):
-        sol = diffrax.diffeqsolve(term, getattr(diffrax, name)(), problem.t_start, problem.t_end, None, y0,
-                                  stepsize_controller=diffrax.PIDController(rtol=rtol, atol=rtol * 1e-3),
-                                  max_steps=2**20)
-        return sol.ys[-1], sol.stats["num_steps"]
+        sol = solve_adaptive(model.vector_field, (problem.t_start, problem.t_end), y0, solver, rtol, rtol * 1e-3,
+                             at_saved_times=False, max_steps=DIFFRAX_MAX_STEPS)
+        return sol.ys[-1], sol.steps, sol.success
 
-    start = time.perf_counter()
-    run(jnp.asarray(1e-6))[0].block_until_ready()
-    return run, time.perf_counter() - start
+    compile_time = first_call_seconds(lambda: run(jnp.asarray(1e-6))[0].block_until_ready())
+
+    def checked(rtol):
+        y, steps, success = run(rtol)
+        if not bool(success):
+            raise ReferenceFailedError(f"{solver} did not reach t = {problem.t_end:g} s at rtol = {float(rtol):g}")
+        return y, steps
+
+    return checked, compile_time
 
 
 def pareto(points: list[dict], cost: str) -> list[int]:
@@ -187,10 +176,10 @@ def plot(record: dict, out) -> list[str]:
                     continue
                 style = plotting.style(method)
                 if method.startswith(("diffrax", "scipy")):
-                    style.update(linestyle="--", marker={"diffrax Tsit5": "1", "diffrax Dopri8": "2",
-                                                         "scipy DOP853": "3", "scipy RK45": "4"}[method],
-                                 color={"diffrax Tsit5": "black", "diffrax Dopri8": "dimgray",
-                                        "scipy DOP853": "tab:cyan", "scipy RK45": "darkgoldenrod"}[method])
+                    style.update(linestyle="--", marker={"diffrax-tsit5": "1", "diffrax-dopri8": "2",
+                                                         "scipy-dop853": "3", "scipy-rk45": "4"}[method],
+                                 color={"diffrax-tsit5": "black", "diffrax-dopri8": "dimgray",
+                                        "scipy-dop853": "tab:cyan", "scipy-rk45": "darkgoldenrod"}[method])
                 ax.loglog([p[cost] for p in mp], [p["error"] for p in mp], ms=5, lw=1, **style)
             front = sorted((p for p in pts if p.get(f"pareto_{cost}") and p["error"] > 0), key=lambda p: p[cost])
             ax.loglog([p[cost] for p in front], [p["error"] for p in front], color="k", lw=5, alpha=0.15,
@@ -217,54 +206,3 @@ def summary(record: dict) -> list[tuple[str, str]]:
 
 STUDY = Study("work_precision", "Work-precision: error against wall time and force evaluations",
               parameters, compute, plot, summary)
-
-
-# --- recommend ----------------------------------------------------------------------
-
-
-class NoFixedStepError(RuntimeError):
-    pass
-
-
-def recommend(problem: Problem, tol: float) -> dict:
-    """The cheapest fixed-step integrator and dt, measured on ``problem``, whose error <= ``tol``.
-
-    For each integrator dt is halved from a quarter of the run until the error is below
-    ``tol`` at that dt and at half of it (so a lucky cancellation at one dt is not
-    trusted); its cost is the median compiled wall time. Returns ``integrator``, ``dt``,
-    ``error``, ``seconds``; when no method gets there above the dt floor, the result
-    names the reference that does instead (``integrator`` is then that reference).
-    """
-    import jax.numpy as jnp
-
-    truth, _ = true_final(problem)
-    span = problem.t_end - problem.t_start
-    max_log2 = int(round(-np.log2(DT_FLOOR_FRACTION)))
-    candidates = []
-    for method in (n for n, m in INTEGRATORS.items() if isinstance(m, Stepper)):
-        run = final_state_function(problem.model.cast(jnp), method)
-        previous = None
-        for k in range(2, max_log2 + 1):
-            point = fixed_step_point(problem, method, 2**k, truth, run, timed=False)
-            ok = point["error"] is not None and point["error"] <= tol
-            if ok and previous is not None:  # time only the method's answer
-                candidates.append(fixed_step_point(problem, method, previous["steps"], truth, run))
-                break
-            previous = point if ok else None
-            if INTEGRATORS[method].implicit and k >= 16:
-                break
-    if candidates:
-        best = min(candidates, key=lambda p: p["seconds"])
-        return {"integrator": best["method"], "dt": best["dt"], "error": best["error"],
-                "seconds": best["seconds"], "steps": best["steps"]}
-    # no fixed step reaches tol: report the adaptive reference that does
-    floor = f"no fixed-step method reaches {tol:g} m with dt >= {span * DT_FLOOR_FRACTION:.3g} s"
-    best = np.inf
-    for rtol in (1e-8, 1e-10, 1e-12, 1e-13):
-        point = adaptive_point(problem, "diffrax Dopri8", rtol, truth, {})
-        best = min(best, point["error"])
-        if point["error"] <= tol:
-            return {"integrator": "diffrax-dopri8", "dt": None, "rtol": rtol, "error": point["error"],
-                    "seconds": point["seconds"], "note": floor}
-    raise NoFixedStepError(f"{floor}, and neither does diffrax-dopri8 at rtol = 1e-13 (its error "
-                           f"{best:.2g} m): {tol:g} m is below what float64 round-off allows here")

@@ -95,7 +95,7 @@ def test_memory_bound_streams_the_bytes_it_claims():
     model, _ = bench.particles_model(1000)
     system = peers.PointMasses.from_model(model)
     # q and v read and written (2 x N x 3 doubles), 1/m and drag beta only read (2 x N doubles)
-    assert bench._step_bytes(model, system) == (2 * 1000 * 3 * 8, 2 * 1000 * 8)
+    assert bench.step_bytes(model, system) == (2 * 1000 * 3 * 8, 2 * 1000 * 8)
     peers.memory_stream(48_000, 16_000)()
 
 

@@ -42,6 +42,11 @@ def test_collect_and_render_from_records():
         lookup(records, "s/y")
 
 
+def test_a_table_names_the_study_whose_results_it_lacks():
+    with pytest.raises(ValueError, match="the table 'lecture_errors' needs the results of tunnelling"):
+        collect("{{table:lecture_errors}}", {"restitution": {"lecture_errors": []}})
+
+
 def test_html_links_citations():
     bib = parse_bib((PAPER / "paper.bib").read_text())
     assert bib["hairer2006"]["year"] == "2006"

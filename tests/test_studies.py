@@ -9,7 +9,7 @@ from steplab.studies import runner
 from steplab.studies.lecture import lecture_check
 from steplab.studies.plotting import plt, save_figure
 from steplab.studies.problems import oscillator_problem, true_final
-from steplab.studies.stability_limits import measured_limit, oscillator_mode, theoretical_limit
+from steplab.studies.stability_limits import measured_limit, oscillator_mode
 from steplab.studies.truncation import error_curve, fit_order
 
 STEPPERS = [name for name, method in INTEGRATORS.items() if isinstance(method, Stepper)]
@@ -64,7 +64,8 @@ THEORY = {  # closed forms, undamped and zeta = 0.1
 
 @pytest.mark.parametrize("key", THEORY)
 def test_theoretical_limit_matches_closed_form(key):
-    value = theoretical_limit(*key)
+    method, zeta = key
+    value = INTEGRATORS[method].stability_limit(zeta)
     if THEORY[key] is None:
         assert value is None
     else:
@@ -75,7 +76,7 @@ def test_theoretical_limit_matches_closed_form(key):
 @pytest.mark.parametrize("method", STEPPERS)
 def test_measured_stability_limit_within_one_percent_of_theory(method, zeta):
     measured = measured_limit(oscillator_mode(zeta), method, 5000)["omega_dt_max"]
-    theory = theoretical_limit(method, zeta)
+    theory = INTEGRATORS[method].stability_limit(zeta)
     if theory is None:
         assert measured is None
     elif theory == 0:
@@ -109,7 +110,9 @@ def test_implicit_euler_pays_the_predicted_amplitude_per_period():
     from steplab.studies.stiffness import implicit_euler_damping
 
     for row in implicit_euler_damping([0.01, 0.3, 3.0, 30.0])["rows"]:
-        assert row["amplitude_kept_per_period"] == pytest.approx(row["theory"], rel=1e-6)
+        y = row["omega_dt"]  # |R(i y)| = 1 / sqrt(1 + y^2) per step, 2 pi / y steps per period
+        assert row["theory"] == pytest.approx((1 + y * y) ** (-np.pi / y), rel=1e-12)
+        assert row["amplitude_kept_per_period"] == pytest.approx((1 + y * y) ** (-np.pi / y), rel=1e-6)
 
 
 def test_long_run_energy_on_the_kepler_orbit():
@@ -231,7 +234,7 @@ def test_recommend_meets_the_tolerance_when_run_independently():
     """Re-run what `recommend` picks on the NumPy path: the error stays under the tolerance."""
     from steplab.integrators import simulate
     from steplab.studies.problems import scene_problem
-    from steplab.studies.work_precision import recommend
+    from steplab.studies.recommend import recommend
 
     problem = scene_problem("drag-projectile", 2.0, "drag")
     truth, _ = true_final(problem)
@@ -245,7 +248,7 @@ def test_recommend_meets_the_tolerance_when_run_independently():
 
 
 def test_recommend_names_the_reference_when_no_fixed_step_gets_there():
-    from steplab.studies.work_precision import recommend
+    from steplab.studies.recommend import recommend
 
     choice = recommend(oscillator_problem(t_end=0.3), 1e-12)
     assert choice["integrator"] in ("rk4", "diffrax-dopri8")

@@ -30,6 +30,7 @@ from .bounding_volumes import Hierarchy as Hierarchy
 from .bounding_volumes import hierarchy_overlaps as hierarchy_overlaps
 from .bounding_volumes import overlaps as overlaps
 from .contact import Contact as Contact
+from .detectors import DETECTOR_NAMES as DETECTOR_NAMES
 from .events import Collision as Collision
 from .events import CollisionLog as CollisionLog
 from .events import cancel_triggers as cancel_triggers
@@ -44,5 +45,4 @@ from .shapes import Plane as Plane
 from .shapes import Sphere as Sphere
 from .shapes import rotation_matrix as rotation_matrix
 from .time_of_impact import time_of_impact as time_of_impact
-from .world import DETECTOR_NAMES as DETECTOR_NAMES
 from .world import CollisionWorld as CollisionWorld

@@ -17,8 +17,11 @@ import numpy as np
 from . import overlap, swept
 from .response import normal_speed
 
-#: detector name -> collision_times(pairs, radii, q0, q1, iterations) -> (s, bracket start)
+#: detector name -> collision_times(pairs, radii, q0, q1, iterations) -> (s, bracket start); the one
+#: list of detectors: the world's validation, the scene schema and the command line read it
 DETECTORS = {"none": None, "overlap": overlap.collision_times, "swept": swept.collision_times}
+#: the detectors, by name ("none": no collision handling)
+DETECTOR_NAMES = tuple(DETECTORS)
 
 
 @dataclasses.dataclass(frozen=True)

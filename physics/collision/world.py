@@ -5,13 +5,14 @@ from __future__ import annotations
 import dataclasses
 from collections.abc import Callable
 
+import numpy as np
+
+from .detectors import DETECTOR_NAMES as DETECTOR_NAMES
 from .events import CollisionLog, cancel_triggers
 from .pairs import DEFAULT_BROADPHASE
 from .response import PairProperties
 from .shapes import DEFAULT_MATERIAL, Shape
 
-#: the detectors, by name
-DETECTOR_NAMES = ("none", "overlap", "swept")
 #: bisection iterations of overlap testing (the lecture: "usually 5 iterations is pretty close")
 DEFAULT_BISECTION_ITERATIONS = 5
 #: collisions resolved per step before the rest of the step is left unresolved (and reported)
@@ -27,7 +28,8 @@ class CollisionWorld:
 
     Parameters
     ----------
-    detector : {"none", "overlap", "swept"}
+    detector : str
+        One of :data:`.detectors.DETECTOR_NAMES`: "none", "overlap" or "swept".
     shapes : tuple of Shape
         Static geometry: planes, boxes, oriented boxes (triggers among them).
     materials : tuple of str
@@ -81,10 +83,22 @@ class CollisionWorld:
     def new_log(self) -> CollisionLog:
         return CollisionLog()
 
-    def step(self, log, model, integrator, t, y, dt, carry):
-        """One physics step with collisions (see :func:`physics.collision.step.physics_step`)."""
-        if self.detector == "none":
-            return integrator.step(model, t, y, dt, carry)
-        from .step import physics_step
+    def stepper(self, model, integrator):
+        """The physics step of one run, ``step(t, y, dt, carry)``, holding its collision log.
 
-        return physics_step(self, log, model, integrator, t, y, dt, carry)
+        ``simulate(..., collisions=world)`` calls this once before its loop. None for the
+        detector "none": the integrator's own step, on any backend. ValueError for what
+        collision handling cannot serve: a solver, or a model on another backend than NumPy.
+        """
+        if self.detector == "none":
+            return None
+        if not hasattr(integrator, "step"):  # a solver: it has no steps to put collisions between
+            raise ValueError(f"collisions need a fixed-step integrator, not the {integrator.kind} solver "
+                             f"'{integrator.name}' (use the detector 'none')")
+        if model.xp is not np:
+            backend = model.xp.__name__.split(".")[0]
+            raise ValueError(f"collision detection runs on the NumPy backend only, not {backend!r} "
+                             "(use backend 'numpy', or the detector 'none')")
+        from .step import CollisionStep
+
+        return CollisionStep(self, model, integrator)

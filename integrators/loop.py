@@ -1,0 +1,111 @@
+"""The one compiled loop: fixed steps of a stepper as a jitted JAX program.
+
+Every compiled run of a fixed-step method goes through :func:`compiled_loop`:
+``simulate(backend="jax")`` (states saved every so many steps), the sweeps over dt of
+the studies (only the final state, with ``dt`` and ``n`` traced so one compilation
+serves the whole sweep), the stability study's long energy runs (an observer evaluated
+after every step instead of the states) and the bench (the same loop, with the check
+turned off to measure what the check costs).
+
+After every step the loop checks the state: a component that is non-finite or beyond
+``limit`` marks the run as diverged, and the loop returns the 1-based index of that
+first bad step (or -1). One reduction does it: NaN fails ``|y| <= limit``.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+
+#: the "no bad step" value of the loop's first-bad-step counter
+NO_BAD_STEP = -1
+
+
+def compiled_loop(model, integrator, **options):
+    """:func:`fixed_step_loop`, jitted: ``run(y0, t_start, dt, n, limit) -> (out, first bad step)``."""
+    import jax
+
+    return jax.jit(fixed_step_loop(model, integrator, **options))
+
+
+def fixed_step_loop(model, integrator, *, chunks: int | None = None, save_every: int = 1,
+                    observe: Callable | None = None, check: bool = True, halt: bool = False):
+    """The loop as a function to trace: ``run(y0, t_start, dt, n, limit) -> (out, first bad step)``.
+
+    :func:`compiled_loop` jits it as it is, every argument traced. A caller that wants
+    some arguments fixed at compile time jits a closure over it instead: XLA rounds a
+    step with a constant ``dt`` differently (it folds ``dt / 2`` and the like), and the
+    stability study's records were made with a constant ``dt``.
+
+    Parameters
+    ----------
+    model : physics.Model
+        On the JAX backend.
+    integrator : Stepper
+    chunks : int, optional
+        None: ``out`` is the final state y_n, and ``n`` may be traced (a ``fori_loop``,
+        one compilation for every n and dt). An int: the loop is ``chunks`` scan
+        iterations of up to ``save_every`` steps each (the last chunk may be shorter),
+        and ``out`` stacks ``observe(y)`` after every chunk, shape ``(chunks, ...)``, so
+        memory grows with the number of saved values only.
+    save_every : int
+        Steps per chunk. With 1, each scan iteration is one step, and the loop runs
+        exactly ``chunks`` steps (pass n = chunks).
+    observe : callable, optional
+        ``observe(y) -> array``, what is saved after each chunk (default: the state).
+        With ``save_every=1`` it is evaluated after every step (the energy of a long run).
+    check : bool
+        Check every step for divergence. Off, the loop carries no counter and the
+        first bad step is always -1 (the bench measures the check's cost this way).
+    halt : bool
+        Stop stepping once a step is bad (the state stays the last one computed): an
+        implicit method's Newton iteration would otherwise spend its whole budget on
+        NaN at every remaining step.
+
+    Notes
+    -----
+    Step k (0-based) starts at ``t_start + k dt``, the time the NumPy loop gives it, so
+    both backends run the same operations in the same order; XLA's fusion still rounds
+    a few of them differently, so the two agree to round-off, not bit for bit.
+    """
+    import jax.numpy as jnp
+    from jax import lax
+
+    observe = observe or (lambda y: y)
+
+    def run(y0, t_start, dt, n, limit):
+        def one_step(k, state):
+            if not check:
+                y, carry = state
+                return integrator.step(model, t_start + k * dt, y, dt, carry)
+            y, carry, bad = state
+            if halt:
+                y, carry = lax.cond(bad < 0, lambda: integrator.step(model, t_start + k * dt, y, dt, carry),
+                                    lambda: (y, carry))
+            else:
+                y, carry = integrator.step(model, t_start + k * dt, y, dt, carry)
+            ok = jnp.all(jnp.abs(y) <= limit)
+            return y, carry, jnp.where((bad < 0) & ~ok, k + 1, bad)
+
+        state = (y0, integrator.init(model, t_start, y0))
+        if check:
+            state += (jnp.asarray(NO_BAD_STEP, dtype=jnp.int64),)
+
+        def first_bad(state):
+            return state[2] if check else jnp.asarray(NO_BAD_STEP, dtype=jnp.int64)
+
+        if chunks is None:
+            state = lax.fori_loop(0, n, one_step, state)
+            return state[0], first_bad(state)
+
+        def chunk(state, c):
+            if save_every == 1:  # one step per scan iteration: no inner loop
+                state = one_step(c, state)
+            else:
+                first = c * save_every
+                state = lax.fori_loop(first, jnp.minimum(first + save_every, n), one_step, state)
+            return state, observe(state[0])
+
+        state, out = lax.scan(chunk, state, jnp.arange(chunks))
+        return out, first_bad(state)
+
+    return run

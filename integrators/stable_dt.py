@@ -1,0 +1,91 @@
+"""The largest stable dt of each fixed-step method on a model, predicted before running.
+
+An explicit method is stable on a linear mode of frequency omega and damping ratio zeta
+while omega dt stays under the method's own limit on the damped oscillator
+(:meth:`Stepper.stability_limit`, from its stability function or amplification matrix).
+Every mode of the linearised model must be stable, and the stiffest one
+(:func:`steplab.physics.modes.stiffest_mode`, omega_max) fails first, so
+
+    dt_max = stability_limit(zeta) / omega_max.
+
+With proportional damping (the soft bodies' dampers sit on their springs) the stiffest
+mode is also the most damped one, and the damped limit is the one a run meets; the
+undamped limit is reported beside it (the textbook 2 / omega_max of symplectic Euler).
+A model without a restoring force (no springs) has no oscillating mode and no limit.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+
+from steplab.physics.modes import NonFiniteModelError, StiffestMode, stiffest_mode
+
+from .base import Stepper
+
+#: a one-step spectral radius above 1 + this counts as growth (the symplectic methods sit
+#: exactly on |eigenvalue| = 1 below their limit, up to round-off)
+GROWTH_TOLERANCE = 1e-12
+
+
+@dataclasses.dataclass(frozen=True)
+class StableStep:
+    """One method's predicted limits on one model (None: no limit; 0: unstable at every dt)."""
+
+    integrator: str
+    omega_dt_max: float | None  # undamped
+    dt_max: float | None
+    omega_dt_max_damped: float | None  # at the stiffest mode's damping ratio
+    dt_max_damped: float | None
+
+    def stable(self, dt: float) -> bool:
+        """Whether ``dt`` is within the damped limit (the one a run meets)."""
+        return self.dt_max_damped is None or dt <= self.dt_max_damped
+
+
+def _dt(limit: float | None, omega: float) -> float | None:
+    return None if limit is None else limit / omega
+
+
+def stable_step(mode: StiffestMode, stepper: Stepper) -> StableStep:
+    """The largest stable dt of ``stepper`` on a model whose stiffest mode is ``mode``."""
+    if mode.omega is None:
+        return StableStep(stepper.name, None, None, None, None)
+    undamped = stepper.stability_limit(0.0)
+    damped = undamped if mode.damping_ratio == 0 else stepper.stability_limit(mode.damping_ratio)
+    return StableStep(stepper.name, undamped, _dt(undamped, mode.omega), damped, _dt(damped, mode.omega))
+
+
+def stable_steps(model, q, steppers) -> tuple[StiffestMode, list[StableStep]]:
+    """The stiffest mode of ``model`` at positions ``q`` and each stepper's limits on it."""
+    mode = stiffest_mode(model, q)
+    return mode, [stable_step(mode, s) for s in steppers if isinstance(s, Stepper)]
+
+
+def dt_warning(model, q, stepper, dt: float) -> str | None:
+    """One line when ``dt`` exceeds the largest stable dt of ``stepper`` on ``model``, else None.
+
+    Cheap enough to run before every ``steplab run``: the mode by central differences
+    (milliseconds, no compilation), then one spectral radius at omega_max dt; the limit
+    itself is searched only when that step already grows. Silent for a model without
+    springs or with forces that overflow at the initial state, for a solver, for an
+    unconditionally stable method, and for one unstable at every dt (explicit Euler on an
+    undamped mode: its slow growth is the lecture's point).
+    """
+    if not isinstance(stepper, Stepper):
+        return None
+    try:
+        mode = stiffest_mode(model, q, derivative="difference")
+    except NonFiniteModelError:  # the run itself will say what is wrong
+        return None
+    if mode.omega is None or stepper.spectral_radius(mode.omega * dt, mode.damping_ratio) <= 1 + GROWTH_TOLERANCE:
+        return None
+    limit = stable_step(mode, stepper)
+    if not limit.dt_max_damped:  # None: no limit; 0: unstable at every dt
+        return None
+    damped = f", damping ratio {mode.damping_ratio:.3g}" if mode.damping_ratio else ""
+    hint = (f" (a dt in milliseconds? {dt:g} ms is --dt {dt / 1000:g})"
+            if dt >= 1 and dt / 1000 <= limit.dt_max_damped else "")
+    return (f"dt = {dt:g} s exceeds the largest stable dt of {stepper.name} on this scene, "
+            f"{limit.dt_max_damped:.3g} s (stiffest mode: omega_max = {mode.omega:.4g} rad/s{damped}; "
+            f"omega dt = {mode.omega * dt:.3g} > {limit.omega_dt_max_damped:.4g}): the run will blow up{hint}; "
+            "see steplab check")

@@ -1,0 +1,97 @@
+"""``steplab bench``: steplab side by side with diffrax, scipy, Numba and the memory bound.
+
+Each comparison runs the same method with the same dt and the same number of steps (the
+accuracy-matched ones instead reach the same final error), in this one process. Every
+contender is compiled and called once before timing; then the contenders are called in
+turn, round after round, and each one's median is taken, so a burst of load from
+elsewhere on the machine hits all of them alike. A ratio is steplab's median over the
+peer's: below 1, steplab is faster. Each comparison also records how far apart the two
+final states are, to show they computed the same thing.
+
+The targets of issue 6 are reported as met or missed, never asserted: timings belong
+in a benchmark, not in a unit test.
+
+The package, one job a module: :mod:`.config` (sizes, targets), :mod:`.comparisons` (the
+sections), :mod:`.systems` (the large models), :mod:`.profile` (loop kernels from the
+compiled text), :mod:`.record` and :mod:`.report` (the JSON record and its tables); the
+timer is the studies' (:mod:`steplab.studies.timing`).
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import sys
+import time
+from collections.abc import Callable
+
+from steplab.studies.timing import Times as Times
+from steplab.studies.timing import interleaved_medians as interleaved_medians
+from steplab.studies.timing import interleaved_samples as interleaved_samples
+from steplab.studies.timing import interleaved_times as interleaved_times
+
+from .comparisons import SECTIONS as SECTIONS
+from .config import COMPILE_TARGET_SECONDS as COMPILE_TARGET_SECONDS
+from .config import FULL as FULL
+from .config import QUICK as QUICK
+from .config import REQUIRED_RATIOS as REQUIRED_RATIOS
+from .config import SEED as SEED
+from .config import TARGETS as TARGETS
+from .config import Config as Config
+from .profile import loop_kernels as loop_kernels
+from .record import Record as Record
+from .report import format_markdown as format_markdown
+from .report import format_table as format_table
+from .report import rows as rows
+from .systems import cloth_model as cloth_model
+from .systems import particles_model as particles_model
+from .systems import step_bytes as step_bytes
+
+
+def run_bench(config: Config, quick: bool = False, progress: Callable[[str], None] | None = None) -> dict:
+    """Run every comparison; returns the record ``--json`` writes."""
+    from steplab.studies.runner import provenance
+
+    progress = progress or (lambda message: None)
+    record = Record(config, quick)
+    start = time.perf_counter()
+    for section in SECTIONS:
+        begin = time.perf_counter()
+        section(config, record, progress)
+        record.data["details"].setdefault("section_seconds", {})[section.__name__] = time.perf_counter() - begin
+    record.data["details"]["total_seconds"] = time.perf_counter() - start
+    # what Equinox actually runs with (it reads EQX_ON_ERROR once, when first imported)
+    from equinox import _config as equinox_config
+
+    record.data["details"]["EQX_ON_ERROR"] = getattr(equinox_config, "EQX_ON_ERROR", None)
+    record.data["provenance"] = provenance()
+    return record.data
+
+
+def fair_diffrax() -> None:
+    """Turn off Equinox's run-time error checks for this process, as diffrax's FAQ asks.
+
+    When comparing with other JAX code, the FAQ says to set ``EQX_ON_ERROR=nan`` before
+    Equinox is imported: Equinox reads it once, at import, so this only acts before any
+    diffrax use (the record says what Equinox actually ran with). Only ``steplab bench``, a process of its
+    own, calls it: elsewhere diffrax must keep raising on a failed solve.
+    """
+    if "equinox" not in sys.modules:
+        os.environ.setdefault("EQX_ON_ERROR", "nan")
+
+
+def command(args) -> int:
+    """``steplab bench``: run (or, with ``--from``, re-print) the comparisons."""
+    fair_diffrax()
+    if args.source is not None:
+        record = json.loads(args.source.read_text())
+    else:
+        config = QUICK if args.quick else FULL
+        log = (lambda message: print(f"[bench] {message}", file=sys.stderr, flush=True))
+        record = run_bench(config, quick=args.quick, progress=log)
+        if args.json is not None:
+            from steplab.studies.records import write_json
+
+            write_json(args.json, record)
+    print(format_markdown(record) if args.markdown else format_table(record))
+    return 0

@@ -1,0 +1,65 @@
+"""What one bench run measures: its sizes, its seed, and the targets of issue 6."""
+
+from __future__ import annotations
+
+import dataclasses
+
+#: seed of every random scene the bench builds
+SEED = 20240611
+#: largest acceptable ratio, steplab / peer, per comparison (issue 6, "Targets")
+TARGETS = {
+    "vs_diffrax_semi_implicit_euler": 0.5,
+    "vs_diffrax_euler": 0.5,
+    "vs_diffrax_rk4": 0.5,
+    "vs_numba_semi_implicit_euler": 1.5,
+    "vs_memory_bound_1e6": 1.5,
+    "vs_scipy_at_1e-8": 0.05,
+    "vs_ckdtree_1e5": 0.5,
+}
+#: longest acceptable JIT compilation of a built-in scene, s
+COMPILE_TARGET_SECONDS = 2.0
+#: the ratios ``--json`` always carries (the issue's JSON contract)
+REQUIRED_RATIOS = ("vs_diffrax_semi_implicit_euler", "vs_numba_semi_implicit_euler", "vs_memory_bound_1e6",
+                   "vs_scipy_at_1e-8", "vs_ckdtree_1e5")
+
+
+@dataclasses.dataclass(frozen=True)
+class Config:
+    """Sizes and repeats of one bench run."""
+
+    #: steps of the small system (one oscillator; its dt is small_dt)
+    small_steps: int
+    #: particles of the large system (gravity and drag)
+    particles: int
+    #: the cloth is a side x side grid with structural and shear springs (160: 101,442 springs)
+    cloth_side: int
+    #: spheres of the broadphase comparison
+    broadphase_n: int
+    #: oscillator periods of the accuracy-matched comparison
+    periods: float
+    #: fixed-step searches stop at 2^max_log2_steps steps
+    max_log2_steps: int
+    #: simulations in one batched call, and their steps
+    batch: int
+    batch_steps: int
+    #: timed rounds per comparison (the plain Python loop and scipy get python_repeats)
+    repeats: int
+    python_repeats: int
+    #: steps of the plain-Python-loop comparison (steplab runs the same number there)
+    python_steps: int
+    small_dt: float = 1e-3
+    #: steps per timed call of the large systems; the per-step cost is the marginal one,
+    #: (t(2K) - t(K)) / K, which leaves out the cost of entering and leaving the loop
+    loop_steps: int = 4
+    #: final position error the accuracy-matched comparison asks for, m
+    tolerance: float = 1e-8
+    #: built-in scenes whose compile time is measured (None: all of them)
+    compile_scenes: tuple[str, ...] | None = None
+
+
+FULL = Config(small_steps=100_000, particles=1_000_000, cloth_side=160, broadphase_n=100_000, periods=100,
+              max_log2_steps=22, batch=256, batch_steps=2_500, repeats=9, python_repeats=3, python_steps=100_000)
+#: the systems the targets are stated for, with fewer rounds, smaller batches, 20 oscillator
+#: periods for the accuracy match and 10^4 steps for the Python loop: under a minute
+QUICK = Config(small_steps=100_000, particles=1_000_000, cloth_side=160, broadphase_n=100_000, periods=20,
+               max_log2_steps=20, batch=64, batch_steps=2_500, repeats=5, python_repeats=2, python_steps=10_000)

@@ -1,0 +1,53 @@
+"""The record of one bench run: every comparison's ratio, medians, minimums and what was compared."""
+
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+
+from steplab.studies.timing import Times
+
+from .config import TARGETS, Config
+
+
+def final_difference(a, b) -> float:
+    """Largest |difference| of two final states (positions and velocities), or of two arrays."""
+    return float(np.max(np.abs(np.asarray(a, dtype=float) - np.asarray(b, dtype=float)), initial=0.0))
+
+
+class Record:
+    """The numbers of one bench run, as ``--json`` writes them."""
+
+    def __init__(self, config: Config, quick: bool):
+        self.data = {"quick": quick, "config": dataclasses.asdict(config), "ratios": {}, "seconds": {},
+                     "targets": {}, "details": {}, "compile_seconds": {}, "order": []}
+
+    def compare(self, name: str, group: str, what: str, peer: str, steplab: Times, peer_times: Times,
+                difference: float | None = None, **details) -> None:
+        """Record ratio ``name`` = steplab's median / the peer's, both medians and what was compared.
+
+        ``difference`` is the largest |difference| of the two final states (None where the
+        peer computes no state, as for the memory bound).
+        """
+        self.data["ratios"][name] = steplab.median / peer_times.median
+        self.data["seconds"][name] = {
+            "steplab": steplab.median, "peer": peer_times.median, "peer_name": peer, "group": group, "what": what,
+            "difference": difference, "steplab_min": steplab.minimum, "peer_min": peer_times.minimum,
+            "ratio_of_minimums": steplab.minimum / peer_times.minimum, "rounds": steplab.rounds, **details}
+        self.data["order"].append(name)
+        self._check_target(name)
+
+    def alias(self, name: str, source: str) -> None:
+        """A contract name for another comparison's numbers (e.g. the worse of two problems)."""
+        self.data["ratios"][name] = self.data["ratios"][source]
+        self.data["seconds"][name] = self.data["seconds"][source] | {"alias_of": source}
+        self._check_target(name)
+
+    def _check_target(self, name: str) -> None:
+        if name in TARGETS:
+            ratio = self.data["ratios"][name]
+            self.data["targets"][name] = {"target": TARGETS[name], "ratio": ratio, "met": ratio <= TARGETS[name]}
+            source = self.data["seconds"][name].get("alias_of")
+            if source is not None:
+                self.data["targets"][name]["alias_of"] = source

@@ -1,0 +1,76 @@
+"""The bench's report: one row per comparison, as a table for the terminal or as Markdown."""
+
+from __future__ import annotations
+
+
+def rows(record: dict) -> list[dict]:
+    """One row per comparison, in the order run: name, group, what, peer, medians, ratio, target."""
+    out = []
+    for name in record["order"]:
+        s = record["seconds"][name]
+        target = record["targets"].get(name) or next(
+            (t for t in record["targets"].values() if t.get("alias_of") == name), None)
+        out.append({"name": name, "group": s["group"], "what": s["what"], "peer": s["peer_name"],
+                    "steplab": s["steplab"], "peer_seconds": s["peer"], "ratio": record["ratios"][name],
+                    "ratio_of_minimums": s.get("ratio_of_minimums"),
+                    "target": None if target is None else target["target"],
+                    "met": None if target is None else target["met"]})
+    return out
+
+
+def _seconds(s: float) -> str:
+    for unit, scale in (("s", 1.0), ("ms", 1e-3), ("µs", 1e-6), ("ns", 1e-9)):
+        if s >= scale:
+            return f"{s / scale:.3g} {unit}"
+    return f"{s:.2g} s"
+
+
+def _verdict(row) -> str:
+    if row["target"] is None:
+        return ""
+    return f"≤ {row['target']:g}: {'met' if row['met'] else 'missed'}"
+
+
+def format_table(record: dict) -> str:
+    lines = [f"{'group':<17} {'comparison':<40} {'peer':<44} {'steplab':>9} {'peer':>9} {'ratio':>7} "
+             f"{'(min)':>7}  target on the ratio"]
+    for r in rows(record):
+        lines.append(f"{r['group']:<17} {r['name']:<40} {r['peer'][:44]:<44} {_seconds(r['steplab']):>9} "
+                     f"{_seconds(r['peer_seconds']):>9} {r['ratio']:>7.3g} {_ratio(r['ratio_of_minimums']):>7}  "
+                     f"{_verdict(r)}")
+    lines += _footer(record)
+    return "\n".join(lines)
+
+
+def format_markdown(record: dict) -> str:
+    lines = ["| comparison | what | peer | steplab | peer | ratio | ratio of minimums | target |",
+             "|---|---|---|---|---|---|---|---|"]
+    for r in rows(record):
+        lines.append(f"| `{r['name']}` | {r['what']} | {r['peer']} | {_seconds(r['steplab'])} | "
+                     f"{_seconds(r['peer_seconds'])} | {r['ratio']:.3g} | {_ratio(r['ratio_of_minimums'])} | "
+                     f"{_verdict(r)} |")
+    lines.append("")
+    lines += [f"- {line}" for line in _footer(record)]
+    return "\n".join(lines)
+
+
+def _ratio(value) -> str:
+    return "" if value is None else f"{value:.3g}"
+
+
+def _footer(record: dict) -> list[str]:
+    out = []
+    c = record["targets"].get("compile_seconds_max")
+    if c is not None:
+        out.append(f"JIT compile time, slowest built-in scene: {c['seconds']:.3g} s ({c['scene']}); "
+                   f"target ≤ {c['target']:g} s: {'met' if c['met'] else 'missed'}")
+    others = {k: v for k, v in record["compile_seconds"].items() if not k.startswith("scene ")}
+    if others:
+        out.append("JIT compile time, " + ", ".join(f"{k}: {v:.3g} s" for k, v in others.items()))
+    prov = record.get("provenance", {})
+    mode = "quick" if record["quick"] else "full"
+    out.append(f"ratio = steplab median / peer median (below 1: steplab faster), (min) the same of the "
+               f"fastest rounds; {mode} run, "
+               f"{record['config']['repeats']} interleaved rounds; {prov.get('cpu', '?')}, "
+               f"jax {prov.get('packages', {}).get('jax', '?')}, commit {str(prov.get('git_commit'))[:10]}")
+    return out

@@ -1,0 +1,66 @@
+"""``steplab recommend``: the cheapest fixed-step integrator and dt that meet an error tolerance.
+
+It measures rather than predicts: each fixed-step method runs on the problem at halving
+dt until its error against the exact solution (or the reference) is below the
+tolerance, using the work-precision study's measurement of one fixed-step point.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from steplab.integrators import INTEGRATORS, Stepper
+from steplab.integrators.simulate import final_state_function
+
+from .problems import Problem, true_final
+from .work_precision import adaptive_point, fixed_step_point
+
+#: the smallest step ``recommend`` considers sensible, as a fraction of the run
+DT_FLOOR_FRACTION = 2.0**-20
+
+
+class NoFixedStepError(RuntimeError):
+    """Neither a fixed-step method above the dt floor nor the adaptive reference meets the tolerance."""
+
+
+def recommend(problem: Problem, tol: float) -> dict:
+    """The cheapest fixed-step integrator and dt, measured on ``problem``, whose error <= ``tol``.
+
+    For each integrator dt is halved from a quarter of the run until the error is below
+    ``tol`` at that dt and at half of it (so a lucky cancellation at one dt is not
+    trusted); its cost is the median compiled wall time. Returns ``integrator``, ``dt``,
+    ``error``, ``seconds``; when no method gets there above the dt floor, the result
+    names the reference that does instead (``integrator`` is then that reference).
+    """
+    import jax.numpy as jnp
+
+    truth, _ = true_final(problem)
+    span = problem.t_end - problem.t_start
+    max_log2 = int(round(-np.log2(DT_FLOOR_FRACTION)))
+    candidates = []
+    for method in (n for n, m in INTEGRATORS.items() if isinstance(m, Stepper)):
+        run = final_state_function(problem.model.cast(jnp), method)
+        previous = None
+        for k in range(2, max_log2 + 1):
+            point = fixed_step_point(problem, method, 2**k, truth, run, timed=False)
+            ok = point["error"] is not None and point["error"] <= tol
+            if ok and previous is not None:  # time only the method's answer
+                candidates.append(fixed_step_point(problem, method, previous["steps"], truth, run))
+                break
+            previous = point if ok else None
+            if INTEGRATORS[method].implicit and k >= 16:
+                break
+    if candidates:
+        best = min(candidates, key=lambda p: p["seconds"])
+        return {"integrator": best["method"], "dt": best["dt"], "error": best["error"],
+                "seconds": best["seconds"], "steps": best["steps"]}
+    # no fixed step reaches tol: report the adaptive reference that does
+    floor = f"no fixed-step method reaches {tol:g} m with dt >= {span * DT_FLOOR_FRACTION:.3g} s"
+    best = np.inf
+    for rtol in (1e-8, 1e-10, 1e-12, 1e-13):
+        point = adaptive_point(problem, "diffrax-dopri8", rtol, truth, {})
+        best = min(best, point["error"])
+        if point["error"] <= tol:
+            return {"integrator": "diffrax-dopri8", "dt": None, "rtol": rtol, "error": point["error"],
+                    "seconds": point["seconds"], "note": floor}
+    raise NoFixedStepError(f"{floor}, and neither does diffrax-dopri8 at rtol = 1e-13 (its error "
+                           f"{best:.2g} m): {tol:g} m is below what float64 round-off allows here")

@@ -1,0 +1,87 @@
+"""Writing records and figures atomically: the one writer every result file goes through.
+
+A file is written to a temporary name beside its destination and renamed into place
+(``os.replace`` is atomic on POSIX), so a reader never sees a half-written file even if
+the process is killed mid-write. The studies' runner, the plots, the paper, the bench,
+the animations and ``steplab run``'s trajectories all write through here.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import json
+import os
+import tempfile
+from collections.abc import Callable, Iterator
+from pathlib import Path
+
+#: the names the writer gives its temporary files: ``.<name>.<random>.tmp``, and
+#: ``.<name>.<random>.tmp.<ext>`` for writers that pick the format from the name (animations)
+TEMPORARY_PATTERNS = (".*.*.tmp", ".*.*.tmp.*")
+
+
+def write_atomic(path: str | Path, data: bytes) -> None:
+    """Write ``data`` to ``path`` so that ``path`` is either the old file or the whole new one."""
+    with atomic_path(path) as tmp:
+        with open(tmp, "wb") as f:
+            f.write(data)
+            f.flush()
+            os.fsync(f.fileno())
+
+
+def write_json(path: str | Path, record) -> None:
+    """A record as sorted, indented JSON (the same record gives the same bytes), atomically."""
+    write_atomic(path, (json.dumps(record, indent=2, sort_keys=True) + "\n").encode())
+
+
+def write_with(path: str | Path, save: Callable[[Path], object]) -> None:
+    """Let ``save(tmp)`` write a file itself (matplotlib's animation writers need a real
+    file, not bytes), then move it onto ``path`` atomically."""
+    with atomic_path(path, keep_suffix=True) as tmp:
+        save(tmp)
+
+
+@contextlib.contextmanager
+def atomic_path(path: str | Path, keep_suffix: bool = False) -> Iterator[Path]:
+    """A fresh temporary file beside ``path`` to write into; renamed onto ``path`` when the
+    block ends, deleted if it raises.
+
+    ``keep_suffix`` ends the temporary name with ``path``'s suffix
+    (``.<name>.<random>.tmp.gif``), for writers that choose the format by extension.
+    """
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    suffix = ".tmp" + (path.suffix if keep_suffix else "")
+    fd, name = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=suffix)
+    os.close(fd)
+    tmp = Path(name)
+    try:
+        os.chmod(tmp, 0o666 & ~_umask())  # mkstemp makes 0600; results are for everyone to read
+        yield tmp
+        os.replace(tmp, path)
+    except BaseException:
+        with contextlib.suppress(FileNotFoundError):
+            os.unlink(tmp)
+        raise
+
+
+def _umask() -> int:
+    """The process's umask (reading it means setting it: set it straight back)."""
+    mask = os.umask(0)
+    os.umask(mask)
+    return mask
+
+
+def remove_temporary_files(folder: str | Path) -> list[Path]:
+    """Delete the temporary files a killed writer left in ``folder`` (SIGKILL skips clean-up).
+
+    Call it when a run starts, not while another process writes into the same folder.
+    Returns what was deleted.
+    """
+    removed = []
+    for path in sorted({p for pattern in TEMPORARY_PATTERNS for p in Path(folder).glob(pattern)}):
+        with contextlib.suppress(FileNotFoundError, IsADirectoryError, PermissionError):
+            if path.is_file():
+                path.unlink()
+                removed.append(path)
+    return removed
