@@ -343,7 +343,8 @@ class _SceneBuilder:
         restitution = self._restitution(c, "restitution", 1.0)
         friction = c.number("friction", 0.0, nonnegative=True)
         iterations = c.integer("bisection_iterations", collision_world.DEFAULT_BISECTION_ITERATIONS, 0, 60)
-        max_impacts = c.integer("max_impacts_per_step", collision_world.DEFAULT_MAX_IMPACTS_PER_STEP, 1, 10**6)
+        max_impacts = (c.integer("max_impacts_per_step", None, 1, 10**9) if "max_impacts_per_step" in c.data
+                       else collision_world.DEFAULT_MAX_IMPACTS_PER_STEP)  # None: scaled with the bodies
         broadphase = c.string("broadphase", DEFAULT_BROADPHASE, choices=tuple(METHODS))
         rest_speed = c.number("rest_speed", collision_world.DEFAULT_REST_SPEED, nonnegative=True)
 

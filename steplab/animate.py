@@ -1,8 +1,13 @@
 """``steplab animate``: a simulation as an animation, alone or side by side, for teaching.
 
-Each panel shows the bodies (circles of their true radius) and springs in the plane of the
-two axes the motion spans most, and below it the energy against time, so a class sees
-both the motion and what the integrator does to the energy.
+Each panel shows the bodies (circles of their true radius, or a visible minimum) and springs
+in the plane of the two axes the motion spans most, and below it the energy's change against
+time, so a class sees both the motion and what the integrator does to the energy. Side by
+side, the panels share their axes: what looks bigger is bigger.
+
+The static parts of the figure (axes, ticks, the energy curves) are drawn once; each frame
+redraws only the bodies, springs, clock and energy marker on top of them (blitting), and the
+frames go straight to Pillow (GIF) or ffmpeg (MP4).
 """
 
 from __future__ import annotations
@@ -14,6 +19,40 @@ import numpy as np
 #: at most this many frames are drawn (the trajectory is subsampled to fit)
 MAX_FRAMES = 150
 AXIS_NAMES = "xyz"
+#: a body is drawn at least this fraction of its window across: a 5 cm ball must stay visible
+#: in the 100 m frame an unstable run needs
+MIN_DRAWN_RADIUS = 0.012
+#: the panels share one window unless it would be more than this many times wider than a
+#: panel's own (a run that diverged to 1e30 m): then the window is capped, and a body outside
+#: it is drawn on the edge, in red
+MAX_SHARED_ZOOM = 1000.0
+#: pixels per inch of the written frames (the figure is 5.2 x 6.4 inches per panel)
+DPI = 100
+FORMATS = (".gif", ".mp4")
+
+
+def check_format(out: str | Path) -> None:
+    """Raise ``ValueError`` (one line) unless ``out`` names a format that can be written here.
+
+    GIF needs only Pillow (a matplotlib dependency). MP4 needs an ffmpeg binary: the one the
+    ``imageio-ffmpeg`` package ships, or one on ``PATH`` (``apt-get install ffmpeg``).
+    """
+    suffix = Path(out).suffix.lower()
+    if suffix not in FORMATS:
+        raise ValueError(f"--out {out}: unknown animation format {Path(out).suffix or '(none)'!r}; "
+                         f"use {' or '.join(FORMATS)}")
+    if suffix == ".mp4":
+        _ffmpeg(out)
+
+
+def _ffmpeg(out):
+    try:
+        import imageio_ffmpeg
+
+        return imageio_ffmpeg.get_ffmpeg_exe()
+    except (ImportError, RuntimeError):
+        raise ValueError(f"--out {out}: MP4 needs ffmpeg: `pip install imageio-ffmpeg` (or `apt-get install "
+                         "ffmpeg`), or write a .gif") from None
 
 
 def animate(runs: list[tuple[str, object]], model, out: str | Path, fps: int = 30, view: str | None = None,
@@ -25,7 +64,7 @@ def animate(runs: list[tuple[str, object]], model, out: str | Path, fps: int = 3
     runs : list of (label, Trajectory)
     model : physics.Model
         The scene's model (body radii, springs, energy).
-    out : path ending in .gif (Pillow) or .mp4 (ffmpeg, if installed)
+    out : path ending in .gif (Pillow) or .mp4 (ffmpeg; see :func:`check_format`)
     view : "xy", "xz" or "yz", optional
         The plane shown; by default the two axes the motion spans most.
     shapes : static collision shapes (planes, boxes, oriented boxes) to draw in grey
@@ -34,7 +73,6 @@ def animate(runs: list[tuple[str, object]], model, out: str | Path, fps: int = 3
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
-    from matplotlib import animation
     from matplotlib.collections import LineCollection, PatchCollection
     from matplotlib.patches import Circle
 
@@ -42,13 +80,7 @@ def animate(runs: list[tuple[str, object]], model, out: str | Path, fps: int = 3
     from steplab.studies.records import write_with
 
     out = Path(out)
-    writers = {".gif": lambda: animation.PillowWriter(fps=fps)}
-    if animation.FFMpegWriter.isAvailable():
-        writers[".mp4"] = lambda: animation.FFMpegWriter(fps=fps)
-    if out.suffix.lower() not in writers:
-        raise ValueError(f"--out {out}: unknown animation format {out.suffix or '(none)'!r}; "
-                         f"use {' or '.join(writers)}")
-
+    check_format(out)
     if view is not None:
         axes_idx = [AXIS_NAMES.index(a) for a in view]
     else:
@@ -61,15 +93,17 @@ def animate(runs: list[tuple[str, object]], model, out: str | Path, fps: int = 3
     centers = np.array([np.asarray(f.center, dtype=float) for f in model.forces if isinstance(f, CentralGravity)])
     centers = centers.reshape(-1, 3)
     pairs = np.concatenate([np.stack([np.asarray(f.i), np.asarray(f.j)], 1) for f in springs]) if springs else None
+    fixed = np.concatenate([_extent(shapes)[:, axes_idx], centers[:, axes_idx]])
+    lo, hi = shared_window([traj.positions[..., axes_idx] for _, traj in runs], fixed, radii.max())
+    drawn_radii = np.maximum(radii, MIN_DRAWN_RADIUS * (hi - lo).max())
+    changes, unit = energy_changes([np.array([float(model.energy(y)) for y in traj.y]) for _, traj in runs])
 
     frames = min(MAX_FRAMES, max(len(traj.t) for _, traj in runs))
-    fig, grid = plt.subplots(2, len(runs), figsize=(5.2 * len(runs), 6.4), squeeze=False,
-                             gridspec_kw={"height_ratios": [3, 1]})
-    artists = []
+    fig, grid = plt.subplots(2, len(runs), figsize=(5.2 * len(runs), 6.4), squeeze=False, dpi=DPI,
+                             gridspec_kw={"height_ratios": [3, 1]}, sharex="row", sharey="row")
+    panels = []
     for col, (label, traj) in enumerate(runs):
         ax, eax = grid[0][col], grid[1][col]
-        lo, hi = _window(np.concatenate([traj.positions[..., axes_idx].reshape(-1, 2), _extent(shapes)[:, axes_idx],
-                                         centers[:, axes_idx]]), radii.max())
         ax.set_xlim(lo[0], hi[0])
         ax.set_ylim(lo[1], hi[1])
         ax.set_aspect("equal")
@@ -81,49 +115,115 @@ def animate(runs: list[tuple[str, object]], model, out: str | Path, fps: int = 3
             ax.plot(centers[:, axes_idx[0]], centers[:, axes_idx[1]], "*", color="tab:orange", ms=12,
                     label="attracting mass")
             ax.legend(loc="lower right", fontsize=8)
-        lines = LineCollection([], colors="0.5", linewidths=0.8)
+        lines = LineCollection([], colors="0.5", linewidths=0.8, animated=True)
         ax.add_collection(lines)
-        circles = PatchCollection([Circle((0, 0), r) for r in radii], facecolor="tab:blue", edgecolor="k",
-                                  linewidth=0.5)
+        circles = PatchCollection([Circle((0, 0), r) for r in drawn_radii], facecolor="tab:blue", edgecolor="k",
+                                  linewidth=0.5, animated=True)
         ax.add_collection(circles)
-        clock = ax.text(0.02, 0.95, "", transform=ax.transAxes, fontsize=9, va="top")
-        energy = np.array([float(model.energy(y)) for y in traj.y])
-        eax.plot(traj.t, energy, color="0.7", lw=1)
-        marker, = eax.plot([], [], "o", color="tab:red", ms=4)
+        clock = ax.text(0.02, 0.95, "", transform=ax.transAxes, fontsize=9, va="top", animated=True)
+        eax.plot(traj.t, changes[col], color="0.6", lw=1)
+        eax.axhline(0.0, color="0.85", lw=0.8, zorder=0)
+        marker, = eax.plot([], [], "o", color="tab:red", ms=4, animated=True)
         eax.set_xlabel("time t (s)")
-        eax.set_ylabel("energy (J)")
+        eax.set_ylabel(f"energy change ({unit})")
         picks = np.linspace(0, len(traj.t) - 1, frames).round().astype(int)
-        artists.append((traj, picks, lines, circles, clock, marker, energy))
+        panels.append((traj, picks, lines, circles, clock, marker, changes[col]))
+    _energy_scale(grid[1][0], changes)
 
     def draw(frame):
-        changed = []
-        for traj, picks, lines, circles, clock, marker, energy in artists:
+        for traj, picks, lines, circles, clock, marker, change in panels:
             k = picks[frame]
             q = traj.positions[k][:, axes_idx]
-            circles.set_paths([Circle(tuple(c), r) for c, r in zip(q, radii)])
+            inside = np.isfinite(q).all(axis=1) & (q >= lo).all(axis=1) & (q <= hi).all(axis=1)
+            q = np.clip(np.nan_to_num(q, nan=0.0), lo, hi)  # clipped onto the edge, and marked red
+            circles.set_paths([Circle(tuple(c), r) for c, r in zip(q, drawn_radii)])
+            circles.set_facecolor(np.where(inside, "tab:blue", "tab:red"))
             if pairs is not None:
                 lines.set_segments(np.stack([q[pairs[:, 0]], q[pairs[:, 1]]], axis=1))
             clock.set_text(f"t = {traj.t[k]:.2f} s")
-            marker.set_data([traj.t[k]], [energy[k]])
-            changed += [lines, circles, clock, marker]
-        return changed
+            marker.set_data([traj.t[k]], [change[k]])
+            for artist in (lines, circles, clock, marker):
+                artist.axes.draw_artist(artist)
 
     fig.tight_layout()
-    anim = animation.FuncAnimation(fig, draw, frames=frames, interval=1000 / fps, blit=False)
     try:
-        # the writers need a real file (Pillow and ffmpeg pick the format from its name):
-        # the one atomic writer hands them a temporary one and moves it into place
-        write_with(out, lambda tmp: anim.save(tmp, writer=writers[out.suffix.lower()]()))
+        fig.canvas.draw()  # everything static, once; the animated artists are left out
+        background = fig.canvas.copy_from_bbox(fig.bbox)
+
+        def images():
+            for frame in range(frames):
+                fig.canvas.restore_region(background)
+                draw(frame)
+                yield np.asarray(fig.canvas.buffer_rgba())[..., :3]
+
+        # Pillow and ffmpeg pick the format from the file's name: the one atomic writer hands
+        # them a temporary file with the same suffix and moves it into place
+        save = _write_mp4 if out.suffix.lower() == ".mp4" else _write_gif
+        write_with(out, lambda tmp: save(tmp, images(), fps))
     finally:
         plt.close(fig)
     return out
 
 
-def _window(q, pad):
-    """Plot limits around the finite positions q (..., 2), square enough to read a 1-D motion.
+def _write_gif(path: Path, images, fps: int) -> None:
+    from PIL import Image
 
-    Each panel gets its own window, so a run that blows up does not shrink the others.
+    # each frame is quantised to its own 256-colour palette; the duration is per frame, ms
+    frames = [Image.fromarray(np.ascontiguousarray(image)).quantize(256) for image in images]
+    frames[0].save(path, save_all=True, append_images=frames[1:], duration=round(1000 / fps), loop=0)
+
+
+def _write_mp4(path: Path, images, fps: int) -> None:
+    import imageio_ffmpeg  # check_format has made sure it finds an ffmpeg
+
+    writer = None
+    for image in images:
+        # H.264 in yuv420p needs an even width and height: drop an odd last row or column
+        image = np.ascontiguousarray(image[: image.shape[0] // 2 * 2, : image.shape[1] // 2 * 2])
+        if writer is None:
+            writer = imageio_ffmpeg.write_frames(str(path), (image.shape[1], image.shape[0]), fps=fps,
+                                                 macro_block_size=1, ffmpeg_log_level="error")
+            writer.send(None)  # start ffmpeg
+        writer.send(image)
+    writer.close()
+
+
+def shared_window(runs: list[np.ndarray], fixed: np.ndarray, pad: float) -> tuple[np.ndarray, np.ndarray]:
+    """One plot window, (lo, hi) of shape (2,), around every run's finite positions (..., 2).
+
+    Square enough to read a 1-D motion, and padded by the largest radius. A run whose own
+    window is more than ``MAX_SHARED_ZOOM`` times wider than the narrowest run's does not widen
+    it further: the window is capped there (about the narrowest run's centre).
     """
+    own = [_window(np.concatenate([q.reshape(-1, 2), fixed]), pad) for q in runs]
+    lo = np.min([w[0] for w in own], axis=0)
+    hi = np.max([w[1] for w in own], axis=0)
+    narrowest = min(own, key=lambda w: (w[1] - w[0]).max())
+    cap = MAX_SHARED_ZOOM * (narrowest[1] - narrowest[0]).max() / 2
+    centre = (narrowest[0] + narrowest[1]) / 2
+    return np.maximum(lo, centre - cap), np.minimum(hi, centre + cap)
+
+
+def energy_changes(energies: list[np.ndarray]) -> tuple[list[np.ndarray], str]:
+    """Each run's energy change from its start: in % of the initial energy, or in J when it is 0."""
+    e0 = energies[0][0]
+    if e0 == 0 or not np.isfinite(e0):
+        return [e - e[0] for e in energies], "J"
+    return [100 * (e - e[0]) / abs(e0) for e in energies], "% of the initial"
+
+
+def _energy_scale(eax, changes) -> None:
+    """The energy panels share their y axis; symmetric-log when the runs differ by orders of magnitude,
+    so a 1 % wobble and a 10^4 % blow-up are both readable (and both honest)."""
+    sizes = [np.nanmax(np.abs(np.where(np.isfinite(c), c, np.nan))) for c in changes]
+    sizes = [s for s in sizes if np.isfinite(s) and s > 0]
+    if len(sizes) > 1 and max(sizes) > 30 * min(sizes):
+        # the linear part, |change| < the smallest run's, gets as much height as three decades
+        eax.set_yscale("symlog", linthresh=min(sizes), linscale=3)
+
+
+def _window(q, pad):
+    """Plot limits around the finite positions q (..., 2), square enough to read a 1-D motion."""
     q = q.reshape(-1, 2)
     q = q[np.isfinite(q).all(axis=1)]
     lo, hi = q.min(axis=0), q.max(axis=0)

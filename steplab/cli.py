@@ -1,8 +1,9 @@
 """The ``steplab`` command line.
 
 Bad input (an unknown integrator, a malformed scene, a non-positive dt...) ends with
-one line on stderr and exit status 2; a simulation that diverges ends with one line and
-status 1. Never a traceback.
+one line on stderr and exit status 2; a simulation that diverges, or whose step holds
+more impacts than the cap, and a ``recommend`` that finds nothing meeting the tolerance
+end with one line and status 1. Never a traceback.
 """
 
 from __future__ import annotations
@@ -97,7 +98,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--dt", type=_positive, help="the dt to check, s (default: the scene's)")
     p.add_argument("--json", action="store_true", help="print machine-readable JSON")
 
-    p = sub.add_parser("animate", help="render a simulation as an animation (GIF), alone or side by side")
+    p = sub.add_parser("animate", help="render a simulation as an animation (GIF or MP4), alone or side by side")
     p.add_argument("scene", help="built-in scene name or path to a TOML file")
     p.add_argument("--integrator", help="integrator name (default: the scene's)")
     p.add_argument("--compare", metavar="A,B",
@@ -107,7 +108,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--t-end", type=_finite, help="end time, s (default: the scene's)")
     p.add_argument("--fps", type=_count, default=30, help="frames per second (default: 30)")
     p.add_argument("--view", choices=("xy", "xz", "yz"), help="plane shown (default: the two axes moved along most)")
-    p.add_argument("--out", type=Path, required=True, help="FILE.gif (or FILE.mp4 where ffmpeg is installed)")
+    p.add_argument("--out", type=Path, required=True, help="FILE.gif or FILE.mp4 (MP4 through imageio-ffmpeg's ffmpeg)")
 
     p = sub.add_parser("paper", help="regenerate paper/paper.md, its figures and HTML from study results")
     p.add_argument("--results", type=Path, default=Path("results"), help="results folder (default: results/)")
@@ -117,8 +118,14 @@ def build_parser() -> argparse.ArgumentParser:
 
     p = sub.add_parser("recommend", help="the cheapest integrator and dt that meet an error tolerance")
     p.add_argument("scene", help="built-in scene name or path to a TOML file")
-    p.add_argument("--tol", type=_positive, required=True, help="largest final position error, m")
+    p.add_argument("--tol", type=_positive, required=True, help="largest final position error, m (with "
+                   "collisions: largest position error over the run)")
     p.add_argument("--t-end", type=_finite, help="end time, s (default: the scene's)")
+    p.add_argument("--dt-max", type=_positive, metavar="DT",
+                   help="largest dt to consider, s, e.g. a frame, 1/60 (default: a quarter of the run)")
+    p.add_argument("--integrators", metavar="A,B", help="candidates (default: every fixed-step integrator)")
+    p.add_argument("--detector", choices=DETECTOR_NAMES,
+                   help="collision detector to measure with (default: the scene's; none: without collisions)")
     p.add_argument("--json", action="store_true", help="print machine-readable JSON")
 
     p = sub.add_parser("study", help="run one study (see --list)")
@@ -172,6 +179,7 @@ def _run_command(args) -> int:
     from steplab.integrators.references import ReferenceFailedError
     from steplab.integrators.simulate import DivergenceError
     from steplab.paper import PaperError
+    from steplab.physics.collision import ImpactCapError
     from steplab.physics.scene import SceneError
     from steplab.studies.recommend import NoFixedStepError
 
@@ -186,7 +194,7 @@ def _run_command(args) -> int:
         return command(args) or 0
     except (SceneError, UnknownIntegratorError, NotConstantForceError, PaperError, ValueError) as err:
         return _fail(args.command, str(err), EXIT_BAD_INPUT)
-    except (DivergenceError, ReferenceFailedError, NoFixedStepError) as err:
+    except (DivergenceError, ReferenceFailedError, NoFixedStepError, ImpactCapError) as err:
         return _fail(args.command, str(err), EXIT_DIVERGED)
     except OSError as err:  # an unwritable --out or results folder, a full disk
         where = f"{err.filename}: " if err.filename else ""
@@ -276,6 +284,7 @@ def cmd_run(args) -> int:
     from steplab.integrators.simulate import MAX_STEPS
     from steplab.integrators.stable_dt import dt_warning
     from steplab.io import check_trajectory_path, save_trajectory
+    from steplab.physics.collision import ImpactCapError
     from steplab.physics.scene import load_scene
 
     if args.out is not None:
@@ -291,21 +300,37 @@ def cmd_run(args) -> int:
     warning = dt_warning(scene.model, scene.y0[0], integrator, dt)  # before the run: it may be long
     if warning is not None:
         print(f"steplab run: warning: {warning}", file=sys.stderr)
+    run_warnings = [] if warning is None else [warning]
     end = {"n_steps": args.steps} if args.steps is not None else {"t_end": t_end}
-    traj = simulate(scene.model, integrator, scene.y0, scene.t_start, dt=dt, **end, backend=args.backend,
-                    dtype=dtype, save_every=args.save_every, max_steps=args.max_steps or MAX_STEPS,
-                    progress=not args.json and sys.stderr.isatty(), collisions=world)
+    kept = []  # the run's collision step, whose log tells what happened before a stop
     energy_start = float(scene.model.energy(scene.y0))
+    try:
+        traj = simulate(scene.model, integrator, scene.y0, scene.t_start, dt=dt, **end, backend=args.backend,
+                        dtype=dtype, save_every=args.save_every, max_steps=args.max_steps or MAX_STEPS,
+                        progress=not args.json and sys.stderr.isatty(),
+                        stepper=None if world is None else _keeping(world.stepper, kept))
+    except ImpactCapError as err:  # stopped, never dropped: one line, status 1 (and the record)
+        if args.json:
+            log = kept[0].log if kept else None
+            print(json.dumps({"scene": scene.name, "integrator": integrator.name, "dt": dt,
+                              "detector": world.detector, "error": str(err), "stopped_at": err.t,
+                              "warnings": run_warnings + [str(err)], "energy_start": energy_start,
+                              "collisions": log.summary() if log is not None else None}, indent=2))
+        return _fail(args.command, str(err), EXIT_DIVERGED)
     energy_end = float(scene.model.energy(traj.y[-1].astype(float)))
+    collisions = traj.collisions.summary() if traj.collisions is not None else None
+    if collisions is not None and collisions.get("bound_hits"):
+        run_warnings.append(_bound_hits_warning(collisions["bound_hits"]))
     summary = {
         "scene": scene.name, "integrator": integrator.name, "dt": dt, "steps": traj.steps,
         "t_start": scene.t_start, "t_end": float(traj.t[-1]), "backend": traj.backend,
         "precision": args.precision, "bodies": list(scene.model.names),
         "final_positions": traj.positions[-1].tolist(), "final_velocities": traj.velocities[-1].tolist(),
         "energy_start": energy_start, "energy_end": energy_end,
-        "energy_change": energy_end - energy_start, "wall_time": traj.wall_time,
-        "detector": world.detector if world is not None else "none",
-        "collisions": traj.collisions.summary() if traj.collisions is not None else None,
+        "energy_change": energy_end - energy_start,
+        "energy_relative_change": (energy_end - energy_start) / abs(energy_start) if energy_start else None,
+        "wall_time": traj.wall_time, "detector": world.detector if world is not None else "none",
+        "collisions": collisions, "warnings": run_warnings,
     }
     if args.out is not None:
         save_trajectory(args.out, traj, scene.model, {k: summary[k] for k in (
@@ -323,6 +348,21 @@ def cmd_run(args) -> int:
     else:
         _print_run(summary)
     return 0
+
+
+def _keeping(make_step, kept: list):
+    """``make_step`` (a stepper factory for ``simulate``) that also appends the step it builds to ``kept``."""
+    def stepper(model, integrator):
+        step = make_step(model, integrator)
+        kept.append(step)
+        return step
+
+    return stepper
+
+
+def _bound_hits_warning(hits: int) -> str:
+    return (f"{hits} steps reached the bound on impacts per step and left the rest of the step unresolved "
+            "(raise max_impacts_per_step)")
 
 
 def _collision_world(scene, detector, backend):
@@ -360,16 +400,22 @@ def _print_run(s: dict) -> None:
         c = s["collisions"]
         extra = "".join(f", {c[k]} {label}" for k, label in (("triggers", "trigger entries"),
                                                             ("cancelled", "cancelled")) if c[k])
-        print(f"  collisions ({s['detector']}): {c['impacts']} impacts{extra}, at most "
-              f"{c['most_impacts_in_a_step']} in one step, {c['resting_corrections']} resting-contact corrections")
-        if c["bound_hits"]:
-            print(f"  warning: {c['bound_hits']} steps reached the bound on impacts per step and left "
-                  f"the rest of the step unresolved (raise max_impacts_per_step)")
+        # the most resolved in one step counts impacts and resting-contact corrections together
+        print(f"  collisions ({s['detector']}): {_plural(c['impacts'], 'impact')}{extra}, "
+              f"{_plural(c['resting_corrections'], 'resting-contact correction')}, "
+              f"at most {c['most_impacts_in_a_step']} of them in one step")
+        if c.get("bound_hits"):
+            print(f"  warning: {_bound_hits_warning(c['bound_hits'])}")
     print(f"  wall time: {s['wall_time'] * 1e3:.3g} ms")
     if "out" in s:
         print(f"  trajectory written to {s['out']}")
     if "collisions_out" in s:
         print(f"  collisions written to {s['collisions_out']}")
+
+
+def _plural(n: int, noun: str) -> str:
+    """``1 impact``, ``2 impacts``, ``0 impacts``."""
+    return f"{n} {noun}{'' if n == 1 else 's'}"
 
 
 def _vec(v) -> str:
@@ -430,13 +476,12 @@ def _verdict(dt: float, dt_max) -> str:
 
 
 def cmd_animate(args) -> int:
-    from steplab.animate import animate
+    from steplab.animate import animate, check_format
     from steplab.integrators import get_integrator, simulate
     from steplab.physics.collision import DETECTOR_NAMES
     from steplab.physics.scene import load_scene
 
-    if args.out.suffix.lower() not in (".gif", ".mp4"):
-        raise ValueError(f"--out {args.out}: unknown animation format {args.out.suffix or '(none)'!r}; use .gif")
+    check_format(args.out)  # before the runs: a format that cannot be written is one line, status 2
     scene = load_scene(args.scene)
     dt = args.dt if args.dt is not None else scene.dt
     t_end = args.t_end if args.t_end is not None else scene.t_end
@@ -497,6 +542,16 @@ def cmd_recommend(args) -> int:
     t_end = args.t_end if args.t_end is not None else scene.t_end
     if not t_end > scene.t_start:
         raise ValueError(f"--t-end {t_end:g} must be later than the scene's t_start = {scene.t_start:g}")
+    integrators = None
+    if args.integrators is not None:
+        from steplab.studies.recommend_collisions import check_integrators
+
+        integrators = check_integrators(n.strip() for n in args.integrators.split(","))
+        if not integrators:
+            raise ValueError("--integrators: give at least one fixed-step integrator")
+    world = _collision_world(scene, args.detector, "numpy")
+    if world is not None:
+        return _recommend_with_collisions(args, scene, t_end, world, integrators)
     problem = Problem(scene.name, scene.description, scene.model, scene.y0, scene.t_start, t_end)
     if scene.model.constant_acceleration is not None:  # the closed form is the truth
         from steplab.physics import projectile
@@ -508,7 +563,7 @@ def cmd_recommend(args) -> int:
             return np.stack([p, v])
 
         problem = dataclasses.replace(problem, solution=solution)
-    result = recommend(problem, args.tol)
+    result = recommend(problem, args.tol, dt_max=args.dt_max, integrators=integrators)
     if args.json:
         print(json.dumps(result, indent=2))
         return 0
@@ -519,6 +574,35 @@ def cmd_recommend(args) -> int:
         print(f"{scene.name}: {result['integrator']} with dt = {result['dt']:.6g} s ({result['steps']} steps) "
               f"reaches error {result['error']:.3g} m <= {args.tol:g} m in {result['seconds'] * 1e3:.3g} ms "
               "(compiled, median)")
+    return 0
+
+
+def _recommend_with_collisions(args, scene, t_end, world, integrators) -> int:
+    """``recommend`` measured with the scene's collisions; status 1 with the evidence when nothing passes."""
+    from steplab.studies.recommend_collisions import NoCollisionStepError, recommend_with_collisions
+
+    try:
+        r = recommend_with_collisions(scene.model, scene.y0, scene.t_start, t_end, world, args.tol,
+                                      scene_dt=scene.dt, dt_max=args.dt_max, integrators=integrators,
+                                      progress=not args.json and sys.stderr.isatty())
+    except NoCollisionStepError as err:
+        if not args.json:
+            raise
+        print(json.dumps(err.evidence | {"error": str(err)}, indent=2))
+        return EXIT_DIVERGED
+    if args.json:
+        print(json.dumps(r, indent=2))
+        return 0
+    ref = r["reference"]
+    measured = (f"largest position error {r['error']:.3g} m <= {args.tol:g} m" if r["regime"] == "trajectories"
+                else f"energy error {100 * r['energy_error']:.3g} %, largest penetration {r['penetration']:.3g} m")
+    print(f"{scene.name}: {r['integrator']} with dt = {r['dt']:.6g} s ({r['steps']} steps), {r['detector']} "
+          f"detector: {measured}, {_plural(r['impacts'], 'impact')} (reference: {ref['impacts']}), "
+          f"{r['seconds'] * 1e3:.3g} ms (NumPy event loop, median)")
+    print(f"  reference: {ref['integrator']} at dt = {ref['dt']:.3g} s, converged to {ref['convergence']:.3g} m "
+          f"against dt = {2 * ref['dt']:.3g} s ({_plural(ref['impacts_at_2dt'], 'impact')} there)")
+    if "note" in r:
+        print(f"  note: {r['note']}")
     return 0
 
 
@@ -536,7 +620,7 @@ def cmd_study(args) -> int:
     if args.name not in STUDIES:
         raise ValueError(f"unknown study {args.name!r}; valid: {', '.join(STUDIES)}")
     record = run_study(STUDIES[args.name], args.out, quick=args.quick, force=args.force)
-    _print_summary([record])
+    _print_summary([record], args.out)
     return 0
 
 
@@ -550,11 +634,11 @@ def cmd_reproduce(args) -> int:
         for study in bar:
             bar.set_postfix_str(study.name)
             records.append(run_study(study, args.out, quick=args.quick, force=args.force))
-    _print_summary(records)
+    _print_summary(records, args.out)
     return 0
 
 
-def _print_summary(records) -> None:
+def _print_summary(records, out: Path) -> None:
     for record in records:
         from steplab.studies import STUDIES
 
@@ -564,8 +648,7 @@ def _print_summary(records) -> None:
             print(f"  {label:<40} {value}")
         for figure in record.get("figures", []):
             print(f"  figure: {figure}")
-    if records:
-        print("results in the output folder as <study>.json")
+        print(f"  record: {Path(out) / (record['study'] + '.json')}")
 
 
 # --- bench --------------------------------------------------------------------------

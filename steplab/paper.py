@@ -169,7 +169,7 @@ def build(results: Path, paper: Path = Path("paper"), tutorial: bool = True, htm
     write_atomic(paper / "paper.md", text.encode())
     written += [paper / "data" / "numbers.json", paper / "paper.md"]
     if tutorial:
-        written += run_tutorial(paper / "tutorial.md", paper)
+        written += tutorial_figures(paper / "tutorial.md", paper)
     if html:
         bib = parse_bib((paper / "paper.bib").read_text()) if (paper / "paper.bib").exists() else {}
         for name in ("paper", "tutorial"):
@@ -209,6 +209,26 @@ CODE_BLOCK = re.compile(r"```python\n(.*?)```", re.S)
 
 def tutorial_blocks(text: str) -> list[str]:
     return CODE_BLOCK.findall(text)
+
+
+def tutorial_figures(path: Path, paper: Path) -> list[Path]:
+    """Run the tutorial in a scratch folder, then copy the figures it shows into ``paper``.
+
+    The tutorial saves its figures where its reader chooses (``tutorial-figures/``, which git
+    ignores), never over the committed copies that its Markdown shows: those only this build
+    writes.
+    """
+    import tempfile
+
+    shown = sorted(set(FIGURE.findall(Path(path).read_text())))
+    with tempfile.TemporaryDirectory() as scratch:
+        drawn = {p.name: p for p in run_tutorial(path, Path(scratch))}
+        missing = [figure for figure in shown if Path(figure).name not in drawn]
+        if missing:
+            raise PaperError(f"the tutorial shows {', '.join(missing)}, which its code does not draw")
+        for figure in shown:
+            write_atomic(Path(paper) / figure, drawn[Path(figure).name].read_bytes())
+    return [Path(paper) / figure for figure in shown]
 
 
 def run_tutorial(path: Path, cwd: Path) -> list[Path]:
@@ -269,5 +289,7 @@ def to_html(markdown_text: str, bib: dict) -> str:
             "padding:0 1em}img{max-width:100%}table{border-collapse:collapse;font-size:.85em}"
             "td,th{border:1px solid #bbb;padding:.2em .5em}code,pre{background:#f4f4f4}"
             "pre{padding:.6em;overflow-x:auto}figure{margin:1.5em 0}figcaption{font-size:.9em;color:#333}"
-            "@media print{body{max-width:none;font-size:10pt}figure,table{break-inside:avoid}}</style></head><body>\n"
+            # printed, a code line wraps instead of running off the page (a scroll bar cannot print)
+            "@media print{body{max-width:none;font-size:10pt}figure,table,pre{break-inside:avoid}"
+            "pre{white-space:pre-wrap;overflow-wrap:anywhere;font-size:8pt}}</style></head><body>\n"
             f"{body}\n</body></html>\n")

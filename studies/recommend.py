@@ -2,13 +2,14 @@
 
 It measures rather than predicts: each fixed-step method runs on the problem at halving
 dt until its error against the exact solution (or the reference) is below the
-tolerance, using the work-precision study's measurement of one fixed-step point.
+tolerance, using the work-precision study's measurement of one fixed-step point. A
+scene with collisions is measured with them instead (:mod:`.recommend_collisions`).
 """
 
 from __future__ import annotations
 
 import numpy as np
-from steplab.integrators import INTEGRATORS, Stepper
+from steplab.integrators import INTEGRATORS, Stepper, get_integrator
 from steplab.integrators.simulate import final_state_function
 
 from .problems import Problem, true_final
@@ -22,33 +23,39 @@ class NoFixedStepError(RuntimeError):
     """Neither a fixed-step method above the dt floor nor the adaptive reference meets the tolerance."""
 
 
-def recommend(problem: Problem, tol: float) -> dict:
+def recommend(problem: Problem, tol: float, *, dt_max: float | None = None, integrators=None) -> dict:
     """The cheapest fixed-step integrator and dt, measured on ``problem``, whose error <= ``tol``.
 
-    For each integrator dt is halved from a quarter of the run until the error is below
-    ``tol`` at that dt and at half of it (so a lucky cancellation at one dt is not
-    trusted); its cost is the median compiled wall time. Returns ``integrator``, ``dt``,
-    ``error``, ``seconds``; when no method gets there above the dt floor, the result
-    names the reference that does instead (``integrator`` is then that reference).
+    For each integrator dt is halved from a quarter of the run (or from the largest whole
+    division of the run not above ``dt_max``) until the error is below ``tol`` at that dt
+    and at half of it (so a lucky cancellation at one dt is not trusted); its cost is the
+    median compiled wall time. ``integrators`` names the candidates (default: every
+    fixed-step method). Returns ``integrator``, ``dt``, ``error``, ``seconds``; when no
+    method gets there above the dt floor, the result names the reference that does
+    instead (``integrator`` is then that reference).
     """
     import jax.numpy as jnp
 
     truth, _ = true_final(problem)
     span = problem.t_end - problem.t_start
-    max_log2 = int(round(-np.log2(DT_FLOOR_FRACTION)))
+    most = round(1 / DT_FLOOR_FRACTION)
+    # the first dt: a quarter of the run, or the largest whole division not above dt_max
+    first = 4 if dt_max is None else max(4, int(np.ceil(span / dt_max * (1 - 1e-12))))
+    names = integrators if integrators is not None else [n for n, m in INTEGRATORS.items() if isinstance(m, Stepper)]
     candidates = []
-    for method in (n for n, m in INTEGRATORS.items() if isinstance(m, Stepper)):
+    for method in names:
         run = final_state_function(problem.model.cast(jnp), method)
-        previous = None
-        for k in range(2, max_log2 + 1):
-            point = fixed_step_point(problem, method, 2**k, truth, run, timed=False)
+        previous, n = None, first
+        while n <= most:
+            point = fixed_step_point(problem, method, n, truth, run, timed=False)
             ok = point["error"] is not None and point["error"] <= tol
             if ok and previous is not None:  # time only the method's answer
                 candidates.append(fixed_step_point(problem, method, previous["steps"], truth, run))
                 break
             previous = point if ok else None
-            if INTEGRATORS[method].implicit and k >= 16:
+            if get_integrator(method).implicit and n >= 2**16:
                 break
+            n *= 2
     if candidates:
         best = min(candidates, key=lambda p: p["seconds"])
         return {"integrator": best["method"], "dt": best["dt"], "error": best["error"],

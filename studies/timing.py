@@ -31,13 +31,17 @@ def first_call_seconds(call: Callable[[], object]) -> float:
     return time.perf_counter() - start
 
 
-def interleaved_samples(calls: dict[object, Callable[[], object]], repeats: int) -> dict[object, list[float]]:
+def interleaved_samples(calls: dict[object, Callable[[], object]], repeats: int,
+                        warm_up: bool = True) -> dict[object, list[float]]:
     """Wall times of each call: one warm-up call each, then ``repeats`` rounds in turn.
 
-    Every call must block until its result exists (:func:`ready` for JAX).
+    Every call must block until its result exists (:func:`ready` for JAX). ``warm_up=False``
+    leaves out the warm-up calls, for calls too long to make twice that the caller has
+    warmed up on a smaller case (a collision run compiled on one step).
     """
-    for call in calls.values():
-        call()
+    if warm_up:
+        for call in calls.values():
+            call()
     samples = {name: [] for name in calls}
     for _ in range(repeats):
         for name, call in calls.items():
@@ -69,9 +73,10 @@ class Times:
         return cls(seconds, seconds, 1)
 
 
-def interleaved_times(calls: dict[object, Callable[[], object]], repeats: int) -> dict[object, Times]:
+def interleaved_times(calls: dict[object, Callable[[], object]], repeats: int,
+                      warm_up: bool = True) -> dict[object, Times]:
     """:class:`Times` of each call, the calls interleaved (see :func:`interleaved_samples`)."""
-    return {name: Times.of(s) for name, s in interleaved_samples(calls, repeats).items()}
+    return {name: Times.of(s) for name, s in interleaved_samples(calls, repeats, warm_up).items()}
 
 
 def interleaved_medians(calls: dict[object, Callable[[], object]], repeats: int) -> dict[object, float]:

@@ -7,6 +7,7 @@ produce the JSON contract of issue 6.
 
 import dataclasses
 import json
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -22,7 +23,7 @@ from steplab.cli import main
 #: a bench run small enough for a unit test (seconds, not minutes)
 TINY = bench.Config(small_steps=300, particles=500, cloth_side=6, broadphase_n=2_000, periods=1,
                     max_log2_steps=14, batch=3, batch_steps=50, repeats=1, python_repeats=1, python_steps=50,
-                    loop_steps=2, compile_scenes=("projectile",))
+                    loop_steps=2, compile_scenes=("projectile",), collision_runs=((30, 3),))
 #: final states of the same method, dt and steps agree to this (m, m/s): round-off only
 ROUND_OFF = 1e-12
 
@@ -101,7 +102,9 @@ def test_memory_bound_streams_the_bytes_it_claims():
 
 @pytest.fixture(scope="module")
 def tiny_record():
-    return bench.run_bench(TINY, quick=True)
+    with pytest.MonkeyPatch.context() as patch:  # a real-time target on the tiny ball pit too
+        patch.setitem(bench.REAL_TIME_TARGETS, 30, 0.25)
+        return bench.run_bench(TINY, quick=True)
 
 
 def test_tiny_bench_run_has_the_json_contract(tiny_record):
@@ -129,6 +132,37 @@ def test_tiny_bench_run_compared_equal_computations(tiny_record):
         assert difference <= 1e-9, name
     accuracy = tiny_record["seconds"]["vs_scipy_at_1e-8"]
     assert accuracy["steplab_error"] <= 1e-8 and accuracy["peer_error"] <= 1e-8
+
+
+def test_tiny_bench_run_measures_the_ball_pit(tiny_record):
+    pit = tiny_record["collisions"]["ball_pit_30"]
+    assert (pit["balls"], pit["steps"], pit["dt"]) == (30, 3, 1 / 60)
+    for name, c in pit["contenders"].items():
+        assert 0 < c["wall_seconds"] < np.inf and c["balls_inside"] == 30, name
+        assert c["per_step_seconds"] == pytest.approx(c["wall_seconds"] / 3)
+        assert c["real_time_factor"] == pytest.approx(3 / 60 / c["wall_seconds"])
+        if name != "steplab":  # balls in free flight move alike: the engines started from the same state
+            assert c["median_distance_to_steplab"] <= 1e-3, name
+            assert tiny_record["ratios"][f"vs_{name}_ball_pit_30"] > 0
+    assert set(pit["contenders"]) | set(pit["not_compared"]) == {"steplab", *bench.engines.ENGINES}
+    assert pit["contenders"]["steplab"]["impacts"] >= 0
+    target = tiny_record["targets"]["real_time_ball_pit_30"]
+    assert target["target"] == 4.0 and target["seconds"] == pytest.approx(1 / target["real_time_factor"])
+    assert "ball_pit_30" in bench.format_table(tiny_record) and "`ball_pit_30`" in bench.format_markdown(tiny_record)
+
+
+def test_ball_pit_scene_files_are_the_generators():
+    from steplab.bench import ball_pit_scene as pit
+
+    folder = Path(__file__).parent.parent / "benchmarks" / "scenes"
+    for n in pit.SCENE_FILE_SIZES:  # regenerate with steplab.bench.ball_pit_scene.write_scene_files
+        assert (folder / pit.scene_file_name(n)).read_text() == pit.ball_pit_toml(n), n
+    scene = bench.ball_pit(2_000)
+    q, v = scene.y0
+    half = scene.collisions.shapes[1].offset * -1
+    assert scene.model.n_bodies == 2_000 and half == 10.0  # the issue's sparse 20 m box
+    assert np.all(np.abs(q[:, :2]) <= half - pit.RADIUS) and np.all(q[:, 2] >= pit.RADIUS)
+    assert np.all(np.linalg.norm(v, axis=1) <= pit.SPEED)
 
 
 def test_bench_command_writes_json_and_prints_tables(tiny_record, monkeypatch, tmp_path, capsys):

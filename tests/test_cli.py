@@ -180,6 +180,7 @@ def test_study_command_writes_results(capsys, tmp_path):
     assert [r["backend"] for r in drop] == ["numpy"] and drop[0]["detector"] != "none"
     status, out, _ = run(capsys, "study", "scenes", "--quick", "--out", str(tmp_path))
     assert status == 0 and "scenes (cached)" in out
+    assert f"record: {tmp_path / 'scenes.json'}" in out  # the record's path, not a pattern
     status, out, _ = run(capsys, "study", "--list")
     assert {"truncation", "stability", "work_precision", "frame_rate", "scenes"} <= set(out.split())
 
@@ -214,6 +215,10 @@ def test_animate_marks_the_attracting_mass_of_central_gravity(capsys, tmp_path):
     (["animate", "oscillator", "--compare", "euler", "--out", "a.gif"], "--compare needs at least two"),
     (["animate", "oscillator", "--compare", "euler,nope", "--out", "a.gif"], "unknown integrator 'nope'"),
     (["recommend", "oscillator", "--tol", "-1"], "--tol: must be > 0"),
+    (["recommend", "drop", "--tol", "1e-3", "--dt-max", "-1"], "--dt-max: must be > 0"),
+    (["recommend", "drop", "--tol", "1e-3", "--detector", "bogus"], "invalid choice: 'bogus'"),
+    (["recommend", "drop", "--tol", "1e-3", "--integrators", "nope"], "unknown integrator 'nope'"),
+    (["recommend", "drop", "--tol", "1e-3", "--integrators", "exact"], "exact is not a fixed-step integrator"),
     (["study", "nope"], "unknown study 'nope'"),
 ])
 def test_more_bad_input_status_2(capsys, argv, message):
@@ -222,3 +227,75 @@ def test_more_bad_input_status_2(capsys, argv, message):
     assert exit_.value.code == 2
     err = capsys.readouterr().err
     assert message in err and err.count("\n") == 1
+
+
+#: three 1 kg balls in a row, no gravity: "a" (1 m/s) hits "b" at t = 0.05 s, and "b", touching
+#: "c", passes the impulse on in the same step of 0.1 s: two impacts in one step
+CHAIN_SCENE = """description = "a Newton's-cradle chain of three"
+[simulation]
+integrator = "velocity-verlet"
+dt = 0.1
+t_end = 0.3
+[[bodies]]
+name = "a"
+mass = 1.0
+radius = 0.1
+position = [0.0, 0.0, 0.0]
+velocity = [1.0, 0.0, 0.0]
+[[bodies]]
+name = "b"
+mass = 1.0
+radius = 0.1
+position = [0.25, 0.0, 0.0]
+[[bodies]]
+name = "c"
+mass = 1.0
+radius = 0.1
+position = [0.45, 0.0, 0.0]
+[collisions]
+detector = "swept"
+restitution = 1.0
+max_impacts_per_step = CAP
+"""
+
+
+def test_impact_cap_stops_the_run_in_text_and_json(capsys, tmp_path):
+    """A step holding more impacts than the cap: status 1, one line; --json names it as error and warning."""
+    scene = tmp_path / "chain.toml"
+    scene.write_text(CHAIN_SCENE.replace("CAP", "1"))
+    status, out, err = run(capsys, "run", str(scene))
+    assert status == 1 and err.count("\n") == 1 and "max_impacts_per_step" in err and not out
+    status, out, err = run(capsys, "run", str(scene), "--json")
+    s = json.loads(out)
+    assert status == 1 and "max_impacts_per_step" in err
+    assert "max_impacts_per_step" in s["error"] and s["error"] in s["warnings"] and s["collisions"]["impacts"] == 1
+
+
+def test_run_json_has_warnings_and_the_energy_change(capsys, tmp_path):
+    """Elastic equal balls swap velocities: the chain ends with "c" at 1 m/s and the energy unchanged."""
+    scene = tmp_path / "chain.toml"
+    scene.write_text(CHAIN_SCENE.replace("CAP", "2"))
+    status, out, _ = run(capsys, "run", str(scene), "--json")
+    s = json.loads(out)
+    assert status == 0 and s["warnings"] == [] and s["collisions"]["impacts"] == 2
+    assert s["energy_start"] == 0.5 and abs(s["energy_relative_change"]) <= 1e-14
+    # "c" leaves at t = 0.05 s at 1 m/s: x = 0.45 + 0.25 m at t = 0.3 s
+    assert s["final_positions"][2][0] == pytest.approx(0.70, abs=1e-12)
+    # rk4 on the 1 Hz oscillator is stable up to omega dt = 2 sqrt(2) (its interval on the imaginary axis)
+    status, out, _ = run(capsys, "run", "oscillator", "--integrator", "rk4", "--dt", "0.5", "--t-end", "1", "--json")
+    assert status == 0 and [w for w in json.loads(out)["warnings"] if "largest stable dt of rk4" in w]
+
+
+def test_run_reports_the_energy_lost_in_bounces(capsys):
+    """Three bounces at eps = 0.858 keep eps^6 of the drop's energy (velocity Verlet: exact in flight)."""
+    status, out, _ = run(capsys, "run", "drop", "--integrator", "velocity-verlet", "--json")
+    s = json.loads(out)
+    assert status == 0 and s["collisions"]["impacts"] == 3
+    assert s["energy_relative_change"] == pytest.approx(0.858**6 - 1, abs=2e-3)
+    assert s["energy_change"] == pytest.approx(s["energy_end"] - s["energy_start"])
+
+
+def test_run_summary_counts_in_words(capsys):
+    # the golf ball of `drop` first reaches the floor at t = sqrt(2 H / g) = 0.43 s: one impact by 0.5 s
+    status, out, _ = run(capsys, "run", "drop", "--t-end", "0.5")
+    assert status == 0 and "1 impact," in out and "1 impacts" not in out

@@ -185,4 +185,4 @@ def test_collisions_on_jax_are_refused_with_one_line(capsys):
 def test_run_summary_mentions_the_collisions(capsys):
     assert main(["run", "tunnelling", "--detector", "swept"]) == 0
     out = capsys.readouterr().out
-    assert "collisions (swept): 1 impacts" in out
+    assert "collisions (swept): 1 impact," in out  # one impact, in the singular (issue 17)

@@ -60,6 +60,23 @@ def test_tutorial_runs_as_written(tmp_path):
     shutil.copy(PAPER / "tutorial.md", tmp_path / "tutorial.md")
     text = (tmp_path / "tutorial.md").read_text()
     assert len(tutorial_blocks(text)) >= 8
-    drawn = {p.name for p in run_tutorial(tmp_path / "tutorial.md", tmp_path)}
+    paths = run_tutorial(tmp_path / "tutorial.md", tmp_path)
+    drawn = {p.name for p in paths}
     shown = set(__import__("re").findall(r"\]\(figures/([^)\s]+)\)", text))
     assert shown <= drawn
+    # the reader's folder (git-ignored), never over the copies the Markdown shows
+    assert {p.parent for p in paths} == {tmp_path / "tutorial-figures"} and not list((tmp_path / "figures").iterdir())
+
+
+def test_the_build_copies_the_tutorials_figures_from_a_scratch_folder(tmp_path):
+    from steplab.paper import PaperError, tutorial_figures
+
+    block = ('```python\nfrom pathlib import Path\nfigures = Path("tutorial-figures")\nfigures.mkdir()\n'
+             '(figures / "a.png").write_bytes(b"drawn")\n```\n')
+    (tmp_path / "tutorial.md").write_text(block + "![A.](figures/a.png)\n")
+    assert tutorial_figures(tmp_path / "tutorial.md", tmp_path / "paper") == [tmp_path / "paper" / "figures" / "a.png"]
+    assert (tmp_path / "paper" / "figures" / "a.png").read_bytes() == b"drawn"
+    assert not (tmp_path / "tutorial-figures").exists()  # run elsewhere, never beside the tutorial
+    (tmp_path / "tutorial.md").write_text(block + "![B.](figures/b.png)\n")
+    with pytest.raises(PaperError, match="shows figures/b.png, which its code does not draw"):
+        tutorial_figures(tmp_path / "tutorial.md", tmp_path / "paper")

@@ -1,10 +1,12 @@
-"""Runs with collision detection and response: detector x scene.
+"""Runs with collision detection and response: detector x scene, and ball pits of 10^3 and 10^4 spheres.
 
 Needs ``physics.collision`` and scenes with a ``[collisions]`` table; where a commit has
 neither, ``setup`` raises ``NotImplementedError`` and asv records the benchmark as skipped.
 """
 
 from __future__ import annotations
+
+import time
 
 from steplab.integrators import simulate
 from steplab.physics.scene import builtin_scenes, load_scene
@@ -29,3 +31,47 @@ class CollisionRun:
     def time_100_steps(self, detector, scene):
         s = self.scene
         simulate(s.model, s.integrator, s.y0, s.t_start, s.t_start + STEPS * s.dt, s.dt, collisions=self.world)
+
+
+#: steps per timed run of a ball pit (its first 0.1 s at dt = 1/60 s)
+PIT_STEPS = 6
+
+
+class BallPit:
+    """N spheres falling into a walled box (``steplab bench``'s ball pits), swept event loop.
+
+    The scene is steplab.bench.ball_pit_scene's: r = 0.1 m, eps = 0.8, dt = 1/60 s,
+    semi-implicit Euler. ``setup`` builds it and runs a small pit first, so that every
+    Numba kernel is compiled before the clock starts.
+    """
+
+    params = [1_000, 10_000]
+    param_names = ["balls"]
+    number = 1  # one run of 10^4 balls takes about a second
+    repeat = (1, 5, 30.0)
+    timeout = 600
+
+    def setup(self, balls):
+        try:
+            from steplab.bench.ball_pit_scene import ball_pit
+        except ImportError:  # an older steplab
+            raise NotImplementedError("steplab.bench.ball_pit_scene is not available") from None
+        warm = ball_pit(50)
+        self._run(warm, 30)
+        self.scene = ball_pit(balls)
+
+    @staticmethod
+    def _run(scene, steps):
+        return simulate(scene.model, scene.integrator, scene.y0, scene.t_start, dt=scene.dt, n_steps=steps,
+                        save_every=steps, collisions=scene.collisions)
+
+    def time_steps(self, balls):
+        self._run(self.scene, PIT_STEPS)
+
+    def track_real_time_factor(self, balls):
+        """Simulated seconds per wall second over the first PIT_STEPS steps (1: real time)."""
+        start = time.perf_counter()
+        self._run(self.scene, PIT_STEPS)
+        return PIT_STEPS * self.scene.dt / (time.perf_counter() - start)
+
+    track_real_time_factor.unit = "simulated s per wall s"

@@ -18,7 +18,9 @@ One module per concept (the lecture's collision chapters):
 - :mod:`.response` — the impulse with restitution (equation 4), friction, materials;
 - :mod:`.resting` — resting contact;
 - :mod:`.events` — prologue, epilogue, the collision log;
-- :mod:`.step` — the physics step, stage by stage; :mod:`.world` — one scene's setup.
+- :mod:`.step` — the physics step, stage by stage, and its two event loops; :mod:`.impact_queue`,
+  :mod:`.changed_pairs`, :mod:`.coupling` — what the incremental loop keeps and re-tests;
+  :mod:`.impact_cap` — the bound on impacts per step; :mod:`.world` — one scene's setup.
 """
 
 from __future__ import annotations
@@ -35,6 +37,7 @@ from .events import Collision as Collision
 from .events import CollisionLog as CollisionLog
 from .events import cancel_triggers as cancel_triggers
 from .events import remove_on_impact as remove_on_impact
+from .impact_cap import ImpactCapError as ImpactCapError
 from .narrow_phase import PAIR_TESTS as PAIR_TESTS
 from .narrow_phase import collide as collide
 from .response import PairProperties as PairProperties
@@ -45,4 +48,5 @@ from .shapes import Plane as Plane
 from .shapes import Sphere as Sphere
 from .shapes import rotation_matrix as rotation_matrix
 from .time_of_impact import time_of_impact as time_of_impact
+from .world import EVENT_LOOPS as EVENT_LOOPS
 from .world import CollisionWorld as CollisionWorld

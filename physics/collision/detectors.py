@@ -62,6 +62,22 @@ def start_state(pairs, radii, y, slop: float) -> StartState:
     return StartState(contact.penetration_depth >= -slop, speed, contact.normal)
 
 
+def pair_times(detector: str, pairs, start: StartState, radii, y0, y1, iterations: int):
+    """Each pair's collision time in the sub-step ``y0 -> y1``: (s, bracket start), ``inf`` for none.
+
+    Touching and approaching faster than the rest speed is an impact at s = 0 (not for a
+    trigger shape: a body already inside one has not entered it); touching and slower is
+    a resting contact (``inf``); pairs apart get the detector's times.
+    """
+    s, lo = np.full(len(pairs), np.inf), np.zeros(len(pairs))
+    if not pairs.trigger:
+        s[start.impacting] = 0.0
+    apart = np.flatnonzero(~start.in_contact)
+    if apart.size:
+        s[apart], lo[apart] = DETECTORS[detector](pairs.subset(apart), radii, y0[0], y1[0], iterations)
+    return s, lo
+
+
 def earliest_impact(detector: str, groups, starts, radii, y0, y1, iterations: int, ignored) -> Impact | None:
     """The first collision while bodies move from ``y0`` to ``y1``, or ``None``.
 
@@ -69,16 +85,9 @@ def earliest_impact(detector: str, groups, starts, radii, y0, y1, iterations: in
     entries only: a body already inside one is not a collision. Pairs whose key is in
     ``ignored`` (cancelled earlier in the step) are skipped.
     """
-    times = DETECTORS[detector]
-    q0, q1 = y0[0], y1[0]
     best = None
     for pairs, start in zip(groups, starts):
-        s, lo = np.full(len(pairs), np.inf), np.zeros(len(pairs))
-        if not pairs.trigger:
-            s[start.impacting] = 0.0
-        apart = np.flatnonzero(~start.in_contact)
-        if apart.size:
-            s[apart], lo[apart] = times(pairs.subset(apart), radii, q0, q1, iterations)
+        s, lo = pair_times(detector, pairs, start, radii, y0, y1, iterations)
         if ignored:
             for k in np.flatnonzero(np.isfinite(s)):
                 if pairs.key(k) in ignored:

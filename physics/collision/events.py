@@ -78,7 +78,8 @@ class CollisionLog:
     events: list[Collision] = dataclasses.field(default_factory=list)
     #: bodies an epilogue removed from collision detection (they fly on untouched)
     removed: set[int] = dataclasses.field(default_factory=set)
-    #: steps in which the bound on impacts per step was reached
+    #: steps in which the bound on impacts per step was reached: always 0 now that such a step
+    #: raises ImpactCapError (kept while readers of the summary still look for it)
     bound_hits: int = 0
     #: the most impacts resolved in one step
     most_impacts_in_a_step: int = 0

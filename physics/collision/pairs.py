@@ -112,13 +112,38 @@ def candidates(shapes, q0, q1, radii, inverse_masses, method: str, removed=(), m
     movable = (inverse_masses[pairs[:, 0]] > 0) | (inverse_masses[pairs[:, 1]] > 0)
     groups = [BodyPairs(pairs[movable, 0], pairs[movable, 1])]
     moving = index[inverse_masses[index] > 0]
+    groups += _near_shapes(shapes, centers[moving], reach[moving], moving)
+    return [g for g in groups if len(g)]
+
+
+def changed_candidates(shapes, chords, grid, inverse_masses, removed, changed) -> list:
+    """The candidate groups of the bodies ``changed`` (int array, ascending) after an impact.
+
+    Their swept spheres (``chords.centers``, ``chords.reach``, :class:`.chords.Chords`) are
+    tested against every other body's (through ``grid``, a :class:`.changed_pairs.SweptGrid`)
+    and every static shape.
+    """
+    active = np.ones(len(inverse_masses), bool)
+    if removed:
+        active[list(removed)] = False
+    is_changed = np.zeros(len(inverse_masses), bool)
+    is_changed[changed] = True
+    pairs = grid.pairs(inverse_masses, active, changed, is_changed)
+    groups = [BodyPairs(pairs[:, 0], pairs[:, 1])]
+    moving = changed[active[changed] & (inverse_masses[changed] > 0)]
+    groups += _near_shapes(shapes, chords.centers[moving], chords.reach[moving], moving)
+    return [g for g in groups if len(g)]
+
+
+def _near_shapes(shapes, c, r, moving) -> list:
+    """One :class:`ShapePairs` per static shape: the bodies ``moving`` whose swept spheres (c, r) reach it."""
+    groups = []
     for k, shape in enumerate(shapes):
         bounds = shape.bounds()
-        c, r = centers[moving], reach[moving]
         if bounds is None:  # a plane: the sphere reaches down to it
             near = c @ shape.normal - shape.offset <= r
         else:
             d = np.clip(c, bounds[0], bounds[1]) - c
             near = np.sum(d * d, axis=1) <= r * r
         groups.append(ShapePairs(k, shape, moving[near]))
-    return [g for g in groups if len(g)]
+    return groups

@@ -9,14 +9,20 @@ import numpy as np
 
 from .detectors import DETECTOR_NAMES as DETECTOR_NAMES
 from .events import CollisionLog, cancel_triggers
+from .impact_cap import default_cap
 from .pairs import DEFAULT_BROADPHASE
 from .response import PairProperties
 from .shapes import DEFAULT_MATERIAL, Shape
 
 #: bisection iterations of overlap testing (the lecture: "usually 5 iterations is pretty close")
 DEFAULT_BISECTION_ITERATIONS = 5
-#: collisions resolved per step before the rest of the step is left unresolved (and reported)
-DEFAULT_MAX_IMPACTS_PER_STEP = 64
+#: collisions resolved per step at most when a scene names no bound: None, scaled with the
+#: bodies (:func:`.impact_cap.default_cap`); a step that holds more raises ImpactCapError
+DEFAULT_MAX_IMPACTS_PER_STEP = None
+#: how the step finds its impacts after each one (:mod:`.step`): "incremental" re-tests the
+#: pairs of the bodies the impact moved, "full" re-integrates and re-tests everything, "auto"
+#: is "incremental" where the two agree to round-off (semi-implicit Euler, constant forces)
+EVENT_LOOPS = ("auto", "incremental", "full")
 #: approach speeds at or below this never bounce, m/s (Box2D's "restitution threshold" is
 #: 1 m/s; 1 mm/s only stops round-off-sized speeds from rattling through touching bodies)
 DEFAULT_REST_SPEED = 1e-3
@@ -38,14 +44,19 @@ class CollisionWorld:
         Restitution and friction per pair of materials.
     bisection_iterations : int
         Overlap testing: halvings of the step bracketing each collision time.
-    max_impacts_per_step : int
-        Collisions resolved per step at most; the log counts the steps that reach it.
+    max_impacts_per_step : int or None
+        Collisions resolved per step at most (None: :func:`.impact_cap.default_cap` of the
+        bodies); a step holding more raises :class:`.impact_cap.ImpactCapError`.
     broadphase : str
         Pair-finding method (see ``physics.broadphase``).
     rest_speed : float
         m/s; slower approaches are resting contacts (eps = 0), see :func:`.step.rest_speed`.
     prologues, epilogues : tuples of callables
         See :mod:`.events`. The default prologue makes trigger shapes report, not collide.
+    event_loop : str
+        One of :data:`EVENT_LOOPS`: ``"auto"`` (default: ``"incremental"`` where it gives the
+        full loop's results to round-off, else ``"full"``), ``"incremental"`` or ``"full"``,
+        the reference that re-tests everything after every impact (see :mod:`.step`).
     """
 
     detector: str = "swept"
@@ -53,11 +64,12 @@ class CollisionWorld:
     materials: tuple[str, ...] = ()
     pair_properties: PairProperties = dataclasses.field(default_factory=PairProperties)
     bisection_iterations: int = DEFAULT_BISECTION_ITERATIONS
-    max_impacts_per_step: int = DEFAULT_MAX_IMPACTS_PER_STEP
+    max_impacts_per_step: int | None = DEFAULT_MAX_IMPACTS_PER_STEP
     broadphase: str = DEFAULT_BROADPHASE
     rest_speed: float = DEFAULT_REST_SPEED
     prologues: tuple[Callable, ...] = (cancel_triggers,)
     epilogues: tuple[Callable, ...] = ()
+    event_loop: str = "auto"
 
     def __post_init__(self):
         if self.detector not in DETECTOR_NAMES:
@@ -66,8 +78,16 @@ class CollisionWorld:
             raise ValueError(f"bisection_iterations must be >= 0, got {self.bisection_iterations}")
         if not self.rest_speed >= 0:
             raise ValueError(f"rest_speed must be >= 0, got {self.rest_speed}")
-        if self.max_impacts_per_step < 1:
+        if self.max_impacts_per_step is not None and self.max_impacts_per_step < 1:
             raise ValueError(f"max_impacts_per_step must be >= 1, got {self.max_impacts_per_step}")
+        if self.event_loop not in EVENT_LOOPS:
+            raise ValueError(f"unknown event loop {self.event_loop!r}; valid: {', '.join(EVENT_LOOPS)}")
+
+    def impact_cap(self, n_bodies: int) -> int:
+        """Impacts resolved per step at most, for a scene of ``n_bodies``."""
+        if self.max_impacts_per_step is not None:
+            return self.max_impacts_per_step
+        return default_cap(n_bodies)
 
     def material(self, body: int) -> str:
         return self.materials[body] if self.materials else DEFAULT_MATERIAL

@@ -13,8 +13,10 @@ in a benchmark, not in a unit test.
 
 The package, one job a module: :mod:`.config` (sizes, targets), :mod:`.comparisons` (the
 sections), :mod:`.systems` (the large models), :mod:`.profile` (loop kernels from the
-compiled text), :mod:`.record` and :mod:`.report` (the JSON record and its tables); the
-timer is the studies' (:mod:`steplab.studies.timing`).
+compiled text), :mod:`.record` and :mod:`.report` (the JSON record and its tables);
+:mod:`.collisions` (the ball pits, issue 13) with :mod:`.ball_pit_scene` (the scene) and
+:mod:`.engines` (MuJoCo and pybullet, when installed); the timer is the studies'
+(:mod:`steplab.studies.timing`).
 """
 
 from __future__ import annotations
@@ -30,10 +32,14 @@ from steplab.studies.timing import interleaved_medians as interleaved_medians
 from steplab.studies.timing import interleaved_samples as interleaved_samples
 from steplab.studies.timing import interleaved_times as interleaved_times
 
+from .ball_pit_scene import ball_pit as ball_pit
+from .ball_pit_scene import ball_pit_toml as ball_pit_toml
+from .ball_pit_scene import mujoco_model as mujoco_model
 from .comparisons import SECTIONS as SECTIONS
 from .config import COMPILE_TARGET_SECONDS as COMPILE_TARGET_SECONDS
 from .config import FULL as FULL
 from .config import QUICK as QUICK
+from .config import REAL_TIME_TARGETS as REAL_TIME_TARGETS
 from .config import REQUIRED_RATIOS as REQUIRED_RATIOS
 from .config import SEED as SEED
 from .config import TARGETS as TARGETS

@@ -3,7 +3,8 @@
 1. the small system (one oscillator, 10^5 steps) against diffrax, Numba and a Python loop;
 2. large systems (10^6 particles, a 10^5-spring cloth) against Numba and the memory bound;
 3. accuracy-matched: time to a final error of 1e-8 m against scipy and diffrax;
-4. broadphase against scipy's cKDTree; 5. compile times; 6. batching with ``jax.vmap``.
+4. broadphase against scipy's cKDTree; 5. compile times; 6. batching with ``jax.vmap``;
+7. collisions: ball pits of 10^3 to 10^5 spheres against MuJoCo and pybullet (:mod:`.collisions`).
 
 Each section takes the :class:`.Config`, the :class:`.Record` and a progress callback.
 """
@@ -18,9 +19,10 @@ from steplab.integrators.references import solve_adaptive
 from steplab.integrators.simulate import final_state_function
 from steplab.studies.timing import Times, interleaved_samples, interleaved_times, ready
 
+from .collisions import ball_pits
 from .config import COMPILE_TARGET_SECONDS, SEED, Config
 from .profile import compiled_text, loop_kernels
-from .record import Record, final_difference
+from .record import Record, final_difference, size_label
 from .systems import cloth_model, particles_model, step_bytes
 
 # --- 1. the small system: one oscillator, 10^5 steps ---------------------------------------------
@@ -311,18 +313,13 @@ def broadphase(config: Config, record: Record, progress) -> None:
     t = interleaved_times(calls, config.repeats)
     ours = {tuple(p) for p in calls["steplab"]().tolist()}
     theirs = {tuple(sorted(p)) for p in calls["ckdtree"]().tolist()}
-    record.compare(f"vs_ckdtree_{_exponent(n)}", "broadphase",
+    record.compare(f"vs_ckdtree_{size_label(n)}", "broadphase",
                    f"{n:,} spheres of radius {radius:.3g} uniform in the unit cube, {len(ours):,} pairs",
                    "scipy cKDTree (build + query_pairs)", t["steplab"], t["ckdtree"], float(len(ours ^ theirs)),
                    steplab_method=fastest, single_call_seconds=once)
     if n != 100_000:  # the contract's key, whatever n this run used
-        record.alias("vs_ckdtree_1e5", f"vs_ckdtree_{_exponent(n)}")
+        record.alias("vs_ckdtree_1e5", f"vs_ckdtree_{size_label(n)}")
     progress("broadphase: done")
-
-
-def _exponent(n: int) -> str:
-    e = int(round(np.log10(n)))
-    return f"1e{e}" if 10**e == n else str(n)
 
 
 # --- 5. compile times, 6. batching ------------------------------------------------------------------
@@ -393,4 +390,4 @@ def batching(config: Config, record: Record, progress) -> None:
     progress("batching: done")
 
 
-SECTIONS = (small_system, large_systems, accuracy_matched, broadphase, compile_times, batching)
+SECTIONS = (small_system, large_systems, accuracy_matched, broadphase, compile_times, batching, ball_pits)

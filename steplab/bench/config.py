@@ -1,4 +1,4 @@
-"""What one bench run measures: its sizes, its seed, and the targets of issue 6."""
+"""What one bench run measures: its sizes, its seed, and the targets of issues 6 and 13."""
 
 from __future__ import annotations
 
@@ -16,6 +16,9 @@ TARGETS = {
     "vs_scipy_at_1e-8": 0.05,
     "vs_ckdtree_1e5": 0.5,
 }
+#: smallest acceptable simulated seconds per wall second of a ball pit, by its balls
+#: (issue 13, "Targets": 10^4 spheres at 0.25x real time, MuJoCo's PGS; 2,000 at 1x)
+REAL_TIME_TARGETS = {2_000: 1.0, 10_000: 0.25}
 #: longest acceptable JIT compilation of a built-in scene, s
 COMPILE_TARGET_SECONDS = 2.0
 #: the ratios ``--json`` always carries (the issue's JSON contract)
@@ -55,11 +58,22 @@ class Config:
     tolerance: float = 1e-8
     #: built-in scenes whose compile time is measured (None: all of them)
     compile_scenes: tuple[str, ...] | None = None
+    #: the collision bench: (balls, steps of dt = 1/60 s) of each ball pit (:mod:`.ball_pit_scene`)
+    collision_runs: tuple[tuple[int, int], ...] = ((1_000, 60), (10_000, 60))
+    #: timed rounds of each ball pit (one run of 10^4 balls takes seconds)
+    collision_repeats: int = 1
+    #: the largest pit the engines are set up for: MuJoCo's compiler takes time quadratic
+    #: in the free bodies (12 s for 10^4) and its broadphase 2 bytes per pair (20 GB for 10^5)
+    collision_peer_max_balls: int = 10_000
 
 
 FULL = Config(small_steps=100_000, particles=1_000_000, cloth_side=160, broadphase_n=100_000, periods=100,
-              max_log2_steps=22, batch=256, batch_steps=2_500, repeats=9, python_repeats=3, python_steps=100_000)
+              max_log2_steps=22, batch=256, batch_steps=2_500, repeats=9, python_repeats=3, python_steps=100_000,
+              collision_runs=((1_000, 60), (2_000, 60), (10_000, 60), (100_000, 6)), collision_repeats=3)
 #: the systems the targets are stated for, with fewer rounds, smaller batches, 20 oscillator
-#: periods for the accuracy match and 10^4 steps for the Python loop: under a minute
+#: periods for the accuracy match and 10^4 steps for the Python loop: under a minute; the
+#: ball pits of 10^3 and 10^4 balls for their first 0.2 and 0.1 s (a per-step cost), the
+#: engines at 10^3 only (MuJoCo's compiler alone takes 12 to 25 s for 10^4 balls)
 QUICK = Config(small_steps=100_000, particles=1_000_000, cloth_side=160, broadphase_n=100_000, periods=20,
-               max_log2_steps=20, batch=64, batch_steps=2_500, repeats=5, python_repeats=2, python_steps=10_000)
+               max_log2_steps=20, batch=64, batch_steps=2_500, repeats=5, python_repeats=2, python_steps=10_000,
+               collision_runs=((1_000, 12), (10_000, 6)), collision_peer_max_balls=1_000)

@@ -16,12 +16,19 @@ def final_difference(a, b) -> float:
     return float(np.max(np.abs(np.asarray(a, dtype=float) - np.asarray(b, dtype=float)), initial=0.0))
 
 
+def size_label(n: int) -> str:
+    """A size in a comparison's name: ``1e5`` for a power of ten, else the number (``2000``)."""
+    e = int(round(np.log10(n)))
+    return f"1e{e}" if 10**e == n else str(n)
+
+
 class Record:
     """The numbers of one bench run, as ``--json`` writes them."""
 
     def __init__(self, config: Config, quick: bool):
         self.data = {"quick": quick, "config": dataclasses.asdict(config), "ratios": {}, "seconds": {},
-                     "targets": {}, "details": {}, "compile_seconds": {}, "order": []}
+                     "targets": {}, "details": {}, "compile_seconds": {}, "order": [],
+                     "collisions": {}}
 
     def compare(self, name: str, group: str, what: str, peer: str, steplab: Times, peer_times: Times,
                 difference: float | None = None, **details) -> None:

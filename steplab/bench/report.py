@@ -1,4 +1,8 @@
-"""The bench's report: one row per comparison, as a table for the terminal or as Markdown."""
+"""The bench's report: one row per comparison, as a table for the terminal or as Markdown.
+
+Below it, the ball pits of the collision section: one row per pit and contender, with the
+real-time factor (simulated seconds per wall second) and its target.
+"""
 
 from __future__ import annotations
 
@@ -16,6 +20,62 @@ def rows(record: dict) -> list[dict]:
                     "target": None if target is None else target["target"],
                     "met": None if target is None else target["met"]})
     return out
+
+
+def collision_rows(record: dict) -> list[dict]:
+    """One row per ball pit and contender: per-step cost, real-time factor, the target on it."""
+    out = []
+    for label, pit in record.get("collisions", {}).items():
+        target = record["targets"].get(f"real_time_{label}")
+        for name, c in pit["contenders"].items():
+            mine = name == "steplab"
+            out.append({"pit": label, "balls": pit["balls"], "steps": pit["steps"], "contender": c["settings"],
+                        "per_step": c["per_step_seconds"], "real_time_factor": c["real_time_factor"],
+                        "target": target if mine else None, "balls_inside": c["balls_inside"],
+                        "impacts": f"{c['impacts']:,} ({c['bound_hits']})" if mine else ""})
+        for note in pit["not_compared"].values():
+            out.append({"pit": label, "balls": pit["balls"], "steps": pit["steps"], "contender": note,
+                        "per_step": None, "real_time_factor": None, "target": None, "balls_inside": None,
+                        "impacts": ""})
+    return out
+
+
+def _real_time_verdict(target) -> str:
+    if target is None:
+        return ""
+    return f"≥ {target['real_time_target']:g}x: {'met' if target['met'] else 'missed'}"
+
+
+def _collision_table(record: dict) -> list[str]:
+    rows_ = collision_rows(record)
+    if not rows_:
+        return []
+    lines = ["", f"{'ball pit':<15} {'balls':>7} {'steps':>5}  {'contender':<58} {'per step':>9} "
+                 f"{'x real time':>11}  {'target':<14} {'impacts (steps at the cap)':<27} inside"]
+    for r in rows_:
+        lines.append(f"{r['pit']:<15} {r['balls']:>7,} {r['steps']:>5}  {r['contender'][:58]:<58} "
+                     f"{_optional(r['per_step'], _seconds):>9} {_optional(r['real_time_factor'], '{:.3g}'.format):>11}"
+                     f"  {_real_time_verdict(r['target']):<14} {r['impacts']:<27} "
+                     f"{_optional(r['balls_inside'], '{:,}'.format)}")
+    return lines
+
+
+def _collision_markdown(record: dict) -> list[str]:
+    rows_ = collision_rows(record)
+    if not rows_:
+        return []
+    lines = ["", "| ball pit | balls | steps | contender | per step | simulated s per wall s | target | "
+                 "impacts (steps at the cap) | balls inside |", "|---|---|---|---|---|---|---|---|---|"]
+    for r in rows_:
+        lines.append(f"| `{r['pit']}` | {r['balls']:,} | {r['steps']} | {r['contender']} | "
+                     f"{_optional(r['per_step'], _seconds)} | {_optional(r['real_time_factor'], '{:.3g}'.format)} | "
+                     f"{_real_time_verdict(r['target'])} | {r['impacts']} | "
+                     f"{_optional(r['balls_inside'], '{:,}'.format)} |")
+    return lines
+
+
+def _optional(value, form) -> str:
+    return "–" if value is None else form(value)
 
 
 def _seconds(s: float) -> str:
@@ -38,6 +98,7 @@ def format_table(record: dict) -> str:
         lines.append(f"{r['group']:<17} {r['name']:<40} {r['peer'][:44]:<44} {_seconds(r['steplab']):>9} "
                      f"{_seconds(r['peer_seconds']):>9} {r['ratio']:>7.3g} {_ratio(r['ratio_of_minimums']):>7}  "
                      f"{_verdict(r)}")
+    lines += _collision_table(record)
     lines += _footer(record)
     return "\n".join(lines)
 
@@ -49,6 +110,7 @@ def format_markdown(record: dict) -> str:
         lines.append(f"| `{r['name']}` | {r['what']} | {r['peer']} | {_seconds(r['steplab'])} | "
                      f"{_seconds(r['peer_seconds'])} | {r['ratio']:.3g} | {_ratio(r['ratio_of_minimums'])} | "
                      f"{_verdict(r)} |")
+    lines += _collision_markdown(record)
     lines.append("")
     lines += [f"- {line}" for line in _footer(record)]
     return "\n".join(lines)

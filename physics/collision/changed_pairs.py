@@ -1,0 +1,186 @@
+"""The broadphase after an impact: the candidate pairs of the bodies whose motion it changed.
+
+The step's broadphase (:func:`.pairs.candidates`) runs once, over every body's swept
+bounds for the whole step. An impact changes the chords of a few bodies (the pair, or
+their spring-connected groups): only their pairs can have new collisions, so only their
+new swept bounds, from the point of impact to the new end of the step, are tested,
+against the bounds of every other body over the rest of the step. The bounds are the
+ones :func:`.pairs.candidates` builds (a sphere on the middle of the chord, reaching the
+radius plus half the chord plus the margin), for an unchanged body those of its whole
+step (they hold every later part of its chord, :mod:`.chords`), and the test is the
+broadphase's one floating-point expression (``physics.broadphase.common.spheres_overlap``):
+every pair the full broadphase would find over the rest of the step is found, and perhaps
+a few more, which the exact narrow phase then clears.
+
+The swept spheres sit in a hashed uniform grid (:class:`SweptGrid`), built once per step
+and updated body by body, so a query costs O(1) per changed body, not O(N); the kernels
+are compiled with ``cache=True`` like the broadphase's, so the compile is paid once per
+machine.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from numba import njit
+
+from ..broadphase.common import append_pair, sort_pairs
+
+#: cell edge over the median swept reach: a body of up to twice the median reach sits in one
+#: cell and is found by scanning the 3 x 3 x 3 cells around a query
+CELL_REACHES = 4.0
+#: hash buckets per body (a power of two at least this many times N)
+BUCKETS_PER_BODY = 2
+#: relative widening of a query for the roundings of its bounds (far more than the few ulps needed)
+ROUNDING = 1e-12
+#: cell indices stay below 2^50 (exact in float64; far bodies share the outermost cells)
+MAX_CELL_INDEX = 2.0**50
+
+
+class SweptGrid:
+    """A hashed uniform grid of every body's swept sphere, updated body by body as chords change.
+
+    Each body sits in the cell of its centre (a doubly linked list per bucket), except the
+    *large* ones (reach over half a cell edge: fast bodies), kept on a list every query
+    scans. A query of body a scans the cells within its reach plus half an edge of its
+    centre: a small partner's centre lies within reach_a + reach_b of a's, so in one of
+    them.
+
+    Parameters
+    ----------
+    centers : ndarray, shape (N, 3)
+    reach : ndarray, shape (N,)
+        Shared with the :class:`.chords.Chords` that owns them, read at every call.
+    """
+
+    def __init__(self, centers, reach):
+        n = len(reach)
+        self.centers, self.reach = centers, reach
+        median = float(np.median(reach)) if n else 1.0
+        self.h = CELL_REACHES * median if median > 0 else 1.0
+        buckets = 1
+        while buckets < BUCKETS_PER_BODY * max(n, 1):
+            buckets *= 2
+        self.head = np.full(buckets, -1, np.int64)
+        self.next = np.full(n, -1, np.int64)
+        self.prev = np.full(n, -1, np.int64)
+        self.cell = np.zeros((n, 3), np.int64)
+        self.bucket = np.full(n, -1, np.int64)
+        self.large = np.zeros(n, np.bool_)
+        self.large_list = np.zeros(n, np.int64)
+        self.n_large = np.zeros(1, np.int64)
+        _place(self.h, centers, reach, np.arange(n), self.head, self.next, self.prev, self.cell, self.bucket,
+               self.large, self.large_list, self.n_large)
+
+    def moved(self, bodies) -> None:
+        """``bodies`` have new swept spheres (already in ``centers`` and ``reach``): file them again."""
+        _place(self.h, self.centers, self.reach, bodies, self.head, self.next, self.prev, self.cell, self.bucket,
+               self.large, self.large_list, self.n_large)
+
+    def pairs(self, inverse_masses, active, changed, is_changed):
+        """Pairs (i < j), sorted, of a body in ``changed`` with any body whose swept spheres overlap."""
+        return _query(self.h, self.centers, self.reach, self.head, self.next, self.cell, self.large,
+                      self.large_list, self.n_large[0], inverse_masses, active, changed, is_changed)
+
+
+@njit(cache=True, inline="always")
+def _cell(x, h):
+    """The cell index of coordinate ``x``, clamped so that it stays an exact integer."""
+    return np.int64(np.floor(min(max(x / h, -MAX_CELL_INDEX), MAX_CELL_INDEX)))
+
+
+@njit(cache=True, inline="always")
+def _hash(x, y, z, mask):
+    key = (np.uint64(x & 0x1FFFFF) * np.uint64(73856093)) ^ (np.uint64(y & 0x1FFFFF) * np.uint64(19349663)) \
+        ^ (np.uint64(z & 0x1FFFFF) * np.uint64(83492791))
+    return np.int64((key * np.uint64(0x9E3779B97F4A7C15)) >> np.uint64(32)) & mask
+
+
+@njit(cache=True)
+def _place(h, centers, reach, bodies, head, nxt, prv, cell, bucket, large, large_list, n_large):
+    mask = head.shape[0] - 1
+    for b in bodies:
+        if bucket[b] >= 0:  # unlink from its bucket
+            if prv[b] >= 0:
+                nxt[prv[b]] = nxt[b]
+            else:
+                head[bucket[b]] = nxt[b]
+            if nxt[b] >= 0:
+                prv[nxt[b]] = prv[b]
+            bucket[b] = -1
+        if reach[b] > 0.5 * h:
+            if not large[b]:
+                large[b] = True
+                large_list[n_large[0]] = b
+                n_large[0] += 1
+            continue
+        large[b] = False
+        for k in range(3):
+            cell[b, k] = _cell(centers[b, k], h)
+        s = _hash(cell[b, 0], cell[b, 1], cell[b, 2], mask)
+        bucket[b] = s
+        prv[b] = -1
+        nxt[b] = head[s]
+        if head[s] >= 0:
+            prv[head[s]] = b
+        head[s] = b
+
+
+@njit(cache=True, inline="always")
+def _overlap(centers, reach, a, b):
+    # the broadphase's test, in its order of operations (physics.broadphase.common)
+    dx = centers[a, 0] - centers[b, 0]
+    dy = centers[a, 1] - centers[b, 1]
+    dz = centers[a, 2] - centers[b, 2]
+    s = reach[a] + reach[b]
+    return dx * dx + dy * dy + dz * dz <= s * s
+
+
+@njit(cache=True)
+def _query(h, centers, reach, head, nxt, cell, large, large_list, n_large, inverse_masses, active, changed,
+           is_changed):
+    n = centers.shape[0]
+    mask = head.shape[0] - 1
+    out = np.empty((16, 2), dtype=np.int64)
+    k = 0
+    lo = np.empty(3, np.int64)
+    hi = np.empty(3, np.int64)
+    for a in changed:
+        if not active[a]:
+            continue
+        for d in range(3):
+            # a small partner's centre is within reach_a + h/2 (widened for rounding) of a's
+            r = reach[a] + 0.5 * h + ROUNDING * (abs(centers[a, d]) + reach[a] + h)
+            lo[d] = _cell(centers[a, d] - r, h)
+            hi[d] = _cell(centers[a, d] + r, h)
+        # candidates: the small bodies in the cells around a (all of them for a huge query), and the large ones
+        if (hi[0] - lo[0] + 1) * (hi[1] - lo[1] + 1) * (hi[2] - lo[2] + 1) > n:
+            for b in range(n):
+                if not large[b]:
+                    k, out = _take(a, b, centers, reach, inverse_masses, active, is_changed, k, out)
+        else:
+            for x in range(lo[0], hi[0] + 1):
+                for y in range(lo[1], hi[1] + 1):
+                    for z in range(lo[2], hi[2] + 1):
+                        b = head[_hash(x, y, z, mask)]
+                        while b >= 0:
+                            if cell[b, 0] == x and cell[b, 1] == y and cell[b, 2] == z:
+                                k, out = _take(a, b, centers, reach, inverse_masses, active, is_changed, k, out)
+                            b = nxt[b]
+        for p in range(n_large):
+            b = large_list[p]
+            if large[b]:
+                k, out = _take(a, b, centers, reach, inverse_masses, active, is_changed, k, out)
+    return sort_pairs(out, k, n)
+
+
+@njit(cache=True)
+def _take(a, b, centers, reach, inverse_masses, active, is_changed, k, out):
+    """Append the pair (a, b) when it is a new candidate: b active, once per pair, movable, overlapping."""
+    if b == a or not active[b] or (is_changed[b] and b < a):
+        return k, out
+    if inverse_masses[a] == 0.0 and inverse_masses[b] == 0.0:
+        return k, out  # two immovable bodies: nothing can respond
+    if not _overlap(centers, reach, a, b):
+        return k, out
+    out, k = append_pair(out, k, a, b)
+    return k, out

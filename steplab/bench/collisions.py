@@ -1,0 +1,127 @@
+"""The collision section of ``steplab bench``: ball pits of 10^3 to 10^5 spheres (issue 13).
+
+Each pit (:mod:`.ball_pit_scene`) runs from its start for the configured steps of dt = 1/60 s
+with semi-implicit Euler and the swept event loop, as ``steplab run`` runs its scene
+file; the engines (:mod:`.engines`) run the same bodies from the same state for the same
+steps. A small pit runs first, to compile steplab's Numba kernels; every contender is set
+up and takes one step before timing, then the contenders run in turn, round after round. Reported: the wall
+time per step, the simulated seconds per wall second (the real-time factor; 1 is real
+time) and, where an engine ran, the ratio steplab / engine of the wall times.
+
+The engines' contacts are not steplab's (soft contacts, no restitution), so their final
+states differ wherever balls touched; each one is checked for keeping every ball in the
+box (``balls_inside``), and the median distance of its balls to steplab's is recorded
+(``median_distance_to_steplab``): over the first steps, while most balls fly free and
+move alike in every engine, it shows that they started from the same state.
+"""
+
+from __future__ import annotations
+
+import time
+
+import numpy as np
+
+from steplab.studies.timing import interleaved_times
+
+from .ball_pit_scene import ball_pit, box_side
+from .config import REAL_TIME_TARGETS, Config
+from .engines import ENGINES, engine_runs
+from .record import Record, size_label
+
+#: the pit run first, to compile every kernel of the event loop: (balls, steps); Numba
+#: compiles a kernel per type signature, not size, and in 30 steps these balls fall onto
+#: the floor and hit each other, so every path of the loop has been taken
+WARM_UP_PIT = (50, 30)
+
+
+def ball_pits(config: Config, record: Record, progress) -> None:
+    """Every ball pit of ``config.collision_runs``: steplab, and the engines installed."""
+    from steplab.integrators import simulate
+
+    start = time.perf_counter()
+    scene = ball_pit(WARM_UP_PIT[0])
+    simulate(scene.model, scene.integrator, scene.y0, scene.t_start, dt=scene.dt, n_steps=WARM_UP_PIT[1],
+             collisions=scene.collisions)
+    record.data["compile_seconds"]["collisions, warm-up pit"] = time.perf_counter() - start
+    for balls, steps in config.collision_runs:
+        _ball_pit(balls, steps, config, record)
+        progress(f"collisions, {balls:,} balls: done")
+
+
+def balls_inside(q, side: float) -> int:
+    """Balls whose centres are inside the box of floor ``side`` (none fell through a wall)."""
+    q = np.asarray(q)
+    return int(np.sum(np.all(np.abs(q[:, :2]) <= side / 2, axis=1) & (q[:, 2] >= 0.0)))
+
+
+def _ball_pit(balls: int, steps: int, config: Config, record: Record) -> None:
+    from steplab.integrators import simulate
+
+    scene = ball_pit(balls)
+    world, side, dt = scene.collisions, box_side(balls), scene.dt
+    simulated = steps * dt
+    label = f"ball_pit_{size_label(balls)}"
+    what = (f"{balls:,} balls falling into a {side:g} m box, {scene.integrator}, {world.detector} detector, "
+            f"{steps} steps of dt = 1/{round(1 / dt)} s")
+    finals, setup = {}, {}
+
+    def steplab(k: int):
+        traj = simulate(scene.model, scene.integrator, scene.y0, scene.t_start, dt=dt, n_steps=k, save_every=k,
+                        collisions=world)  # keeps the first and the last state only
+        finals["steplab"] = traj
+        return traj
+
+    start = time.perf_counter()
+    steplab(1)  # the scene's first step (the kernels are compiled: WARM_UP_PIT)
+    setup["steplab"] = time.perf_counter() - start
+    if balls <= config.collision_peer_max_balls:
+        start = time.perf_counter()
+        engines, not_compared = engine_runs(scene)
+        for engine in engines:
+            engine.run(1)
+        setup["engines"] = time.perf_counter() - start
+    else:
+        engines = []
+        not_compared = {name: f"{name}: not set up above {config.collision_peer_max_balls:,} balls "
+                              "(collision_peer_max_balls)" for name in ENGINES}
+    calls = {"steplab": lambda: steplab(steps)}
+    for engine in engines:
+        calls[engine.name] = lambda engine=engine: finals.__setitem__(engine.name, engine.run(steps))
+    t = interleaved_times(calls, config.collision_repeats, warm_up=False)
+
+    log = finals["steplab"].collisions
+    loop = getattr(world, "event_loop", "")  # the event loop's variant, where there are several
+    contenders = {"steplab": {"settings": f"steplab, {world.detector} detector, {loop} event loop".replace(" , ", ", "),
+                              "max_impacts_per_step": world.max_impacts_per_step,
+                              **_speed(t["steplab"], steps, dt),
+                              "balls_inside": balls_inside(finals["steplab"].y[-1][0], side),
+                              **log.summary()}}
+    q = finals["steplab"].y[-1][0]
+    for engine in engines:
+        # bodies in free flight move alike in every engine (each steps semi-implicit Euler)
+        distance = np.linalg.norm(finals[engine.name] - q, axis=1)
+        contenders[engine.name] = {"settings": engine.settings, **_speed(t[engine.name], steps, dt),
+                                   "balls_inside": balls_inside(finals[engine.name], side),
+                                   "median_distance_to_steplab": float(np.median(distance))}
+    record.data["collisions"][label] = {
+        "what": what, "balls": balls, "steps": steps, "dt": dt, "simulated_seconds": simulated, "box_side": side,
+        "setup_seconds": setup, "contenders": contenders, "not_compared": not_compared}
+    for engine in engines:
+        record.compare(f"vs_{engine.name}_{label}", "collisions", what, engine.settings, t["steplab"],
+                       t[engine.name], None, steplab_real_time_factor=contenders["steplab"]["real_time_factor"],
+                       peer_real_time_factor=contenders[engine.name]["real_time_factor"])
+    if balls in REAL_TIME_TARGETS:
+        # a target on the wall time per simulated second, so that "met" reads as every
+        # other target's, value <= target: at least x times real time is at most 1/x s
+        factor = REAL_TIME_TARGETS[balls]
+        seconds = t["steplab"].median / simulated
+        record.data["targets"][f"real_time_{label}"] = {
+            "target": 1.0 / factor, "seconds": seconds, "met": seconds <= 1.0 / factor,
+            "real_time_target": factor, "real_time_factor": contenders["steplab"]["real_time_factor"],
+            "what": "wall seconds per simulated second"}
+
+
+def _speed(times, steps: int, dt: float) -> dict:
+    """Wall times of a run of ``steps`` steps, per step, and simulated seconds per wall second."""
+    return {"wall_seconds": times.median, "wall_seconds_min": times.minimum, "rounds": times.rounds,
+            "per_step_seconds": times.median / steps, "real_time_factor": steps * dt / times.median}

@@ -1,0 +1,131 @@
+"""Checks for the notebooks' exercises: each compares a student's answer with theory.
+
+Every check prints one line, ``correct: ...`` or ``not yet: ...`` (with a hint), and returns
+whether the answer is right, so a notebook can be run top to bottom with the exercises still
+open, and its solutions variant can ``assert`` each check. The answers are never the code's
+own earlier output: they come from closed forms (a bounce loses eps^2 of its height, a ball
+tunnels when v dt exceeds the wall plus its diameter), from order conditions, and from the
+stiffest-mode prediction that ``steplab check`` prints.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+#: how close a measured order must be to the true one (the truncation study's fit is ~0.01 off)
+ORDER_TOLERANCE = 0.1
+#: relative tolerance of a predicted number (a height, a speed): generous, it is a prediction
+RELATIVE_TOLERANCE = 0.02
+#: an experimental stability limit, bisected over a finite run, may lie this far outside the
+#: predicted interval (slow growth near the limit takes long to show)
+LIMIT_TOLERANCE = 0.03
+#: Ralston's method, the 2-stage 2nd order method with the smallest error constant: its
+#: entries a_21, b_1, b_2, c_2
+RALSTON_ENTRIES = (2 / 3, 1 / 4, 3 / 4, 2 / 3)
+
+
+def _verdict(ok: bool, correct: str, hint: str) -> bool:
+    print(f"correct: {correct}" if ok else f"not yet: {hint}")
+    return ok
+
+
+def _number(x) -> float | None:
+    try:
+        value = float(x)
+    except (TypeError, ValueError):
+        return None
+    return value if np.isfinite(value) else None
+
+
+def _close(x, target: float, rtol: float) -> bool:
+    value = _number(x)
+    return value is not None and abs(value - target) <= rtol * abs(target)
+
+
+def check_bounce_height(height, restitution: float = 0.858, drop_height: float = 0.92) -> bool:
+    """The height of the second bounce: each bounce keeps eps^2 of the height before."""
+    expected = restitution**4 * drop_height
+    return _verdict(_close(height, expected, RELATIVE_TOLERANCE),
+                    f"the second bounce reaches eps^4 H = {expected:.4f} m",
+                    f"{height!r} m is not it: the speed after a bounce is eps times the speed before, and "
+                    "the height goes as the speed squared; now bounce twice")
+
+
+def check_ralston(tableau, measured_order) -> bool:
+    """Ralston's tableau (a_21 = c_2 = 2/3, b = (1/4, 3/4)) and its measured order (2)."""
+    from steplab.integrators import ButcherTableau
+
+    if not isinstance(tableau, ButcherTableau):
+        return _verdict(False, "", f"a ButcherTableau, please (got {type(tableau).__name__}): "
+                        "ButcherTableau(a_lower=((a21,),), b=(b1, b2), c=(c2,))")
+    shape_ok = len(tableau.b) == 2 and len(tableau.c) == 1 and len(tableau.a_lower) == 1
+    entries = np.concatenate([np.ravel(row) for row in tableau.a_lower] + [np.ravel(tableau.b), np.ravel(tableau.c)])
+    entries_ok = shape_ok and np.allclose(entries, RALSTON_ENTRIES, rtol=0, atol=1e-12)
+    if not entries_ok:
+        b = np.asarray(tableau.b, float)
+        c = np.asarray(tableau.c, float) if shape_ok else np.zeros(1)
+        # the order conditions of a 2-stage method: sum b = 1 (order 1), b . c = 1/2 (order 2)
+        second_order = shape_ok and np.isclose(b.sum(), 1) and np.isclose(b[1] * c[0], 0.5)
+        hint = ("second order, but not Ralston's: Ralston takes c_2 = 2/3" if second_order else
+                "two stages, sum(b) = 1 and b_2 c_2 = 1/2 for second order; Ralston takes c_2 = 2/3")
+        return _verdict(False, "", hint)
+    return _verdict(_close(measured_order, 2.0, ORDER_TOLERANCE / 2),
+                    f"Ralston's tableau, and a measured order of {_number(measured_order):.2f}: second order",
+                    f"the tableau is right; the measured order {measured_order!r} is not about 2: fit log(error) "
+                    "against log(dt) (fit_order(error_curve(...)))")
+
+
+def check_stability_limit(dt_found, scene: str = "soft-cube", integrator: str = "semi-implicit-euler") -> bool:
+    """An experimental largest stable dt against ``steplab check``'s prediction for the scene.
+
+    ``steplab check`` predicts from the stiffest mode: ``dt_max`` if that mode were undamped,
+    ``damped dt_max`` at its damping ratio. The other modes are damped differently, so a
+    measured limit lies between the two (within LIMIT_TOLERANCE).
+    """
+    from steplab.integrators import get_integrator
+    from steplab.integrators.stable_dt import stable_steps
+    from steplab.physics.scene import load_scene
+
+    model = load_scene(scene)
+    _, (row,) = stable_steps(model.model, model.y0[0], [get_integrator(integrator)])
+    lo, hi = sorted([row.dt_max_damped, row.dt_max])
+    value = _number(dt_found)
+    ok = value is not None and lo * (1 - LIMIT_TOLERANCE) <= value <= hi * (1 + LIMIT_TOLERANCE)
+    shown = "nothing" if value is None else f"{value:.4g} s"
+    return _verdict(ok, f"{shown}, between steplab check's damped ({lo:.4g} s) and undamped ({hi:.4g} s) limits",
+                    f"you found {shown}; steplab check predicts between {lo:.4g} s and {hi:.4g} s: bisect on dt, "
+                    "calling a run stable when it finishes without DivergenceError")
+
+
+def check_tunnelling_speed(speed, scene: str = "tunnelling") -> bool:
+    """The speed above which overlap testing can miss the scene's wall: (w + 2 r) / dt."""
+    from steplab.physics.collision import Box
+    from steplab.physics.scene import load_scene
+
+    shot = load_scene(scene)
+    (wall,) = [s for s in shot.collisions.shapes if isinstance(s, Box)]
+    thickness, radius = float(wall.hi[0] - wall.lo[0]), float(shot.model.radii[0])
+    expected = (thickness + 2 * radius) / shot.dt
+    return _verdict(_close(speed, expected, RELATIVE_TOLERANCE),
+                    f"above (w + 2 r) / dt = {expected:.4g} m/s a step can jump from one side of the wall to "
+                    "the other without ever overlapping it",
+                    f"{speed!r} m/s is not it: overlap testing sees the ball only at the ends of steps, v dt "
+                    "apart; how long is the stretch of x where the ball overlaps the wall?")
+
+
+def check_position_verlet(stepper, measured_order) -> bool:
+    """A drift-kick-drift leapfrog: the same steps as steplab's position Verlet, and order 2."""
+    from steplab.integrators import Stepper, simulate
+    from steplab.physics.scene import load_scene
+
+    if not isinstance(stepper, Stepper):
+        return _verdict(False, "", f"a Stepper instance, please (got {type(stepper).__name__})")
+    osc = load_scene("oscillator")
+    mine = simulate(osc.model, stepper, osc.y0, 0.0, 1.0, 0.01).y[-1]
+    theirs = simulate(osc.model, "position-verlet", osc.y0, 0.0, 1.0, 0.01).y[-1]
+    if not np.allclose(mine, theirs, rtol=0, atol=1e-12):
+        return _verdict(False, "", "its steps differ from drift-kick-drift: drift the positions half a step, "
+                        "kick the velocity a whole step with the force there, drift half a step again")
+    return _verdict(_close(measured_order, 2.0, ORDER_TOLERANCE / 2),
+                    f"drift-kick-drift, order {_number(measured_order):.2f}",
+                    f"the steps are right; the measured order {measured_order!r} is not about 2")

@@ -1,0 +1,76 @@
+"""The notebooks: generated from the tutorial (never edited by hand), run top to bottom, checked."""
+
+from pathlib import Path
+
+import nbformat
+import pytest
+from nbclient import NotebookClient
+from steplab.integrators import ButcherTableau, get_integrator
+
+from steplab import exercises
+from steplab.notebooks import notebook_files
+
+ROOT = Path(__file__).resolve().parent.parent
+NOTEBOOKS = ROOT / "notebooks"
+SOLUTIONS = sorted((NOTEBOOKS / "solutions").glob("*.ipynb"))
+
+
+def test_committed_notebooks_are_generated_from_the_tutorial():
+    files = notebook_files(ROOT / "paper" / "tutorial.md", NOTEBOOKS / "source", NOTEBOOKS)
+    assert len(files) == 2 * len(list((NOTEBOOKS / "source").glob("*.md"))) >= 10
+    for path, text in files.items():
+        # compared cell by cell, so that another nbformat's spelling of the same notebook passes
+        assert path.exists() and _cells(nbformat.reads(text, as_version=4)) == _cells(nbformat.read(path, 4)), \
+            f"{path} is stale: run python -m steplab.notebooks"
+    committed = set(NOTEBOOKS.glob("*.ipynb")) | set(SOLUTIONS)
+    assert committed == set(files)
+
+
+def _cells(notebook):
+    return [(c.cell_type, c.source, sorted(c.metadata.get("tags", []))) for c in notebook.cells]
+
+
+def _tags(cell):
+    return set(cell.metadata.get("tags", []))
+
+
+@pytest.mark.parametrize("path", SOLUTIONS, ids=lambda p: p.stem)
+def test_notebook_runs_and_its_solutions_are_correct(path, tmp_path):
+    """One kernel per topic: the open exercise says "not yet", its solution "correct"."""
+    notebook = nbformat.read(path, as_version=4)
+    NotebookClient(notebook, timeout=300, kernel_name="python3",
+                   resources={"metadata": {"path": str(tmp_path)}}).execute()
+    output = {tag: "".join(o.get("text", "") for c in notebook.cells if tag in _tags(c) for o in c.outputs)
+              for tag in ("exercise", "solution")}
+    assert output["exercise"].count("not yet:") >= 1 and "correct:" not in output["exercise"]
+    assert output["solution"].count("correct:") >= 1 and "not yet:" not in output["solution"]
+    # the student's notebook is the same, without the solutions
+    student = nbformat.read(NOTEBOOKS / path.name, as_version=4)
+    assert [c.source for c in student.cells] == [c.source for c in notebook.cells if "solution" not in _tags(c)]
+    assert (tmp_path / "tutorial-figures").is_dir()  # figures where the reader runs it, not beside the notebook
+    if any("savefig" in c.source for c in notebook.cells):  # and shown inline, not only saved
+        assert any("image/png" in o.get("data", {}) for c in notebook.cells for o in c.get("outputs", []))
+
+
+def test_checks_accept_the_closed_forms_and_say_not_yet_otherwise(capsys):
+    # closed forms, independent of the code: eps^4 H; (w + 2 r) / dt for the tunnelling scene
+    assert exercises.check_bounce_height(0.858**4 * 0.92)
+    assert not exercises.check_bounce_height(0.858**2 * 0.92)
+    assert exercises.check_tunnelling_speed((0.01 + 2 * 0.05) / 0.01)
+    assert not exercises.check_tunnelling_speed(0.01 / 0.01)
+    ralston = ButcherTableau(a_lower=((2 / 3,),), b=(1 / 4, 3 / 4), c=(2 / 3,))
+    heun = ButcherTableau(a_lower=((1.0,),), b=(0.5, 0.5), c=(1.0,))
+    assert exercises.check_ralston(ralston, 2.01)
+    assert not exercises.check_ralston(ralston, 1.0)
+    assert not exercises.check_ralston(heun, 2.0)
+    assert "second order, but not Ralston's" in capsys.readouterr().out
+    # the soft cube's limits, 2 / omega_max from its stiffest mode, bracket what bisection finds
+    assert exercises.check_stability_limit(2 / 122.181 * 0.95)
+    assert not exercises.check_stability_limit(0.005)
+    assert exercises.check_position_verlet(get_integrator("position-verlet"), 2.0)
+    assert not exercises.check_position_verlet(get_integrator("velocity-verlet"), 2.0)
+    for check in (exercises.check_bounce_height, exercises.check_tunnelling_speed, exercises.check_stability_limit):
+        assert not check(None)
+    assert not exercises.check_ralston(None, None) and not exercises.check_position_verlet(None, None)
+    out = capsys.readouterr().out.splitlines()
+    assert len(out) == 9 and sum(line.startswith("not yet: ") for line in out) == 7
