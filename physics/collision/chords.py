@@ -16,6 +16,7 @@ an unchanged chord, and a changed body's bounds are replaced by its new chord's.
 from __future__ import annotations
 
 import numpy as np
+from numba import njit
 
 
 class Chords:
@@ -47,24 +48,52 @@ class Chords:
         A body whose chord starts at ``t_sub`` is placed at the given fraction ``s`` (the
         detector's own number, so the point of impact is where the test found it).
         """
-        t_from = self.t_from[bodies]
-        length = self.t_end - t_from
-        f = np.divide(t - t_from, length, out=np.zeros_like(length), where=length > 0)
-        if t_sub is not None:
-            f[t_from == t_sub] = s
-        y0 = self.y_from[:, bodies]
-        self.now[:, bodies] = y0 + f[None, :, None] * (self.y_end[:, bodies] - y0)
+        bodies = np.asarray(bodies, dtype=np.int64)
+        if t_sub is None:
+            _at(self.y_from, self.y_end, self.t_from, float(self.t_end), self.now, bodies, float(t), False, 0.0, 0.0)
+        else:
+            _at(self.y_from, self.y_end, self.t_from, float(self.t_end), self.now, bodies, float(t), True,
+                float(t_sub), float(s))
         return self.now
 
     def restart(self, bodies, t, y_rest, margin) -> None:
         """``bodies`` continue from their states in :attr:`now` at ``t`` to their new end states ``y_rest``."""
-        self.y_from[:, bodies] = self.now[:, bodies]
-        self.t_from[bodies] = t
-        self.y_end[:, bodies] = y_rest
-        self.centers[bodies], self.reach[bodies] = swept_bounds(self.y_from[0, bodies], y_rest[0],
-                                                                self.radii[bodies], margin)
+        _restart(self.y_from, self.y_end, self.t_from, self.now, self.centers, self.reach, self.radii,
+                 np.asarray(bodies, dtype=np.int64), float(t), np.asarray(y_rest, dtype=float), float(margin))
 
 
 def swept_bounds(q0, q1, radii, margin):
     """Spheres holding the bodies along their chords ``q0 -> q1``: centre, reach (:func:`.pairs.candidates`)."""
     return 0.5 * (q0 + q1), radii + 0.5 * np.sqrt(np.sum((q1 - q0) ** 2, axis=1)) + margin
+
+
+@njit(cache=True)
+def _at(y_from, y_end, t_from, t_end, now, bodies, t, has_sub, t_sub, s):
+    """:meth:`Chords.at`, compiled: the NumPy expressions element by element (the same numbers)."""
+    for b in bodies:
+        length = t_end - t_from[b]
+        f = (t - t_from[b]) / length if length > 0 else 0.0
+        if has_sub and t_from[b] == t_sub:
+            f = s
+        for d in range(2):
+            for k in range(3):
+                y0 = y_from[d, b, k]
+                now[d, b, k] = y0 + f * (y_end[d, b, k] - y0)
+
+
+@njit(cache=True)
+def _restart(y_from, y_end, t_from, now, centers, reach, radii, bodies, t, y_rest, margin):
+    """:meth:`Chords.restart`, compiled: the same assignments and :func:`swept_bounds` row by row."""
+    for p in range(bodies.shape[0]):
+        b = bodies[p]
+        for d in range(2):
+            for k in range(3):
+                y_from[d, b, k] = now[d, b, k]
+                y_end[d, b, k] = y_rest[d, p, k]
+        t_from[b] = t
+        total = 0.0
+        for k in range(3):
+            centers[b, k] = 0.5 * (y_from[0, b, k] + y_rest[0, p, k])
+            dk = y_rest[0, p, k] - y_from[0, b, k]
+            total += dk * dk
+        reach[b] = radii[b] + 0.5 * np.sqrt(total) + margin

@@ -55,3 +55,40 @@ def resolve_pair(y, i, j, inverse_masses, normal, depth, restitution, friction):
             y[0, j, k] = y[0, j, k] + normal[k] * (push * inv_b)
             y[1, j, k] = y[1, j, k] - lam[k] * inv_b
     return lam
+
+
+@njit(cache=True)
+def impact_terms(y, i, j, radii, accelerations, normals, offsets):
+    """The contact and approach of one pair at its impact, as the NumPy path computes them.
+
+    Body ``i`` against body ``j`` (:func:`.narrow_phase.collide_sphere_sphere`) or, for
+    ``j < 0``, the plane ``-1 - j`` (:func:`.narrow_phase.collide_sphere_plane`), in state
+    ``y`` (2, N, 3); the approach speed and the pressing acceleration are
+    :func:`.response.normal_speed` of the velocities and of the ``accelerations`` along
+    the normal. Returns ``(normal (3,), depth, speed, pressing)``.
+    """
+    normal = np.empty(3)
+    if j >= 0:
+        d0, d1, d2 = y[0, j, 0] - y[0, i, 0], y[0, j, 1] - y[0, i, 1], y[0, j, 2] - y[0, i, 2]
+        dist = np.sqrt(d0 * d0 + d1 * d1 + d2 * d2)
+        if dist > 0:
+            normal[0], normal[1], normal[2] = d0 / dist, d1 / dist, d2 / dist
+        else:
+            normal[0], normal[1], normal[2] = 1.0, 0.0, 0.0
+        depth = radii[i] + radii[j] - dist
+        w0, w1, w2 = y[1, i, 0] - y[1, j, 0], y[1, i, 1] - y[1, j, 1], y[1, i, 2] - y[1, j, 2]
+        g0 = accelerations[i, 0] - accelerations[j, 0]
+        g1 = accelerations[i, 1] - accelerations[j, 1]
+        g2 = accelerations[i, 2] - accelerations[j, 2]
+    else:
+        plane = -1 - j
+        height = (y[0, i, 0] * normals[plane, 0] + y[0, i, 1] * normals[plane, 1]
+                  + y[0, i, 2] * normals[plane, 2]) - offsets[plane]
+        for k in range(3):
+            normal[k] = 0.0 - normals[plane, k]
+        depth = radii[i] - height
+        w0, w1, w2 = y[1, i, 0] - 0.0, y[1, i, 1] - 0.0, y[1, i, 2] - 0.0
+        g0, g1, g2 = accelerations[i, 0] - 0.0, accelerations[i, 1] - 0.0, accelerations[i, 2] - 0.0
+    speed = w0 * normal[0] + w1 * normal[1] + w2 * normal[2]
+    pressing = g0 * normal[0] + g1 * normal[1] + g2 * normal[2]
+    return normal, depth, speed, pressing

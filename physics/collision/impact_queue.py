@@ -21,11 +21,15 @@ from __future__ import annotations
 
 import dataclasses
 import heapq
+from math import isfinite
 
 import numpy as np
 
 from .detectors import Impact, StartState
 from .pairs import BodyPairs, ShapePairs
+
+#: groups up to this many pairs are scanned in Python (:meth:`ImpactQueue.add`)
+SMALL = 32
 
 
 @dataclasses.dataclass
@@ -84,11 +88,28 @@ class ImpactQueue:
         number = len(self.tables)
         self.tables.append(table)
         rank = 0 if body else 1 + pairs.index
-        for k in np.flatnonzero(np.isfinite(s)):
-            j = int(pairs.j[k]) if body else 0
-            heapq.heappush(self._heap, (t_sub + s[k] * h, rank, int(pairs.i[k]), j, number, int(k)))
-        if watch is not None and watch.any():
-            self._watched.append((number, np.flatnonzero(watch)))
+        if len(s) <= SMALL:  # a few pairs (a re-test): Python's scalars are cheaper than NumPy's calls
+            times = np.asarray(s).tolist()
+            finite = [k for k, x in enumerate(times) if isfinite(x)]
+            if finite:
+                times, i = [times[k] for k in finite], pairs.i.tolist()
+                i = [i[k] for k in finite]
+                if body:
+                    j = pairs.j.tolist()
+                    j = [j[k] for k in finite]
+        else:
+            where = np.flatnonzero(np.isfinite(s))
+            finite = where.tolist()
+            times, i = np.asarray(s)[where].tolist(), pairs.i[where].tolist()
+            j = pairs.j[where].tolist() if body else None
+        if finite:
+            heap, push = self._heap, heapq.heappush
+            for n, k in enumerate(finite):
+                push(heap, (t_sub + times[n] * h, rank, i[n], j[n] if body else 0, number, k))
+        if watch is not None:
+            watched = np.flatnonzero(watch)
+            if watched.size:
+                self._watched.append((number, watched))
 
     def changed(self, bodies) -> None:
         """The chords of ``bodies`` changed: every pair tested with them is out of date."""

@@ -80,7 +80,7 @@ import numpy as np
 
 from .changed_pairs import SweptGrid
 from .chords import Chords
-from .compiled_response import resolve_pair
+from .compiled_response import impact_terms, resolve_pair
 from .coupling import Coupling
 from .detectors import StartState, earliest_impact, pair_times, start_state
 from .events import Collision, CollisionLog
@@ -239,15 +239,19 @@ class CollisionStep:
             chords.t_from, chords.t_end, t, self.radii, slop, self.field, self.world.rest_speed, RESTING_STEPS,
             dt, self.plane_normals, self.plane_offsets, self.plane_triggers)
         is_changed[moved] = False
-        nb = int(np.count_nonzero(j >= 0))  # the body pairs come first, then one run per plane
-        edges = [0, nb, *(nb + 1 + np.flatnonzero(np.diff(j[nb:]))), len(j)]
+        js = j.tolist()  # the body pairs come first, then one run per plane
+        n = len(js)
+        nb = 0
+        while nb < n and js[nb] >= 0:
+            nb += 1
+        edges = [0, nb, *(p for p in range(nb + 1, n) if js[p] != js[p - 1]), n]
         for lo, hi in zip(edges[:-1], edges[1:]):
             if lo == hi:
                 continue
-            if j[lo] >= 0:
+            if js[lo] >= 0:
                 pairs = BodyPairs(i[lo:hi], j[lo:hi])
             else:
-                pairs = ShapePairs(-1 - int(j[lo]), self.world.shapes[-1 - int(j[lo])], i[lo:hi])
+                pairs = ShapePairs(-1 - js[lo], self.world.shapes[-1 - js[lo]], i[lo:hi])
             start = StartState(in_contact[lo:hi], speed[lo:hi], normal[lo:hi], rest[lo:hi])
             queue.add(pairs, start, s[lo:hi], s[lo:hi], t, t_end - t, watch[lo:hi])
 
@@ -306,7 +310,12 @@ class CollisionStep:
             pair = _bodies(impact)
             t_hit = t + impact.s * h
             y_hit = chords.at(pair, t_hit, table.t_sub, table.s[k])
-            contact = impact.pairs.subset([k]).contact(self.radii, y_hit[0])
+            if self.compiled_retest:  # spheres and planes under constant forces: one kernel
+                j = int(impact.pairs.j[k]) if isinstance(impact.pairs, BodyPairs) else -1 - impact.pairs.index
+                contact = _PairContact(*impact_terms(y_hit, int(impact.pairs.i[k]), j, self.radii, self.field,
+                                                     self.plane_normals, self.plane_offsets))
+            else:
+                contact = impact.pairs.subset([k]).contact(self.radii, y_hit[0])
             event = self._event(impact, y_hit, t, h, dt, self._accelerations(t_hit, chords), contact)
             if all(prologue(event, self.log) for prologue in self.world.prologues):
                 return impact, event, pair, contact
@@ -387,6 +396,8 @@ class CollisionStep:
     def _event(self, impact, y_hit, t, h, dt, accelerations=None, contact=None) -> Collision:
         """The collision ``impact`` in state ``y_hit``; ``contact``: the pair's, when already known."""
         world, model = self.world, self.model
+        if isinstance(contact, _PairContact):
+            return self._event_of_pair(impact, t, h, dt, contact)
         pair = impact.pairs.subset([impact.k])
         t_hit = t + impact.s * h
         normal = (contact if contact is not None else pair.contact(self.radii, y_hit[0])).normal[0]
@@ -408,11 +419,40 @@ class CollisionStep:
                          restitution=restitution, friction=friction,
                          bracket=(float(t + impact.lo * h), float(t + impact.s * h)), trigger=trigger)
 
+    def _event_of_pair(self, impact, t, h, dt, contact) -> Collision:
+        """:meth:`_event` from the compiled :class:`_PairContact` (the same numbers)."""
+        world, names = self.world, self.model.names
+        pairs, k = impact.pairs, impact.k
+        t_hit = t + impact.s * h
+        body = int(pairs.i[k])
+        if isinstance(pairs, BodyPairs):
+            other = int(pairs.j[k])
+            other_name, trigger = names[other], False
+            restitution, friction = world.properties(body, other)
+        else:
+            other, other_name, trigger = pairs.shape.name, pairs.shape.name, pairs.shape.trigger
+            restitution, friction = world.properties(body, pairs.shape)
+        speed = contact.speed
+        kind = "impact"
+        if speed <= rest_speed(world, contact.pressing, dt):
+            kind, restitution = "resting", 0.0  # a resting contact, not a bounce
+        return Collision(kind=kind, t=float(t_hit), body=body, other=other, body_name=names[body],
+                         other_name=other_name, normal=contact.normal[0], impact_speed=speed,
+                         restitution=restitution, friction=friction,
+                         bracket=(float(t + impact.lo * h), float(t + impact.s * h)), trigger=trigger)
+
     def _respond(self, impact, event, y, contact=None, compiled=False) -> None:
         """Place the pair at the point of impact, give it new velocities, run the epilogues.
 
         ``compiled``: through :func:`.compiled_response.resolve_pair` (the same numbers).
         """
+        if compiled and isinstance(contact, _PairContact):
+            pairs, k = impact.pairs, impact.k
+            j = int(pairs.j[k]) if isinstance(pairs, BodyPairs) else -1
+            lam = resolve_pair(y, int(pairs.i[k]), j, self.inverse_masses, contact.normal[0], contact.depth,
+                               float(event.restitution), float(event.friction))[None]
+            self._record(event, lam)
+            return
         pair = impact.pairs.subset([impact.k])
         contact = contact if contact is not None else pair.contact(self.radii, y[0])
         other = pair.j if isinstance(pair, BodyPairs) else None
@@ -424,6 +464,10 @@ class CollisionStep:
         else:
             lam = resolve(y, pair.i, other, self.inverse_masses, contact.normal, contact.penetration_depth,
                           event.restitution, event.friction)
+        self._record(event, lam)
+
+    def _record(self, event, lam) -> None:
+        """Log a responded collision (``lam``: its impulse) and run the epilogues; settling is counted."""
         if event.kind == "resting" or event.impact_speed <= 0:  # settling, or grazing: no collision
             self.log.resting_corrections += 1
         else:
@@ -431,6 +475,16 @@ class CollisionStep:
             self.log.events.append(event)
             for epilogue in self.world.epilogues:
                 epilogue(event, self.log)
+
+
+class _PairContact:
+    """One pair's contact and approach at its impact, from :func:`.compiled_response.impact_terms`."""
+
+    __slots__ = ("normal", "depth", "speed", "pressing")
+
+    def __init__(self, normal, depth, speed, pressing):
+        self.normal = normal[None]  # (1, 3), as a Contact's
+        self.depth, self.speed, self.pressing = float(depth), float(speed), float(pressing)
 
 
 def _speeding_up(pairs, start, y_end):
@@ -476,7 +530,8 @@ class _ConstantField:
         self.n_bodies = len(field)
 
     def acceleration(self, t, q, v):
-        return np.broadcast_to(self.field, np.shape(q))
+        field = self.field
+        return field if field.shape == np.shape(q) else np.broadcast_to(field, np.shape(q))
 
     def vector_field(self, t, y):
         return np.stack([y[1], self.acceleration(t, y[0], y[1])])
