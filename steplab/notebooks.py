@@ -48,7 +48,8 @@ def notebook_setup(text: str) -> str:
     setup = CODE_BLOCK.findall(text[: SECTION.search(text).start()])[0]
     lines = [line for line in setup.splitlines()
              if line != "import matplotlib" and not line.startswith("matplotlib.use(")]
-    return "\n".join(lines).strip("\n") + "\n"
+    # inline figures even where MPLBACKEND names another backend (CI exports Agg)
+    return "%matplotlib inline\n" + "\n".join(lines).strip("\n") + "\n"
 
 
 def topic_markdown(tutorial: str, source: str, label: str = "<source>") -> str:
