@@ -23,7 +23,7 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-from ..broadphase.common import append_pair, sort_pairs
+from ..broadphase.common import append_pair, sort_pairs, spheres_overlap
 
 #: cell edge over the median swept reach: a body of up to twice the median reach sits in one
 #: cell and is found by scanning the 3 x 3 x 3 cells around a query
@@ -125,16 +125,6 @@ def _place(h, centers, reach, bodies, head, nxt, prv, cell, bucket, large, large
         head[s] = b
 
 
-@njit(cache=True, inline="always")
-def _overlap(centers, reach, a, b):
-    # the broadphase's test, in its order of operations (physics.broadphase.common)
-    dx = centers[a, 0] - centers[b, 0]
-    dy = centers[a, 1] - centers[b, 1]
-    dz = centers[a, 2] - centers[b, 2]
-    s = reach[a] + reach[b]
-    return dx * dx + dy * dy + dz * dz <= s * s
-
-
 @njit(cache=True)
 def _query(h, centers, reach, head, nxt, cell, large, large_list, n_large, inverse_masses, active, changed,
            is_changed):
@@ -180,7 +170,7 @@ def _take(a, b, centers, reach, inverse_masses, active, is_changed, k, out):
         return k, out
     if inverse_masses[a] == 0.0 and inverse_masses[b] == 0.0:
         return k, out  # two immovable bodies: nothing can respond
-    if not _overlap(centers, reach, a, b):
+    if not spheres_overlap(centers, reach, a, b):
         return k, out
     out, k = append_pair(out, k, a, b)
     return k, out
