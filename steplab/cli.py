@@ -116,6 +116,10 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--no-tutorial", action="store_true", help="do not re-run the tutorial's code blocks")
     p.add_argument("--pdf", action="store_true", help="also print the HTML to PDF (needs Debian's chromium)")
 
+    p = sub.add_parser("report", help="write a static HTML site of the results: index, studies, errata, bench")
+    p.add_argument("--results", type=Path, default=Path("results"), help="results folder (default: results/)")
+    p.add_argument("--out", type=Path, required=True, help="site folder (serve with python -m http.server -d DIR)")
+
     p = sub.add_parser("recommend", help="the cheapest integrator and dt that meet an error tolerance")
     p.add_argument("scene", help="built-in scene name or path to a TOML file")
     p.add_argument("--tol", type=_positive, required=True, help="largest final position error, m (with "
@@ -189,7 +193,7 @@ def _run_command(args) -> int:
         sys.path.append(str(Path.cwd()))
     command = {"integrators": cmd_integrators, "scenes": cmd_scenes, "run": cmd_run, "check": cmd_check,
                "animate": cmd_animate, "paper": cmd_paper, "recommend": cmd_recommend, "study": cmd_study,
-               "reproduce": cmd_reproduce, "bench": cmd_bench}[args.command]
+               "reproduce": cmd_reproduce, "bench": cmd_bench, "report": cmd_report}[args.command]
     try:
         return command(args) or 0
     except (SceneError, UnknownIntegratorError, NotConstantForceError, PaperError, ValueError) as err:
@@ -525,6 +529,13 @@ def cmd_paper(args) -> int:
         raise ValueError(f"--paper-dir {args.paper_dir}: no paper.template.md there (run from the repository root)")
     for path in build(args.results, args.paper_dir, tutorial=not args.no_tutorial, pdf=args.pdf):
         print(f"wrote {path}")
+    return 0
+
+
+def cmd_report(args) -> int:
+    from steplab.report import build, main_summary
+
+    print(main_summary(build(args.results, args.out)))
     return 0
 
 

@@ -6,9 +6,13 @@
 - :mod:`.broadphase` — pair finding, method x n x distribution (time and peak memory);
 - :mod:`.collisions` — a run with collisions, detector x scene;
 - :mod:`.accuracy` — ``track_`` benchmarks: global error, fitted order, energy drift, so an
-  accuracy regression shows in asv's history next to a speed one.
+  accuracy regression shows in asv's history next to a speed one;
+- :mod:`.ratios` — ``track_`` benchmarks: ``steplab bench``'s small-system ratios (steplab / peer),
+  so a regression against diffrax, Numba or a Python loop shows in asv's history.
 
-Compiled JAX is compiled in ``setup`` and timed with ``block_until_ready``. A combination
+A JAX benchmark times one compiled call and nothing else: its inputs are device arrays made in
+``setup``, where it is also compiled and run once, and the timed call waits for the result
+with ``block_until_ready``. A combination
 that cannot run (a module another part of steplab has not delivered yet, implicit Euler's
 dense Jacobian at 10^5 bodies) raises ``NotImplementedError`` in ``setup``, which asv
 records as skipped.

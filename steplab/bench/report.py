@@ -60,7 +60,8 @@ def _collision_table(record: dict) -> list[str]:
     return lines
 
 
-def _collision_markdown(record: dict) -> list[str]:
+def collision_markdown(record: dict) -> list[str]:
+    """The ball-pit table (steplab against the physics engines) as Markdown lines; none without pits."""
     rows_ = collision_rows(record)
     if not rows_:
         return []
@@ -110,7 +111,7 @@ def format_markdown(record: dict) -> str:
         lines.append(f"| `{r['name']}` | {r['what']} | {r['peer']} | {_seconds(r['steplab'])} | "
                      f"{_seconds(r['peer_seconds'])} | {r['ratio']:.3g} | {_ratio(r['ratio_of_minimums'])} | "
                      f"{_verdict(r)} |")
-    lines += _collision_markdown(record)
+    lines += collision_markdown(record)
     lines.append("")
     lines += [f"- {line}" for line in _footer(record)]
     return "\n".join(lines)

@@ -1,0 +1,139 @@
+"""``steplab report``: the site of a small results folder parses, every link and image
+resolves, and it loads in a real headless browser (Debian's chromium) without errors."""
+
+import html
+import json
+import shutil
+import subprocess
+from html.parser import HTMLParser
+from pathlib import Path
+
+import pytest
+from steplab.studies import STUDIES, run_study
+
+from steplab.cli import main
+from steplab.report import build
+
+#: the cheapest real studies that between them have figures, tables and lecture errors
+SITE_STUDIES = ("frame_rate", "restitution")
+#: a bench record written by hand: the bench page must print its ratio and both times
+BENCH = {"order": ["step"], "ratios": {"step": 0.5}, "targets": {},
+         "seconds": {"step": {"what": "one oscillator step", "peer_name": "scipy", "steplab": 0.002, "peer": 0.004}},
+         "collisions": {"pit": {"balls": 10, "steps": 6, "not_compared": {}, "contenders": {"mujoco": {
+             "settings": "MuJoCo, PGS", "per_step_seconds": 0.003, "real_time_factor": 5.5, "balls_inside": 10,
+             "impacts": 0, "bound_hits": 0}}}}}
+
+
+@pytest.fixture(scope="module")
+def results(tmp_path_factory):
+    out = tmp_path_factory.mktemp("results")
+    for name in SITE_STUDIES:
+        run_study(STUDIES[name], out, quick=True)
+    (out / "bench.json").write_text(json.dumps(BENCH))
+    return out
+
+
+@pytest.fixture(scope="module")
+def site(results, tmp_path_factory):
+    out = tmp_path_factory.mktemp("site")
+    build(results, out)
+    return out
+
+
+class _Page(HTMLParser):
+    """The title, links and images of one page (html.parser raises on nothing; we check what it finds)."""
+
+    def __init__(self):
+        super().__init__()
+        self.title, self.links, self.images, self._in_title = "", [], [], False
+
+    def handle_starttag(self, tag, attrs):
+        attrs = dict(attrs)
+        self._in_title = tag == "title"
+        if tag == "a" and "href" in attrs:
+            self.links.append(attrs["href"])
+        if tag == "img":
+            self.images.append((attrs.get("src"), attrs.get("alt")))
+
+    def handle_data(self, data):
+        if self._in_title:
+            self.title += data
+
+    def handle_endtag(self, tag):
+        self._in_title = False
+
+
+def _parse(path: Path) -> _Page:
+    page = _Page()
+    page.feed(path.read_text())
+    page.close()
+    return page
+
+
+def test_every_link_and_image_resolves_inside_the_site(site, results):
+    pages = sorted(site.glob("*.html"))
+    assert {p.name for p in pages} == {"index.html", "errata.html", "bench.html"} | {f"{s}.html" for s in SITE_STUDIES}
+    for path in pages:
+        page = _parse(path)
+        assert page.title, f"{path.name} has no title"
+        for href in page.links:
+            target = href.split("#")[0]
+            assert "://" not in href and not href.startswith("/"), f"{path.name}: link {href} is not relative"
+            assert not target or (site / target).is_file(), f"{path.name}: link {href} resolves to no file"
+        for src, alt in page.images:
+            assert alt, f"{path.name}: image {src} has no alt text"
+            assert (site / src).is_file(), f"{path.name}: image {src} resolves to no file"
+            # the PNG the study drew, copied unchanged
+            assert (site / src).read_bytes() == (results / Path(src).name).read_bytes()
+    index = _parse(site / "index.html")
+    assert {f"{s}.html" for s in SITE_STUDIES} | {"errata.html", "bench.html"} <= set(index.links)
+    for name in SITE_STUDIES:
+        record = json.loads((results / f"{name}.json").read_text())
+        shown = {Path(src).name for src, _ in _parse(site / f"{name}.html").images}
+        assert shown == {f for f in record["figures"] if f.endswith(".png")}
+        text = html.unescape((site / f"{name}.html").read_text())
+        for value in (record["provenance"]["git_commit"], record["provenance"]["cpu"], record["provenance"]["date"]):
+            assert value in text
+
+
+def test_errata_and_bench_pages_print_the_records(site, results):
+    errata = html.unescape((site / "errata.html").read_text())
+    errors = json.loads((results / "restitution.json").read_text())["lecture_errors"]
+    listed = [e for e in errors if e.get("is_error", True) and not e["correct"].startswith("checked")]
+    assert listed and all(e["where"] in errata for e in listed)
+    # a check the lecture passed is not an erratum
+    assert all(e["where"] not in errata for e in errors if e["correct"].startswith("checked"))
+    bench = (site / "bench.html").read_text()
+    # steplab 2 ms against the peer's 4 ms: ratio 0.5
+    assert "2 ms" in bench and "4 ms" in bench and "<td>0.5</td>" in bench
+    # and the engines' ball pit: 3 ms a step, 5.5 simulated seconds per wall second
+    assert "<td>MuJoCo, PGS</td>" in bench and "<td>3 ms</td>" in bench and "<td>5.5</td>" in bench
+
+
+@pytest.mark.parametrize("make", [lambda tmp: tmp / "absent", lambda tmp: tmp])
+def test_a_missing_or_empty_results_folder_is_one_line_and_status_2(tmp_path, capsys, make):
+    status = main(["report", "--results", str(make(tmp_path)), "--out", str(tmp_path / "site")])
+    err = capsys.readouterr().err
+    assert status == 2 and err.count("\n") == 1 and "steplab report: error:" in err
+    assert not (tmp_path / "site").exists()
+
+
+def _chromium(*args, cwd):
+    browser = shutil.which("chromium") or shutil.which("chromium-browser")
+    if browser is None:  # a failure, not a skip: .ci/run installs Debian's chromium
+        pytest.fail("the report's browser test needs Chromium: `apt-get install chromium` (.ci/run does)")
+    return subprocess.run([browser, "--headless", "--disable-gpu", "--no-sandbox", "--no-first-run",
+                           "--disable-background-networking", "--disable-component-update",
+                           f"--user-data-dir={cwd / 'profile'}", "--enable-logging=stderr", "--v=0", *args],
+                          capture_output=True, text=True, timeout=120, check=True)
+
+
+def test_every_page_loads_in_chromium_without_console_errors(site, tmp_path):
+    for path in sorted(site.glob("*.html")):
+        run = _chromium("--dump-dom", path.resolve().as_uri(), cwd=tmp_path)
+        assert html.escape(_parse(path).title, quote=False) in run.stdout, f"{path.name}: its title is not in the DOM"
+        console = [line for line in run.stderr.splitlines() if "Uncaught" in line or "Failed to load resource" in line]
+        assert not console, f"{path.name}: {console}"
+    shot = tmp_path / "index.png"
+    _chromium("--window-size=1200,1600", f"--screenshot={shot}", (site / "index.html").resolve().as_uri(), cwd=tmp_path)
+    assert shot.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
