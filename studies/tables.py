@@ -32,9 +32,11 @@ class Table:
 
 
 def markdown_table(header: list[str], rows: list[list[str]]) -> str:
-    """A GitHub-flavoured Markdown table (``|`` inside a cell escaped)."""
+    """A GitHub-flavoured Markdown table (``|`` and ``*`` inside a cell escaped: the lecture's
+    formulas, such as ``x = x + (v + a*t)*t``, must not turn into emphasis)."""
     lines = ["| " + " | ".join(header) + " |", "|" + "---|" * len(header)]
-    lines += ["| " + " | ".join(str(c).replace("|", "\\|") for c in row) + " |" for row in rows]
+    lines += ["| " + " | ".join(str(c).replace("|", "\\|").replace("*", "\\*") for c in row) + " |"
+              for row in rows]
     return "\n".join(lines)
 
 

@@ -80,3 +80,11 @@ def test_the_build_copies_the_tutorials_figures_from_a_scratch_folder(tmp_path):
     (tmp_path / "tutorial.md").write_text(block + "![B.](figures/b.png)\n")
     with pytest.raises(PaperError, match="shows figures/b.png, which its code does not draw"):
         tutorial_figures(tmp_path / "tutorial.md", tmp_path / "paper")
+
+
+def test_a_lecture_formula_in_a_table_cell_stays_literal():
+    """``a*t`` in a cell is the lecture's product, not Markdown emphasis (nor is ``|`` a new column)."""
+    from steplab.studies.tables import markdown_table
+
+    html = to_html(markdown_table(["formula", "note"], [["x = x + (v + a*t)*t", "a | b"]]), {})
+    assert "x = x + (v + a*t)*t" in html and "<em>" not in html and "a | b" in html
