@@ -175,15 +175,9 @@ class CollisionStep:
         t_start, t_end = t, t + dt
         y = np.array(y)
         ignored = set(log.cancelled_pairs)  # pairs a prologue cancelled, until they separate
-        # Forces and integration: the whole step, once
-        y_end, carry_end = integrator.step(model, t, y, dt, carry)
-        y_end = np.array(y_end)
-        slop = contact_slop(y_end[0])
-        # Broadphase, once: pairs whose bounding spheres, around their motion over the step, overlap
-        groups = candidates(world.shapes, y[0], y_end[0], radii, inverse_masses, world.broadphase,
-                            log.removed, slop)
+        # Forces, integration, broadphase and the pairs' start states: the whole step, once
+        y_end, carry_end, slop, groups, starts = self._sweep(t, y, dt, carry)
         # Narrowphase, once per pair: every candidate's time of impact, in the queue
-        starts = [start_state(pairs, radii, y, slop) for pairs in groups]
         queue = ImpactQueue(len(radii))
         chords = Chords(y, y_end, t, t_end, radii, slop)
         grid = SweptGrid(chords.centers, chords.reach)
@@ -337,22 +331,16 @@ class CollisionStep:
     def _full(self, t, y, dt, carry):
         """The reference step: after every collision, everything is integrated and tested again."""
         world, log, model, integrator = self.world, self.log, self.model, self.integrator
-        radii, inverse_masses = self.radii, self.inverse_masses
+        radii = self.radii
         t_start, t_end = t, t + dt
         y = np.array(y)
         ignored = set(log.cancelled_pairs)  # pairs a prologue cancelled, until they separate
         resolved = 0
         while True:
             h = t_end - t
-            # Forces and integration: the integrator steps the ODE over the rest of the step
-            y_end, carry_end = integrator.step(model, t, y, h, carry)
-            y_end = np.array(y_end)
-            slop = contact_slop(y_end[0])
-            # Broadphase: pairs whose bounding spheres, around their motion over the sub-step, overlap
-            groups = candidates(world.shapes, y[0], y_end[0], radii, inverse_masses, world.broadphase,
-                                log.removed, slop)
+            # Forces, integration and broadphase over the rest of the step
+            y_end, carry_end, slop, groups, starts = self._sweep(t, y, h, carry)
             # Narrowphase: the earliest collision of the sub-step that the prologues let through
-            starts = [start_state(pairs, radii, y, slop) for pairs in groups]
             self._set_rest_speeds(groups, starts, t, y, dt)
             if resolved == self.cap:
                 if earliest_impact(world.detector, groups, starts, radii, y, y_end, world.bisection_iterations,
@@ -369,6 +357,22 @@ class CollisionStep:
             carry = integrator.init(model, t, y)
         log.most_impacts_in_a_step = max(log.most_impacts_in_a_step, resolved)
         return self._finish(groups, starts, y_end, carry_end, t_end, ignored, slop)
+
+    def _sweep(self, t, y, h, carry):
+        """The stages before the narrow phase, over the (sub-)step from ``t`` to ``t + h``.
+
+        Forces and integration: the integrator steps the ODE. Broadphase: the pairs whose
+        bounding spheres, around their motion over the sub-step, overlap. Then each candidate
+        pair's start state (touching, approach speed). Returns ``(y_end, carry_end, slop,
+        groups, starts)``.
+        """
+        y_end, carry_end = self.integrator.step(self.model, t, y, h, carry)
+        y_end = np.array(y_end)
+        slop = contact_slop(y_end[0])
+        groups = candidates(self.world.shapes, y[0], y_end[0], self.radii, self.inverse_masses,
+                            self.world.broadphase, self.log.removed, slop)
+        starts = [start_state(pairs, self.radii, y, slop) for pairs in groups]
+        return y_end, carry_end, slop, groups, starts
 
     def _set_rest_speeds(self, groups, starts, t, y, dt, accelerations=None):
         """Each touching, approaching pair's rest speed (one force evaluation, when there is one)."""
