@@ -323,8 +323,6 @@ def cmd_run(args) -> int:
         return _fail(args.command, str(err), EXIT_DIVERGED)
     energy_end = float(scene.model.energy(traj.y[-1].astype(float)))
     collisions = traj.collisions.summary() if traj.collisions is not None else None
-    if collisions is not None and collisions.get("bound_hits"):
-        run_warnings.append(_bound_hits_warning(collisions["bound_hits"]))
     summary = {
         "scene": scene.name, "integrator": integrator.name, "dt": dt, "steps": traj.steps,
         "t_start": scene.t_start, "t_end": float(traj.t[-1]), "backend": traj.backend,
@@ -362,11 +360,6 @@ def _keeping(make_step, kept: list):
         return step
 
     return stepper
-
-
-def _bound_hits_warning(hits: int) -> str:
-    return (f"{hits} steps reached the bound on impacts per step and left the rest of the step unresolved "
-            "(raise max_impacts_per_step)")
 
 
 def _collision_world(scene, detector, backend):
@@ -408,8 +401,6 @@ def _print_run(s: dict) -> None:
         print(f"  collisions ({s['detector']}): {_plural(c['impacts'], 'impact')}{extra}, "
               f"{_plural(c['resting_corrections'], 'resting-contact correction')}, "
               f"at most {c['most_impacts_in_a_step']} of them in one step")
-        if c.get("bound_hits"):
-            print(f"  warning: {_bound_hits_warning(c['bound_hits'])}")
     print(f"  wall time: {s['wall_time'] * 1e3:.3g} ms")
     if "out" in s:
         print(f"  trajectory written to {s['out']}")

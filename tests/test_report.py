@@ -21,7 +21,7 @@ BENCH = {"order": ["step"], "ratios": {"step": 0.5}, "targets": {},
          "seconds": {"step": {"what": "one oscillator step", "peer_name": "scipy", "steplab": 0.002, "peer": 0.004}},
          "collisions": {"pit": {"balls": 10, "steps": 6, "not_compared": {}, "contenders": {"mujoco": {
              "settings": "MuJoCo, PGS", "per_step_seconds": 0.003, "real_time_factor": 5.5, "balls_inside": 10,
-             "impacts": 0, "bound_hits": 0}}}}}
+             "impacts": 0}}}}}
 
 
 @pytest.fixture(scope="module")

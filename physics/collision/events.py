@@ -78,9 +78,6 @@ class CollisionLog:
     events: list[Collision] = dataclasses.field(default_factory=list)
     #: bodies an epilogue removed from collision detection (they fly on untouched)
     removed: set[int] = dataclasses.field(default_factory=set)
-    #: steps in which the bound on impacts per step was reached: always 0 now that such a step
-    #: raises ImpactCapError (kept while readers of the summary still look for it)
-    bound_hits: int = 0
     #: the most impacts resolved in one step
     most_impacts_in_a_step: int = 0
     #: resting-contact corrections (a body put back on a surface it was pressed into)
@@ -96,7 +93,7 @@ class CollisionLog:
 
     def summary(self) -> dict:
         return {"impacts": self.count("impact"), "triggers": self.count("trigger"),
-                "cancelled": self.count("cancelled"), "bound_hits": self.bound_hits,
+                "cancelled": self.count("cancelled"),
                 "most_impacts_in_a_step": self.most_impacts_in_a_step,
                 "resting_corrections": self.resting_corrections}
 

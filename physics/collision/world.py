@@ -8,7 +8,7 @@ from collections.abc import Callable
 import numpy as np
 
 from .detectors import DETECTOR_NAMES as DETECTOR_NAMES
-from .events import CollisionLog, cancel_triggers
+from .events import cancel_triggers
 from .impact_cap import default_cap
 from .pairs import DEFAULT_BROADPHASE
 from .response import PairProperties
@@ -99,9 +99,6 @@ class CollisionWorld:
 
     def with_detector(self, detector: str) -> CollisionWorld:
         return dataclasses.replace(self, detector=detector)
-
-    def new_log(self) -> CollisionLog:
-        return CollisionLog()
 
     def stepper(self, model, integrator):
         """The physics step of one run, ``step(t, y, dt, carry)``, holding its collision log.

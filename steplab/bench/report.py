@@ -32,7 +32,7 @@ def collision_rows(record: dict) -> list[dict]:
             out.append({"pit": label, "balls": pit["balls"], "steps": pit["steps"], "contender": c["settings"],
                         "per_step": c["per_step_seconds"], "real_time_factor": c["real_time_factor"],
                         "target": target if mine else None, "balls_inside": c["balls_inside"],
-                        "impacts": f"{c['impacts']:,} ({c['bound_hits']})" if mine else ""})
+                        "impacts": f"{c['impacts']:,}" if mine else ""})
         for note in pit["not_compared"].values():
             out.append({"pit": label, "balls": pit["balls"], "steps": pit["steps"], "contender": note,
                         "per_step": None, "real_time_factor": None, "target": None, "balls_inside": None,
@@ -51,7 +51,7 @@ def _collision_table(record: dict) -> list[str]:
     if not rows_:
         return []
     lines = ["", f"{'ball pit':<15} {'balls':>7} {'steps':>5}  {'contender':<58} {'per step':>9} "
-                 f"{'x real time':>11}  {'target':<14} {'impacts (steps at the cap)':<27} inside"]
+                 f"{'x real time':>11}  {'target':<14} {'impacts':<27} inside"]
     for r in rows_:
         lines.append(f"{r['pit']:<15} {r['balls']:>7,} {r['steps']:>5}  {r['contender'][:58]:<58} "
                      f"{_optional(r['per_step'], _seconds):>9} {_optional(r['real_time_factor'], '{:.3g}'.format):>11}"
@@ -66,7 +66,7 @@ def collision_markdown(record: dict) -> list[str]:
     if not rows_:
         return []
     lines = ["", "| ball pit | balls | steps | contender | per step | simulated s per wall s | target | "
-                 "impacts (steps at the cap) | balls inside |", "|---|---|---|---|---|---|---|---|---|"]
+                 "impacts | balls inside |", "|---|---|---|---|---|---|---|---|---|"]
     for r in rows_:
         lines.append(f"| `{r['pit']}` | {r['balls']:,} | {r['steps']} | {r['contender']} | "
                      f"{_optional(r['per_step'], _seconds)} | {_optional(r['real_time_factor'], '{:.3g}'.format)} | "
