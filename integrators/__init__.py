@@ -21,7 +21,10 @@ from .euler import ExplicitEuler as ExplicitEuler
 from .exact import Exact as Exact
 from .exact import NotConstantForceError as NotConstantForceError
 from .game_loop import GameLoop as GameLoop
+from .implicit_damping_euler import ImplicitDampingEuler as ImplicitDampingEuler
 from .implicit_euler import ImplicitEuler as ImplicitEuler
+from .position_first_euler import ExponentialDampingEuler as ExponentialDampingEuler
+from .position_first_euler import PositionFirstEuler as PositionFirstEuler
 from .references import DiffraxDopri8 as DiffraxDopri8
 from .references import DiffraxKvaerno5 as DiffraxKvaerno5
 from .references import DiffraxTsit5 as DiffraxTsit5
@@ -72,7 +75,8 @@ def _as_integrator(obj) -> tuple[str, Integrator]:
 #: "steplab.integrators" entry points, loaded on first use; see steplab.physics.plugins)
 INTEGRATORS: Registry = Registry("steplab.integrators", "integrator", [(method.name, method) for method in (
     ExplicitEuler(), SemiImplicitEuler(), VelocityVerlet(), PositionVerlet(), Heun(),
-    Midpoint(), RK4(), ImplicitEuler(), Exact(), DiffraxDopri8(), DiffraxTsit5(),
+    Midpoint(), RK4(), ImplicitEuler(), ImplicitDampingEuler(), PositionFirstEuler(), ExponentialDampingEuler(),
+    Exact(), DiffraxDopri8(), DiffraxTsit5(),
     DiffraxKvaerno5(), ScipyDOP853(), ScipyRadau(),
 )], _as_integrator)
 

@@ -67,6 +67,11 @@ class Stepper(Integrator):
 
     #: the stability limit in closed form, in words (the studies print it beside the number)
     stability_note: ClassVar[str] = ""
+    #: True for a method that updates q and v by formulas of their own and returns
+    #: ``xp.stack([q1, v1])`` (semi-implicit Euler, the Verlets): the compiled loop then
+    #: carries the pair (q, v), which XLA updates in place (:mod:`.loop`). A method that
+    #: updates the stacked y as a whole (y + dt sum b_i k_i) is carried stacked.
+    partitioned: ClassVar[bool] = False
     #: ``R(z)`` for a method that has a scalar stability function; None for one whose map
     #: on the oscillator is a matrix (partitioned methods act on u and v differently)
     stability_function: ClassVar[Callable | None] = None

@@ -21,6 +21,7 @@ class SemiImplicitEuler(Stepper):
     order = 1
     evaluations = 1
     symplectic = True
+    partitioned = True
     style = ("tab:orange", "s")
     stability_note = "2 undamped; 2 sqrt(1 + zeta^2) - 2 zeta damped"
 

@@ -21,6 +21,7 @@ class VelocityVerlet(Stepper):
     order = 2
     evaluations = 1
     symplectic = True
+    partitioned = True
     style = ("tab:green", "^")
     stability_note = "2 undamped (trace 2 - y^2, det 1)"
 
@@ -49,6 +50,7 @@ class PositionVerlet(Stepper):
     order = 2
     evaluations = 1
     symplectic = True
+    partitioned = True
     style = ("tab:olive", "v")
     stability_note = "2 undamped"
 

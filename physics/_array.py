@@ -2,16 +2,24 @@
 
 Every model function takes the array namespace ``xp`` (``numpy`` or ``jax.numpy``)
 explicitly; the only operations that differ between the two are scatter-adds, which
-NumPy does with ``bincount``/``add.at`` and JAX with ``.at[].add``.
+NumPy does with ``bincount``/``add.at`` and JAX with ``.at[].add`` or, for pair forces,
+a gather through each body's pairs (:mod:`.incidence`).
 """
 
 from __future__ import annotations
 
 import numpy as np
 
+from .incidence import incidence, sum_pair_forces, take_rows
+
 
 def is_numpy(xp) -> bool:
     return xp is np
+
+
+def rows(xp, x, index):
+    """``x[index]``: the rows of ``x`` at a constant index array (on JAX, :func:`.incidence.take_rows`)."""
+    return x[index] if is_numpy(xp) else take_rows(x, index)
 
 
 def scatter_pairs(xp, n: int, i, j, f):
@@ -29,6 +37,11 @@ def scatter_pairs(xp, n: int, i, j, f):
         for c in range(3):
             out[:, c] = np.bincount(i, f[:, c], n) - np.bincount(j, f[:, c], n)
         return out
+    # JAX: the same sums as a gather through each body's pairs where that pays (XLA:CPU
+    # runs a scatter element by element), else the scatter-add
+    table = incidence(i, j, n, f.dtype)
+    if table is not None:
+        return sum_pair_forces(table, f)
     return xp.zeros((n, 3), dtype=f.dtype).at[i].add(f).at[j].add(-f)
 
 
@@ -77,3 +90,10 @@ def norm(xp, x):
     # NumPy sum, but elementwise, so XLA fuses it into its consumers. As a length-3
     # reduction XLA:CPU emits a separate, slow kernel (3x slower drag at 10^6 bodies).
     return xp.sqrt(x[..., 0] * x[..., 0] + x[..., 1] * x[..., 1] + x[..., 2] * x[..., 2])
+
+
+def dot(xp, x, y):
+    """Row-wise dot product of two (M, 3) arrays (elementwise on JAX, as :func:`norm`)."""
+    if is_numpy(xp):
+        return np.sum(x * y, axis=-1)
+    return x[..., 0] * y[..., 0] + x[..., 1] * y[..., 1] + x[..., 2] * y[..., 2]

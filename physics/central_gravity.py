@@ -59,12 +59,23 @@ class CentralGravity(Force):
         return -(self.mu * m * inverse**3)[:, None] * r
 
     def jacobian(self, xp, q, v, m):
+        return block_diagonal(xp, self.jacobian_blocks(xp, q, v, m).dq), None
+
+    def jacobian_blocks(self, xp, q, v, m, definite=False):
+        """One block per body, d F_i / d q_i = -mu m (I - 3 rhat rhat^T) / |r|^3, symmetric.
+
+        With ``definite``, its radial eigenvalue, +2 mu m / |r|^3 (the tide
+        that pulls a body off a circular orbit) is left out: -mu m (I - rhat rhat^T) / |r|^3.
+        """
+        from .sparse_jacobian import BodyJacobian
+
         # d(-mu m r / |r|^3)/dr = -mu m (I - 3 rhat rhat^T) / |r|^3 (the tidal tensor)
         r, inverse = self._geometry(xp, q)
         rhat = r * inverse[:, None]
-        eye = xp.eye(3, dtype=q.dtype)
-        block = -(self.mu * m * inverse**3)[:, None, None] * (eye - 3 * rhat[:, :, None] * rhat[:, None, :])
-        return block_diagonal(xp, block), None
+        weight = 1.0 if definite else 3.0  # the radial eigenvalue is -mu m (1 - weight) / |r|^3
+        radial = weight * rhat[:, :, None] * rhat[:, None, :]
+        block = -(self.mu * m * inverse**3)[:, None, None] * (xp.eye(3, dtype=q.dtype) - radial)
+        return BodyJacobian(block, None)
 
     def potential(self, xp, q, m):
         # F = -grad U with U = -mu m / |r|

@@ -7,7 +7,7 @@ from typing import ClassVar
 
 import numpy as np
 
-from ._array import norm, safe_unit, scatter_pair_blocks, scatter_pairs
+from ._array import dot, norm, rows, safe_unit, scatter_pair_blocks, scatter_pairs
 from .force import Force
 from .scene_toml import REQUIRED
 
@@ -47,15 +47,15 @@ class Dampers(Force):
         return cls(np.array(i), np.array(j), np.array(c))
 
     def _terms(self, xp, q, v):
-        delta = q[self.j] - q[self.i]
+        delta = rows(xp, q, self.j) - rows(xp, q, self.i)
         length = norm(xp, delta)
         d = safe_unit(xp, delta, length)
-        u = v[self.j] - v[self.i]
+        u = rows(xp, v, self.j) - rows(xp, v, self.i)
         return d, length, u
 
     def force(self, xp, q, v, m):
         d, _, u = self._terms(xp, q, v)
-        f = (self.damping * xp.sum(u * d, axis=1))[:, None] * d
+        f = (self.damping * dot(xp, u, d))[:, None] * d
         return scatter_pairs(xp, q.shape[0], self.i, self.j, f)
 
     def jacobian(self, xp, q, v, m):
@@ -75,3 +75,24 @@ class Dampers(Force):
             scatter_pair_blocks(xp, n, self.i, self.j, dq_block),
             scatter_pair_blocks(xp, n, self.i, self.j, dv_block),
         )
+
+    def jacobian_blocks(self, xp, q, v, m, definite=False):
+        """One block per damper: d f_i / d v_j = c d d^T and d f_i / d q_j = c [(d . u) P + d u^T P] / l.
+
+        ``u`` is the relative velocity, P = I - d d^T. With ``definite``, the position block
+        (not symmetric, and indefinite) is left out, as Baraff and Witkin do with their
+        damping forces (1998, section 5).
+        """
+        from .sparse_jacobian import PairJacobian
+
+        d, length, u = self._terms(xp, q, v)
+        c = self.damping[:, None, None]
+        ddT = d[:, :, None] * d[:, None, :]
+        dv_block = c * ddT
+        if definite:
+            return PairJacobian(self.i, self.j, None, dv_block)
+        proj = xp.eye(3, dtype=q.dtype) - ddT
+        du = xp.sum(d * u, axis=1)[:, None, None]
+        inv_l = xp.where(length > 0, 1 / xp.where(length > 0, length, 1), 0)[:, None, None]
+        dq_block = c * inv_l * (du * proj + d[:, :, None] * (u[:, None, :] @ proj))
+        return PairJacobian(self.i, self.j, dq_block, dv_block)

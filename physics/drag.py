@@ -54,6 +54,12 @@ class Drag(Force):
         return -(self.beta * norm(xp, v))[:, None] * v
 
     def jacobian(self, xp, q, v, m):
+        return None, block_diagonal(xp, self.jacobian_blocks(xp, q, v, m).dv)
+
+    def jacobian_blocks(self, xp, q, v, m, definite=False):
+        """One block per body, d F_i / d v_i = -beta (|v| I + v v^T / |v|): symmetric, negative semidefinite."""
+        from .sparse_jacobian import BodyJacobian
+
         # d(-beta |v| v)/dv = -beta (|v| I + v v^T / |v|), which tends to 0 as v -> 0.
         speed = norm(xp, v)
         vhat_v = xp.where(
@@ -62,4 +68,4 @@ class Drag(Force):
             0,
         )
         block = -self.beta[:, None, None] * (speed[:, None, None] * xp.eye(3, dtype=v.dtype) + vhat_v)
-        return None, block_diagonal(xp, block)
+        return BodyJacobian(None, block)

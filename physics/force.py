@@ -16,6 +16,8 @@ from typing import ClassVar
 
 import numpy as np
 
+from .incidence import shared_indices
+
 
 @dataclasses.dataclass(frozen=True)
 class Force:
@@ -72,17 +74,40 @@ class Force:
         """
         return None, None
 
+    def jacobian_blocks(self, xp, q, v, m, definite: bool = False):
+        """The Jacobian as 3x3 blocks, for the sparse assembly; ``None`` when not provided.
+
+        A :class:`~steplab.physics.sparse_jacobian.PairJacobian` (one block per pair) or
+        :class:`~steplab.physics.sparse_jacobian.BodyJacobian` (one per body). With
+        ``definite``: a part of it whose blocks are symmetric and keep ``-dF/dq`` and
+        ``-dF/dv`` positive semidefinite (a damper's dependence on positions and a
+        compressed spring's negative stiffness left out), which implicit Euler's conjugate
+        gradients fall back to when the symmetric part of the Jacobian makes their
+        system indefinite; the Newton iteration converges without what it leaves out,
+        which stays in the forces. A force without blocks is frozen over the sparse
+        Newton iteration, like ground contact.
+        """
+        return None
+
     def potential(self, xp, q, m):
         """Potential energy (a scalar) or ``None`` for a non-conservative force."""
         return None
 
     def cast(self, xp, dtype) -> Force:
-        """This force with its float arrays in namespace ``xp`` and precision ``dtype``."""
+        """This force with its float arrays in namespace ``xp`` and precision ``dtype``.
+
+        Integer arrays (body indices) with equal contents become one array on JAX, so
+        forces on the same pairs share their gathers in a compiled step
+        (:func:`.incidence.shared_indices`).
+        """
         changes = {}
         for field in dataclasses.fields(self):
             value = getattr(self, field.name)
             if hasattr(value, "dtype"):  # a NumPy or JAX array
                 value = np.asarray(value)
-                kind = dtype if np.issubdtype(value.dtype, np.floating) else value.dtype
-                changes[field.name] = xp.asarray(value, dtype=kind)
+                if np.issubdtype(value.dtype, np.integer):
+                    changes[field.name] = shared_indices(xp, value)
+                else:
+                    kind = dtype if np.issubdtype(value.dtype, np.floating) else value.dtype
+                    changes[field.name] = xp.asarray(value, dtype=kind)
         return dataclasses.replace(self, **changes)

@@ -140,6 +140,21 @@ class Model:
         scale = self.inverse_masses[:, None, None, None]
         return (dq * scale).reshape(3 * n, 3 * n), (dv * scale).reshape(3 * n, 3 * n)
 
+    def jacobian_blocks(self, t, q, v, definite: bool = False) -> list:
+        """The applied forces' Jacobians as 3x3 blocks (:meth:`Force.jacobian_blocks`), of those that have one.
+
+        With ``definite``, each force's semidefinite part, which implicit Euler's conjugate
+        gradients fall back to; :mod:`.sparse_jacobian` assembles them.
+        """
+        blocks = (term.jacobian_blocks(self.xp, q, v, self.masses, definite) for term in self._applied)
+        return [b for b in blocks if b is not None]
+
+    def sparse_jacobian(self, t, q, v):
+        """``(da/dq, da/dv)`` as (3N, 3N) scipy sparse (BSR) arrays: :func:`.sparse_jacobian.sparse_jacobian`."""
+        from .sparse_jacobian import sparse_jacobian
+
+        return sparse_jacobian(self, t, q, v)
+
     # --- energy --------------------------------------------------------------------------
 
     def kinetic_energy(self, v):

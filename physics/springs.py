@@ -7,7 +7,7 @@ from typing import ClassVar
 
 import numpy as np
 
-from ._array import norm, safe_unit, scatter_pair_blocks, scatter_pairs
+from ._array import norm, rows, safe_unit, scatter_pair_blocks, scatter_pairs
 from .force import Force
 from .scene_toml import REQUIRED
 
@@ -57,7 +57,7 @@ class Springs(Force):
         return cls(np.array(i), np.array(j), np.array(k), np.array(rest))
 
     def _geometry(self, xp, q):
-        delta = q[self.j] - q[self.i]
+        delta = rows(xp, q, self.j) - rows(xp, q, self.i)
         length = norm(xp, delta)
         return safe_unit(xp, delta, length), length
 
@@ -75,6 +75,24 @@ class Springs(Force):
         ratio = xp.where(length > 0, self.rest_length / xp.where(length > 0, length, 1), 0)
         block = self.stiffness[:, None, None] * (ddT + (1 - ratio)[:, None, None] * (eye - ddT))
         return scatter_pair_blocks(xp, q.shape[0], self.i, self.j, block), None
+
+    def jacobian_blocks(self, xp, q, v, m, definite=False):
+        """One block per spring, B = d f_i / d q_j = k [d d^T + (1 - L / l) (I - d d^T)], symmetric.
+
+        With ``definite``, a compressed spring's transverse term, negative where
+        l < L (a compressed spring buckles sideways), is left out, so that every block is
+        positive semidefinite (Choi and Ko, "Stable but responsive cloth", 2002).
+        """
+        from .sparse_jacobian import PairJacobian
+
+        d, length = self._geometry(xp, q)
+        transverse = 1 - xp.where(length > 0, self.rest_length / xp.where(length > 0, length, 1), 0)
+        if definite:
+            transverse = xp.maximum(transverse, 0)
+        k = self.stiffness[:, None, None]
+        ddT = d[:, :, None] * d[:, None, :]
+        block = k * (1 - transverse[:, None, None]) * ddT + (k * transverse[:, None, None]) * xp.eye(3, dtype=q.dtype)
+        return PairJacobian(self.i, self.j, block, None)
 
     def potential(self, xp, q, m):
         _, length = self._geometry(xp, q)

@@ -90,6 +90,11 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--detector", choices=DETECTOR_NAMES,
                    help="collision detection (overlap: overlap testing with bisection; swept: intersection "
                    "testing; default: the scene's [collisions], else none)")
+    p.add_argument("--method", choices=("event", "solver"),
+                   help="collision handling (event: the lecture's event loop, each impact at its time; "
+                   "solver: the engines' contact solver; default: the scene's)")
+    p.add_argument("--iterations", type=_count, metavar="N", help="contact solver: sweeps per substep")
+    p.add_argument("--substeps", type=_count, metavar="N", help="contact solver: substeps per step")
     p.add_argument("--json", action="store_true", help="print the summary as JSON")
 
     p = sub.add_parser("check", help="predict the largest stable dt of each fixed-step integrator on a scene")
@@ -140,6 +145,13 @@ def build_parser() -> argparse.ArgumentParser:
     p = sub.add_parser("reproduce", help="run every study and write the results")
     _study_options(p)
 
+    p = sub.add_parser("export", help="write a scene as another engine's model file (MJCF for MuJoCo)")
+    p.add_argument("scene", help="built-in scene name or path to a TOML file")
+    p.add_argument("--to", choices=("mjcf",), required=True, help="the format: mjcf (MuJoCo's XML)")
+    p.add_argument("--integrator", choices=("Euler", "RK4", "implicit", "implicitfast", "discrete"),
+                   help="MuJoCo's integrator (default: the one that equals the scene's, else Euler)")
+    p.add_argument("--out", type=Path, help="write to FILE (default: print the file)")
+
     p = sub.add_parser("bench", help="time steplab against diffrax, scipy, Numba and the memory bound")
     p.add_argument("--quick", action="store_true", help="fewer repeats and batches (under about a minute)")
     p.add_argument("--json", type=Path, metavar="FILE", help="write every ratio and the medians behind it to FILE")
@@ -153,6 +165,11 @@ def _study_options(p) -> None:
     p.add_argument("--quick", action="store_true", help="a short version (under a minute, for CI)")
     p.add_argument("--out", type=Path, default=Path("results"), help="results folder (default: results/)")
     p.add_argument("--force", action="store_true", help="re-run even if the cached result is current")
+    where = p.add_mutually_exclusive_group()  # on a Dask cluster (studies/distributed.py); default: this process
+    where.add_argument("--workers", type=_count, metavar="N", help="run the sweeps' tasks on a local Dask cluster "
+                       "of N worker processes (timing studies run alone afterwards)")
+    where.add_argument("--scheduler", metavar="ADDRESS", help="run them on the Dask cluster whose scheduler is "
+                       "at ADDRESS (e.g. tcp://host:8786; see the README)")
 
 
 def main(argv=None) -> int:
@@ -193,7 +210,8 @@ def _run_command(args) -> int:
         sys.path.append(str(Path.cwd()))
     command = {"integrators": cmd_integrators, "scenes": cmd_scenes, "run": cmd_run, "check": cmd_check,
                "animate": cmd_animate, "paper": cmd_paper, "recommend": cmd_recommend, "study": cmd_study,
-               "reproduce": cmd_reproduce, "bench": cmd_bench, "report": cmd_report}[args.command]
+               "reproduce": cmd_reproduce, "bench": cmd_bench, "report": cmd_report,
+               "export": cmd_export}[args.command]
     try:
         return command(args) or 0
     except (SceneError, UnknownIntegratorError, NotConstantForceError, PaperError, ValueError) as err:
@@ -300,7 +318,7 @@ def cmd_run(args) -> int:
     if not t_end > scene.t_start:
         raise ValueError(f"--t-end {t_end:g} must be later than the scene's t_start = {scene.t_start:g}")
     dtype = np.dtype(args.precision)
-    world = _collision_world(scene, args.detector, args.backend)
+    world = _with_method(_collision_world(scene, args.detector, args.backend), args)
     warning = dt_warning(scene.model, scene.y0[0], integrator, dt)  # before the run: it may be long
     if warning is not None:
         print(f"steplab run: warning: {warning}", file=sys.stderr)
@@ -332,6 +350,8 @@ def cmd_run(args) -> int:
         "energy_change": energy_end - energy_start,
         "energy_relative_change": (energy_end - energy_start) / abs(energy_start) if energy_start else None,
         "wall_time": traj.wall_time, "detector": world.detector if world is not None else "none",
+        "method": world.method if world is not None else None,
+        "solver": dataclasses.asdict(world.solver) if world is not None and world.method == "solver" else None,
         "collisions": collisions, "warnings": run_warnings,
     }
     if args.out is not None:
@@ -360,6 +380,19 @@ def _keeping(make_step, kept: list):
         return step
 
     return stepper
+
+
+def _with_method(world, args):
+    """``world`` with the run's --method, --iterations and --substeps applied."""
+    if world is None:
+        if args.method or args.iterations or args.substeps:
+            raise ValueError("--method, --iterations and --substeps need a scene with collisions (or --detector)")
+        return None
+    method = args.method or world.method
+    if method != "solver" and (args.iterations or args.substeps):
+        raise ValueError("--iterations and --substeps set the contact solver: add --method solver")
+    changes = {k: getattr(args, k) for k in ("iterations", "substeps") if getattr(args, k)}
+    return dataclasses.replace(world, method=method, solver=dataclasses.replace(world.solver, **changes))
 
 
 def _collision_world(scene, detector, backend):
@@ -397,10 +430,17 @@ def _print_run(s: dict) -> None:
         c = s["collisions"]
         extra = "".join(f", {c[k]} {label}" for k, label in (("triggers", "trigger entries"),
                                                             ("cancelled", "cancelled")) if c[k])
-        # the most resolved in one step counts impacts and resting-contact corrections together
-        print(f"  collisions ({s['detector']}): {_plural(c['impacts'], 'impact')}{extra}, "
-              f"{_plural(c['resting_corrections'], 'resting-contact correction')}, "
-              f"at most {c['most_impacts_in_a_step']} of them in one step")
+        if s.get("method") == "solver":
+            solver = s["solver"]
+            print(f"  collisions (contact solver, {_plural(solver['substeps'], 'substep')} x "
+                  f"{_plural(solver['iterations'], 'iteration')}, {solver['correction']} correction): "
+                  f"{_plural(c['impacts'], 'impact')}{extra}, at most {c['most_impacts_in_a_step']} in one step, "
+                  f"largest residual {c['largest_residual']:.3g} m/s")
+        else:
+            # the most resolved in one step counts impacts and resting-contact corrections together
+            print(f"  collisions ({s['detector']}): {_plural(c['impacts'], 'impact')}{extra}, "
+                  f"{_plural(c['resting_corrections'], 'resting-contact correction')}, "
+                  f"at most {c['most_impacts_in_a_step']} of them in one step")
     print(f"  wall time: {s['wall_time'] * 1e3:.3g} ms")
     if "out" in s:
         print(f"  trajectory written to {s['out']}")
@@ -502,7 +542,8 @@ def cmd_animate(args) -> int:
                         save_every=max(1, steps // 300), collisions=world)
         label = f"{scene.name}: {method.name}, dt = {dt:g} s"
         if world is not None or detector is not None:
-            label += f", {world.detector if world is not None else 'no'} detector"
+            label += (", contact solver" if world is not None and world.method == "solver"
+                      else f", {world.detector if world is not None else 'no'} detector")
         runs.append((label, traj))
     shapes = scene.collisions.shapes if scene.collisions is not None else ()
     path = animate(runs, scene.model, args.out, fps=args.fps, view=args.view, shapes=shapes)
@@ -621,12 +662,21 @@ def cmd_study(args) -> int:
         return 0
     if args.name not in STUDIES:
         raise ValueError(f"unknown study {args.name!r}; valid: {', '.join(STUDIES)}")
-    record = run_study(STUDIES[args.name], args.out, quick=args.quick, force=args.force)
+    reason = STUDIES[args.name].unavailable()
+    if reason:  # an optional package missing: the line says how to install it
+        raise ValueError(reason)
+    if args.workers or args.scheduler:
+        [record] = _on_cluster(args, [STUDIES[args.name]])
+    else:
+        record = run_study(STUDIES[args.name], args.out, quick=args.quick, force=args.force)
     _print_summary([record], args.out)
     return 0
 
 
 def cmd_reproduce(args) -> int:
+    if args.workers or args.scheduler:
+        _print_summary(_on_cluster(args, _available_builtin_studies()), args.out)
+        return 0
     from tqdm import tqdm
 
     from steplab.studies import builtin_studies, run_study
@@ -635,9 +685,36 @@ def cmd_reproduce(args) -> int:
     with tqdm(builtin_studies(), desc="reproduce", unit="study", disable=None) as bar:
         for study in bar:
             bar.set_postfix_str(study.name)
+            reason = study.unavailable()
+            if reason:
+                bar.write(f"{study.name}: skipped: {reason}")
+                continue
             records.append(run_study(study, args.out, quick=args.quick, force=args.force))
     _print_summary(records, args.out)
     return 0
+
+
+def _on_cluster(args, studies: list) -> list[dict]:
+    """Run ``studies`` on ``--workers N`` (a local cluster) or ``--scheduler ADDRESS``; their records."""
+    from steplab.cluster import connect
+    from steplab.studies.distributed import run_studies
+
+    with connect(args.workers, args.scheduler) as client:
+        return run_studies(studies, args.out, client, quick=args.quick, force=args.force)
+
+
+def _available_builtin_studies() -> list:
+    """steplab's own studies that can run here (each one that cannot is named, with why)."""
+    from steplab.studies import builtin_studies
+
+    available = []
+    for study in builtin_studies():
+        reason = study.unavailable()
+        if reason:
+            print(f"{study.name}: skipped: {reason}")
+        else:
+            available.append(study)
+    return available
 
 
 def _print_summary(records, out: Path) -> None:
@@ -654,6 +731,32 @@ def _print_summary(records, out: Path) -> None:
 
 
 # --- bench --------------------------------------------------------------------------
+
+
+# --- export -------------------------------------------------------------------------
+
+#: MuJoCo's integrator that steps as the scene's integrator does (the engines study's identification)
+MUJOCO_EQUIVALENTS = {"semi-implicit-euler": "Euler", "rk4": "RK4", "implicit-damping-euler": "implicitfast",
+                      "implicit-euler": "discrete"}
+
+
+def cmd_export(args) -> int:
+    from steplab.engines.mjcf import mjcf
+    from steplab.physics.scene import load_scene
+    from steplab.studies.records import write_atomic
+
+    scene = load_scene(args.scene)
+    integrator = args.integrator or MUJOCO_EQUIVALENTS.get(scene.integrator, "Euler")
+    text = mjcf(scene.model, scene.y0, scene.dt, scene.collisions, integrator, name=scene.name)
+    if args.integrator is None and scene.integrator not in MUJOCO_EQUIVALENTS:
+        print(f"steplab export: note: MuJoCo has no integrator that steps as {scene.integrator!r} does; "
+              "writing Euler (semi-implicit Euler; choose with --integrator)", file=sys.stderr)
+    if args.out is None:
+        sys.stdout.write(text)
+    else:
+        write_atomic(args.out, text.encode())
+        print(f"{scene.name}: MJCF written to {args.out} (MuJoCo {integrator}, dt = {scene.dt:g} s)")
+    return 0
 
 
 def cmd_bench(args) -> int:

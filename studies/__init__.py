@@ -8,7 +8,18 @@ from __future__ import annotations
 
 from steplab.physics.plugins import BUILTIN, PluginError, Registry
 
-from . import broadphase, frame_rate, restitution, scene_tour, stability, truncation, tunnelling, work_precision
+from . import (
+    broadphase,
+    contacts,
+    engines,
+    frame_rate,
+    restitution,
+    scene_tour,
+    stability,
+    truncation,
+    tunnelling,
+    work_precision,
+)
 from .runner import Study as Study
 from .runner import run_study as run_study
 
@@ -25,7 +36,7 @@ def _as_study(obj) -> tuple[str, Study]:
 #: runs and ``reproduce`` leaves out (it reproduces the paper's records)
 STUDIES: Registry = Registry("steplab.studies", "study", [(s.name, s) for s in (
     truncation.STUDY, stability.STUDY, work_precision.STUDY, frame_rate.STUDY, scene_tour.STUDY,
-    restitution.STUDY, tunnelling.STUDY, broadphase.STUDY,
+    restitution.STUDY, tunnelling.STUDY, broadphase.STUDY, contacts.STUDY, engines.STUDY,
 )], _as_study)
 
 

@@ -168,22 +168,37 @@ def mass_ratio(methods, ratios, steps: int, rtol: float, progress=None) -> list[
     """Largest stable dt of each method against the mass ratio across the spring."""
     rows = []
     for ratio in ratios:
-        mode = spring_pair_mode(ratio)
         for method in methods:
-            rows.append({"mass_ratio": ratio, "integrator": method} | stable_dt(mode, method, steps, rtol))
+            rows.append(mass_ratio_row(ratio, method, steps, rtol))
         if progress is not None:
             progress()
     return rows
 
 
+def mass_ratio_row(ratio: float, method, steps: int, rtol: float) -> dict:
+    """One point of :func:`mass_ratio`: the largest stable dt of ``method`` at mass ratio ``ratio``."""
+    return {"mass_ratio": ratio, "integrator": method} | stable_dt(spring_pair_mode(ratio), method, steps, rtol)
+
+
+def far_offsets(params: dict) -> list[float]:
+    """The distances from the origin the far-from-origin runs start at."""
+    return np.geomspace(1e3, 1e7, params["far_offsets"]).tolist()
+
+
 def compute(params: dict, progress=None) -> dict:
-    offsets = np.geomspace(1e3, 1e7, params["far_offsets"]).tolist()
+    offsets = far_offsets(params)
     coast = coasting(offsets, params["far_speeds"], params["precisions"], params["coasting_steps"])
     jitter = oscillator_jitter(offsets, params["precisions"], params["jitter_periods"])
     pairs = mass_ratio(params["sweep_integrators"], params["mass_ratios"], params["mass_ratio_steps"],
                        params["mass_ratio_rtol"], progress)
+    return assemble(params, huge_dt(params["integrators"], params["huge_omega_dts"], params["huge_max_steps"]),
+                    coast, jitter, pairs)
+
+
+def assemble(params: dict, huge: list[dict], coast: list[dict], jitter: list[dict], pairs: list[dict]) -> dict:
+    """The extremes' part of the stability record from its four sweeps."""
     return {
-        "huge_dt": huge_dt(params["integrators"], params["huge_omega_dts"], params["huge_max_steps"]),
+        "huge_dt": huge,
         "far_from_origin": {
             "dt": GAME_DT, "integrator": FAR_INTEGRATOR, "coasting": coast, "oscillator": jitter,
             "matches_rounding_model": all(

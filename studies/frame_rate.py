@@ -19,7 +19,7 @@ from steplab.integrators.game_loop import interpolate
 
 from . import plotting
 from .problems import oscillator_problem
-from .runner import Study
+from .runner import Study, run_tasks
 from .tables import Table, markdown_table
 
 INTEGRATOR = "semi-implicit-euler"
@@ -65,39 +65,54 @@ def _digest(y) -> str:
     return hashlib.sha256(np.ascontiguousarray(y).tobytes()).hexdigest()[:16]
 
 
-def compute(params: dict, progress=None) -> dict:
+def tasks(params: dict) -> list[list]:
+    """One task per frame sequence, and one for the interpolation trace."""
+    return [["sequence", name] for name in frame_sequences(params["duration"], params["seed"])] + [["interpolation"]]
+
+
+def task(params: dict, item: list) -> dict:
+    """Play one frame sequence through both loops (or trace the interpolation)."""
     problem = oscillator_problem(0.0)
     model, integrator = problem.model, get_integrator(params["integrator"])
     dt = params["physics_dt"]
-    sequences = frame_sequences(params["duration"], params["seed"])
-    runs = []
-    for name, frames in sequences.items():
-        physics = _Physics(model, integrator, problem.y0, dt)
-        loop = GameLoop(physics.step, dt)
-        for frame in frames:
-            loop.advance(frame)
-        fixed = physics.y
-        # naive: one step of the frame's length per frame
-        y, t = problem.y0.copy(), 0.0
-        for frame in frames:
-            y, _ = integrator.step(model, t, y, frame, integrator.init(model, t, y))
-            t += frame
-        runs.append({
-            "sequence": name, "frames": len(frames), "longest_frame": max(frames),
-            "fixed_steps": loop.steps, "fixed_final_x": float(fixed[0, 1, 0]), "fixed_digest": _digest(fixed),
-            "fixed_error": float(abs(fixed[0, 1, 0] - problem.solution(loop.steps * dt)[0, 1, 0])),
-            "naive_final_x": float(y[0, 1, 0]),
-            "naive_error": float(abs(y[0, 1, 0] - problem.solution(params["duration"])[0, 1, 0])),
-        })
-        if progress is not None:
-            progress()
+    if item[0] == "interpolation":
+        return _interpolation_trace(problem, integrator, dt)
+    name = item[1]
+    frames = frame_sequences(params["duration"], params["seed"])[name]
+    physics = _Physics(model, integrator, problem.y0, dt)
+    loop = GameLoop(physics.step, dt)
+    for frame in frames:
+        loop.advance(frame)
+    fixed = physics.y
+    # naive: one step of the frame's length per frame
+    y, t = problem.y0.copy(), 0.0
+    for frame in frames:
+        y, _ = integrator.step(model, t, y, frame, integrator.init(model, t, y))
+        t += frame
+    return {
+        "sequence": name, "frames": len(frames), "longest_frame": max(frames),
+        "fixed_steps": loop.steps, "fixed_final_x": float(fixed[0, 1, 0]), "fixed_digest": _digest(fixed),
+        "fixed_error": float(abs(fixed[0, 1, 0] - problem.solution(loop.steps * dt)[0, 1, 0])),
+        "naive_final_x": float(y[0, 1, 0]),
+        "naive_error": float(abs(y[0, 1, 0] - problem.solution(params["duration"])[0, 1, 0])),
+    }
+
+
+def reduce(params: dict, results: list) -> dict:
+    """The record: every sequence's run, how far the final states spread, and the trace."""
+    *runs, interpolation = results
     spread = {
         "fixed": float(np.ptp([r["fixed_final_x"] for r in runs])),
         "naive": float(np.ptp([r["naive_final_x"] for r in runs])),
     }
     identical = len({r["fixed_digest"] for r in runs}) == 1
     return {"runs": runs, "final_state_spread": spread, "fixed_bit_identical": identical,
-            "interpolation": _interpolation_trace(problem, integrator, dt)}
+            "interpolation": interpolation}
+
+
+def compute(params: dict, progress=None) -> dict:
+    """Every task in turn, then the reduction (a run without a cluster)."""
+    return run_tasks(STUDY, params, progress)
 
 
 class _Physics:
@@ -185,4 +200,5 @@ TABLES = (Table("frame_rate", lambda r: r["runs"], frame_rate_table),)
 
 
 STUDY = Study("frame_rate", "Frame-rate independence: fixed-step accumulator against a naive variable step",
-              parameters, compute, plot, summary, tables=TABLES)
+              parameters, compute, plot, summary, tables=TABLES,
+              tasks=tasks, task=task, reduce=reduce)

@@ -18,13 +18,14 @@ import math
 
 import numpy as np
 from steplab.integrators import simulate
+from steplab.integrators.simulate import step_count
 from steplab.physics import Gravity, Model
 from steplab.physics.collision import CollisionWorld, PairProperties, Plane
 from steplab.physics.collision.response import impulse
 
 from . import plotting
 from .lecture import LECTURE_ERRORS_TABLE
-from .runner import Study
+from .runner import Study, run_tasks
 from .tables import Table, markdown_table
 
 #: the lecture's drop height, cm
@@ -60,12 +61,15 @@ def parameters(quick: bool) -> dict:
 
 
 def drop(eps: float, dt: float, detector: str, bisection: int, bounces: int, integrator: str,
-         params: dict) -> dict:
+         params: dict, system=None) -> dict:
     """Drop a ball from H onto the floor; the apex heights (cm) of its first ``bounces`` bounces.
 
     The ball's bottom starts H above the floor. Each apex is the vertex of the parabola
     through the three saved samples around the highest one (exact for velocity Verlet's
-    exact free flight).
+    exact free flight). ``system`` (a system under test, :mod:`.system`) drops the ball
+    instead of steplab's integrator and detector; its bounces are then told apart by the
+    turns of the ball's vertical velocity (an engine's contact lasts several steps), and the
+    impact speeds are not recorded.
     """
     H, r, g = params["H_cm"] / 100, params["radius"], params["g"]
     model = Model([params["mass"]], [r], [Gravity(np.array([0.0, 0.0, -g]))])
@@ -74,10 +78,18 @@ def drop(eps: float, dt: float, detector: str, bisection: int, bounces: int, int
     v1 = math.sqrt(2 * g * H)
     flight = math.sqrt(2 * H / g) + sum(2 * eps**k * v1 / g for k in range(1, bounces + 1))
     y0 = np.array([[[0.0, 0.0, H + r]], [[0.0, 0.0, 0.0]]])
-    traj = simulate(model, integrator, y0, 0.0, flight + 0.5 * eps**bounces * v1 / g, dt, collisions=world)
+    t_end = flight + 0.5 * eps**bounces * v1 / g
+    if system is None:
+        traj = simulate(model, integrator, y0, 0.0, t_end, dt, collisions=world)
+        impacts = [e for e in traj.collisions.events if e.kind == "impact"]
+        times = [e.t for e in impacts] + [np.inf]
+    else:
+        traj = system.build(model, world, dt, y0).advance(y0, dt, step_count(0.0, t_end, dt))
+        impacts = []
+        # a bounce begins where the ball, falling, starts to rise
+        vz = traj.velocities[:, 0, 2]
+        times = [float(traj.t[k]) for k in np.flatnonzero((vz[:-1] <= 0) & (vz[1:] > 0))] + [np.inf]
     z = traj.positions[:, 0, 2] - r
-    impacts = [e for e in traj.collisions.events if e.kind == "impact"]
-    times = [e.t for e in impacts] + [np.inf]
     apexes = []
     for a, b in zip(times[:bounces], times[1:bounces + 1]):
         inside = np.flatnonzero((traj.t > a) & (traj.t < b))
@@ -195,19 +207,38 @@ def lecture_errors(rows: list[dict], table: list[dict], params: dict) -> list[di
     return errors
 
 
-def compute(params: dict, progress=None) -> dict:
+def tasks(params: dict) -> list[list]:
+    """One drop per ball, detector and dt (several bounces at the main dt), and one per ball and
+    compared integrator."""
+    return ([["drop", name, label, dt] for name in params["objects"] for label in params["detectors"]
+             for dt in params["dts"]]
+            + [["integrator", name, integrator] for name in params["objects"]
+               for integrator in params["compare_integrators"]])
+
+
+def task(params: dict, item: list) -> dict:
+    """One drop of :func:`tasks`: its apex heights (and first impact)."""
+    eps = {name: float(c) for name, _, _, c in LECTURE_TABLE}[item[1]]
+    if item[0] == "integrator":
+        return drop(eps, params["dt"], "swept", 5, 1, item[2], params)
+    _, _, label, dt = item
+    detector, bisection = DETECTORS[label]
+    return drop(eps, dt, detector, bisection, params["bounces"] if dt == params["dt"] else 1,
+                params["integrator"], params)
+
+
+def reduce(params: dict, results: list) -> dict:
+    """The record from the drops: each ball's measured c.o.r. per detector, the dt sweep, the checks."""
     table = lecture_table_check()
     cor = {name: float(c) for name, _, _, c in LECTURE_TABLE}
-    bounces = params["bounces"]
+    drops = {tuple(item): result for item, result in zip(tasks(params), results)}
     rows, sweep = [], []
     for name in params["objects"]:
         eps = cor[name]
         row = {"object": name, "cor_lecture": eps, "cor_measured": {}, "h_cm": {}, "energy_per_bounce": {}}
         for label in params["detectors"]:
-            detector, bisection = DETECTORS[label]
             for dt in params["dts"]:
-                result = drop(eps, dt, detector, bisection, bounces if dt == params["dt"] else 1,
-                              params["integrator"], params)
+                result = drops["drop", name, label, dt]
                 h = result["apex_cm"][0]
                 measured = math.sqrt(h / params["H_cm"])
                 sweep.append({"object": name, "detector": label, "dt": dt, "h_cm": h, "cor_measured": measured,
@@ -223,15 +254,17 @@ def compute(params: dict, progress=None) -> dict:
                         row["speed_after_swept"] = result["speed_after"]
                         row["energy_per_bounce_swept"] = row["energy_per_bounce"][label]
         for integrator in params["compare_integrators"]:
-            result = drop(eps, params["dt"], "swept", 5, 1, integrator, params)
+            result = drops["integrator", name, integrator]
             row.setdefault("cor_measured_by_integrator", {})[integrator] = math.sqrt(
                 result["apex_cm"][0] / params["H_cm"])
         rows.append(row)
-        if progress is not None:
-            progress()
-    # one trajectory per chosen ball for the bounce figure
     return {"dt": params["dt"], "rows": rows, "dt_sweep": sweep, "lecture_table": table,
             "lecture_errors": lecture_errors(rows, table, params)}
+
+
+def compute(params: dict, progress=None) -> dict:
+    """Every drop in turn, then the reduction (a run without a cluster)."""
+    return run_tasks(STUDY, params, progress)
 
 
 def plot(record: dict, out) -> list[str]:
@@ -336,4 +369,5 @@ TABLES = (
 
 
 STUDY = Study("restitution", "Restitution: the lecture's drop table reproduced by each collision detector",
-              parameters, compute, plot, summary, tables=TABLES)
+              parameters, compute, plot, summary, tables=TABLES,
+              tasks=tasks, task=task, reduce=reduce)

@@ -9,6 +9,11 @@ studies/records.py, JSON last), and skips a study whose JSON carries the same ca
 key: a hash of its parameters and of the source code it runs (physics, integrators and the study modules it uses). So an
 interrupted ``steplab reproduce`` resumes where it stopped, and a change to the code or
 the parameters re-runs what it affects.
+
+A study may instead give its sweep as independent tasks and a reduction (``tasks``,
+``task``, ``reduce``): then ``compute`` is those run in turn, each finished task is kept on
+disk until the record is written (studies/task_cache.py), so an interrupted study resumes
+task by task, and studies/distributed.py spreads the same tasks over a Dask cluster.
 """
 
 from __future__ import annotations
@@ -23,9 +28,11 @@ import sys
 import types
 from collections.abc import Callable, Iterable
 from pathlib import Path
+from typing import Any
 
 from .records import remove_temporary_files, write_json
 from .tables import Table
+from .task_cache import TaskCache, as_json
 
 #: packages whose source is part of the cache keys (of studies: the modules a study uses)
 SOURCE_PACKAGES = ("physics", "integrators", "studies")
@@ -42,6 +49,21 @@ class Study:
     summary: Callable[[dict], list[tuple[str, str]]] = lambda record: []
     #: the tables ``steplab paper`` prints from this study's record (studies/tables.py)
     tables: tuple[Table, ...] = ()
+    #: ``unavailable() -> str | None``: why the study cannot run here (an optional package
+    #: missing, with how to install it); ``steplab reproduce`` skips it with that line
+    unavailable: Callable[[], str | None] = lambda: None
+    #: the sweep as independent tasks, which the serial runner (:func:`run_tasks`) and the
+    #: distributed one (studies/distributed.py) share: ``tasks(parameters) -> [item, ...]``
+    #: (JSON values), ``task(parameters, item) -> result`` (a JSON value, and a pure function
+    #: of its arguments: the same bytes on any worker) and ``reduce(parameters, results) ->
+    #: record`` (the results in the items' order). Without them the study runs ``compute`` whole.
+    tasks: Callable[[dict], list] | None = None
+    task: Callable[[dict, Any], Any] | None = None
+    reduce: Callable[[dict, list], dict] | None = None
+    #: ``timed(item)``: True for a task that measures run time; on a cluster it runs alone,
+    #: after every other task, in the process that started the run. (A study not given as
+    #: tasks, such as the timing studies work-precision and broadphase, runs that way whole.)
+    timed: Callable[[Any], bool] = lambda item: False
 
 
 def source_hash(root: Path | None = None, studies: Iterable[str] | None = None) -> str:
@@ -109,17 +131,42 @@ def run_study(study: Study, out: Path, quick: bool = False, force: bool = False,
         return record
     parameters = study.parameters(quick)
     key = cache_key(study, parameters)  # of the source as the study starts: an edit meanwhile re-runs it
-    record = study.compute(parameters, progress=progress)
+    if study.tasks is None:
+        return finish(study, parameters, key, study.compute(parameters, progress=progress), out)
+    cache = TaskCache(out, study.name, key, fresh=force)  # each finished task, until the record is written
+    record = finish(study, parameters, key, run_tasks(study, parameters, progress, cache), out)
+    cache.clear()
+    return record
+
+
+def run_tasks(study: Study, parameters: dict, progress=None, cache: TaskCache | None = None) -> dict:
+    """A study given as tasks, in this process: each task in turn (or its result from ``cache``),
+    then the reduction into the record."""
+    results = []
+    for item in study.tasks(parameters):
+        found, result = cache.load(item) if cache is not None else (False, None)
+        if not found:
+            result = study.task(parameters, item)
+            result = cache.store(item, result) if cache is not None else as_json(result)
+        results.append(result)
+        if progress is not None:
+            progress()
+    return study.reduce(parameters, results)
+
+
+def finish(study: Study, parameters: dict, key: str, record: dict, out: Path, cluster: dict | None = None) -> dict:
+    """Add what a record says about itself, draw its figures and write it (last: its presence
+    means "complete"). ``cluster``: where its tasks ran, when not in this process alone."""
     record.update(study=study.name, title=study.title, parameters=parameters,
-                  provenance=provenance(), cache_key=key)
+                  provenance=provenance(cluster), cache_key=key)
     record["figures"] = study.plot(record, out)
-    write_json(out / f"{study.name}.json", record)  # last: its presence means "complete"
+    write_json(out / f"{study.name}.json", record)
     record["cached"] = False
     return record
 
 
-def provenance() -> dict:
-    """Where a record came from: versions, commit, machine, date."""
+def provenance(cluster: dict | None = None) -> dict:
+    """Where a record came from: versions, commit, machine, date (and the cluster, if one ran it)."""
     from importlib.metadata import PackageNotFoundError, version
 
     def ver(package):
@@ -138,7 +185,7 @@ def provenance() -> dict:
         "packages": {p: ver(p) for p in ("numpy", "scipy", "jax", "diffrax", "matplotlib")},
         "python": platform.python_version(), "cpu": _cpu_name(), "machine": platform.machine(),
         "date": datetime.datetime.now(datetime.UTC).isoformat(timespec="seconds"),
-    }
+    } | ({} if cluster is None else {"cluster": cluster})
 
 
 def _cpu_name() -> str:

@@ -18,8 +18,9 @@ from steplab.integrators import INTEGRATORS, Stepper, get_integrator
 
 from . import extremes, plotting, stiffness
 from .problems import kepler_problem, oscillator_problem
-from .runner import Study
+from .runner import Study, run_tasks
 from .stability_limits import GROWTH_TOLERANCE, LONG_RUN_STEPS, measured_limit, oscillator_mode
+from .system import is_system
 from .tables import Table, format_value, markdown_table
 
 #: energy runs up to this many steps use the NumPy backend; windows of an energy envelope
@@ -63,13 +64,15 @@ def energy_history(problem, method: str, steps: int, dt: float) -> dict:
     method's band is drawn whole (a sample every so many steps would alias with the
     orbit). A run that diverges (or, for implicit Euler on the orbit, whose Newton
     iteration fails once numerical damping has spiralled the body into the singular
-    centre) is shown up to the step before, and the step is recorded.
+    centre) is shown up to the step before, and the step is recorded. ``method`` is a
+    steplab integrator's name or a system under test (:mod:`.system`).
     """
     energy, diverged = _energy_after_every_step(problem, method, steps, dt)
+    name = method.name if is_system(method) else method
     errors = np.abs(energy[1:] - energy[0]) / abs(energy[0])
     starts = np.unique(np.round(np.geomspace(1, len(errors), ENVELOPE_WINDOWS)).astype(int)) - 1
     ends = np.append(starts[1:], len(errors))  # step number at the end of each window
-    return {"integrator": method, "t": (ends * dt).tolist(),  # time since the start
+    return {"integrator": name, "t": (ends * dt).tolist(),  # time since the start
             "relative_energy_error": np.maximum.reduceat(errors, starts).tolist(),
             "max_relative_energy_error": float(errors.max()), "final_relative_energy_error": float(errors[-1]),
             "diverged_at_step": diverged}
@@ -81,6 +84,8 @@ def _energy_after_every_step(problem, method: str, steps: int, dt: float) -> tup
     Short runs step in NumPy (compiling costs about as much as 10^4 NumPy steps); long
     ones are one compiled scan that returns only the energies, never the states.
     """
+    if is_system(method):
+        return _system_energy(problem, method, steps, dt)
     integrator = INTEGRATORS[method]
     if steps <= SHORT_RUN_STEPS:
         from steplab.integrators import DivergenceError, simulate
@@ -109,26 +114,74 @@ def _energy_after_every_step(problem, method: str, steps: int, dt: float) -> tup
     return energy[:bad], bad
 
 
-def compute(params: dict, progress=None) -> dict:
+def _system_energy(problem, system, steps: int, dt: float) -> tuple[np.ndarray, int | None]:
+    """E(y_0), ..., E(y_n) of a system under test (:mod:`.system`), and the first diverged step."""
+    import jax
+    import jax.numpy as jnp
+    from steplab.integrators import DivergenceError
+
+    run = system.build(problem.model, None, dt, problem.y0)
+    try:
+        traj, diverged = run.advance(problem.y0, dt, steps), None
+    except DivergenceError as err:
+        diverged = err.step
+        traj = run.advance(problem.y0, dt, err.step - 1) if err.step > 1 else None
+    states = problem.y0[None] if traj is None else traj.y
+    energy = jax.jit(jax.vmap(problem.model.cast(jnp).energy))(jnp.asarray(states))
+    return np.asarray(energy, dtype=float), diverged
+
+
+def tasks(params: dict) -> list[list]:
+    """The sweep's independent runs: each limit, energy history, stiffness and mass-ratio point,
+    the damping sweep, and the extremes' other three sweeps."""
+    methods, sweep = params["integrators"], params["sweep_integrators"]
+    return ([["limit", zeta, m] for zeta in params["damping_ratios"] for m in methods]
+            + [["energy", problem, m] for problem in ("oscillator", "kepler") for m in methods]
+            + [["stiffness", k, m] for k in params["stiffnesses"] for m in sweep] + [["damping"]]
+            + [["huge_dt"], ["coasting"], ["jitter"]]
+            + [["mass_ratio", ratio, m] for ratio in params["mass_ratios"] for m in sweep])
+
+
+def task(params: dict, item: list):
+    """One run of :func:`tasks`."""
+    kind = item[0]
+    if kind == "limit":
+        return measured_limit(oscillator_mode(item[1]), item[2], params["long_run_steps"])
+    if kind == "energy":
+        if item[1] == "oscillator":
+            problem = oscillator_problem(0.0)
+            return energy_history(problem, item[2], params["energy_steps"], params["energy_omega_dt"] / problem.omega)
+        return energy_history(kepler_problem(), item[2], params["energy_steps"], params["kepler_dt"])
+    if kind == "stiffness":
+        return stiffness.stiffness_row(item[1], item[2], params["stiffness_steps"], params["stiffness_rtol"])
+    if kind == "damping":
+        return stiffness.implicit_euler_damping(params["damping_omega_dts"])
+    if kind == "huge_dt":
+        return extremes.huge_dt(params["integrators"], params["huge_omega_dts"], params["huge_max_steps"])
+    if kind == "coasting":
+        return extremes.coasting(extremes.far_offsets(params), params["far_speeds"], params["precisions"],
+                                 params["coasting_steps"])
+    if kind == "jitter":
+        return extremes.oscillator_jitter(extremes.far_offsets(params), params["precisions"], params["jitter_periods"])
+    return extremes.mass_ratio_row(item[1], item[2], params["mass_ratio_steps"], params["mass_ratio_rtol"])
+
+
+def reduce(params: dict, results: list) -> dict:
+    """The record from the runs of :func:`tasks`, in their order."""
+    by_kind = {}
+    for item, result in zip(tasks(params), results):
+        by_kind.setdefault(item[0], []).append((item, result))
     measured, theory = {}, {}
-    for zeta in params["damping_ratios"]:
+    for (_, zeta, method), result in by_kind["limit"]:
         key = f"{zeta:g}"
-        measured[key], theory[key] = {}, {}
-        for method in params["integrators"]:
-            measured[key][method] = measured_limit(oscillator_mode(zeta), method, params["long_run_steps"])
-            theory[key][method] = get_integrator(method).stability_limit(zeta)
-            if progress is not None:
-                progress()
-    oscillator, kepler = oscillator_problem(0.0), kepler_problem()
-    energy = {"oscillator": [energy_history(oscillator, m, params["energy_steps"],
-                                            params["energy_omega_dt"] / oscillator.omega)
-                             for m in params["integrators"]],
-              "kepler": [energy_history(kepler, m, params["energy_steps"], params["kepler_dt"])
-                         for m in params["integrators"]]}
+        measured.setdefault(key, {})[method] = result
+        theory.setdefault(key, {})[method] = get_integrator(method).stability_limit(zeta)
+    energy = {problem: [result for (_, name, _), result in by_kind["energy"] if name == problem]
+              for problem in ("oscillator", "kepler")}
     undamped = f"{params['damping_ratios'][0]:g}"
-    stiff = stiffness.stable_dt_against_stiffness(params["sweep_integrators"], params["stiffnesses"],
-                                                  params["stiffness_steps"], params["stiffness_rtol"], progress)
-    stiff["implicit_euler_damping"] = stiffness.implicit_euler_damping(params["damping_omega_dts"])
+    stiff = stiffness.stiffness_sweep([result for _, result in by_kind["stiffness"]], params["sweep_integrators"])
+    stiff["implicit_euler_damping"] = by_kind["damping"][0][1]
+    [[_, huge]], [[_, coast]], [[_, jitter]] = by_kind["huge_dt"], by_kind["coasting"], by_kind["jitter"]
     return {
         "growth_tolerance": GROWTH_TOLERANCE,
         "omega_dt_max": {m: r["omega_dt_max"] for m, r in measured[undamped].items()},
@@ -138,8 +191,13 @@ def compute(params: dict, progress=None) -> dict:
         "closed_forms": {m: get_integrator(m).stability_note for m in params["integrators"]},
         "energy": energy,
         "stiff_springs": stiff,
-        "extremes": extremes.compute(params, progress),
+        "extremes": extremes.assemble(params, huge, coast, jitter, [result for _, result in by_kind["mass_ratio"]]),
     }
+
+
+def compute(params: dict, progress=None) -> dict:
+    """Every task in turn, then the reduction (a run without a cluster)."""
+    return run_tasks(STUDY, params, progress)
 
 
 # --- figures ------------------------------------------------------------------------
@@ -276,4 +334,5 @@ TABLES = (
 
 
 STUDY = Study("stability", "Stability: largest stable omega dt, stability regions, long-run energy",
-              parameters, compute, plot, summary, tables=TABLES)
+              parameters, compute, plot, summary, tables=TABLES,
+              tasks=tasks, task=task, reduce=reduce)

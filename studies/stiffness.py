@@ -43,12 +43,21 @@ def stable_dt_against_stiffness(methods, stiffnesses, steps: int, rtol: float, p
     """Largest stable dt of each method at each stiffness, measured and from theory."""
     rows = []
     for k in stiffnesses:
-        model, vertices = soft_cube(k)
-        mode = stiffest_mode(model, vertices)
         for method in methods:
-            rows.append({"stiffness": k, "integrator": method} | stable_dt(mode, method, steps, rtol))
+            rows.append(stiffness_row(k, method, steps, rtol))
             if progress is not None:
                 progress()
+    return stiffness_sweep(rows, methods)
+
+
+def stiffness_row(k: float, method, steps: int, rtol: float) -> dict:
+    """One point of the sweep: the largest stable dt of ``method`` on the soft cube of stiffness ``k``."""
+    model, vertices = soft_cube(k)
+    return {"stiffness": k, "integrator": method} | stable_dt(stiffest_mode(model, vertices), method, steps, rtol)
+
+
+def stiffness_sweep(rows: list[dict], methods) -> dict:
+    """The sweep from its rows: each method's fitted slope of log dt_max against log k, the worst deviation."""
     slopes = {}
     for method in methods:
         pts = [(r["stiffness"], r["dt_max"]) for r in rows if r["integrator"] == method and r["dt_max"]]

@@ -13,6 +13,8 @@ truncation C dt meets accumulated round-off eps T / dt near dt = sqrt(eps T / C)
 
 from __future__ import annotations
 
+import functools
+
 import numpy as np
 from steplab.integrators import INTEGRATORS, DivergenceError, Stepper, get_integrator
 from steplab.integrators.simulate import final_state_function
@@ -20,7 +22,8 @@ from steplab.integrators.simulate import final_state_function
 from . import plotting
 from .lecture import lecture_check
 from .problems import oscillator_problem, projectile_problem, scene_problem, true_final
-from .runner import Study
+from .runner import Study, run_tasks
+from .system import is_system
 from .tables import Table, format_value, markdown_table
 
 #: after the smallest error, keep halving dt this many times to show the round-off branch
@@ -36,6 +39,9 @@ ROUNDOFF_NOISE = 1e4
 FIT_POINTS = 5
 #: implicit Euler solves a linear system per Newton iteration; cap its step count
 IMPLICIT_MAX_LOG2_STEPS = 16
+#: a system under test (an engine stepped from Python) stops at 2^14 steps: enough for the
+#: truncation branch of every method at the oscillator's 1.125 periods
+SYSTEM_MAX_LOG2_STEPS = 14
 
 
 def _problems(names):
@@ -62,21 +68,36 @@ def parameters(quick: bool) -> dict:
 
 
 def error_curve(problem, method: str, precision: str, truth, min_log2: int, max_log2: int) -> list[dict]:
-    """Global position error at t_end for dt = T / 2^k, k = min_log2, ..., until round-off wins."""
-    import jax.numpy as jnp
+    """Global position error at t_end for dt = T / 2^k, k = min_log2, ..., until round-off wins.
 
-    dtype = np.dtype(precision)
-    model = problem.model.cast(jnp, dtype)
-    run = final_state_function(model, method)
-    y0 = jnp.asarray(problem.y0, dtype)
+    ``method``: a steplab integrator (run compiled, in ``precision``) or a system under test
+    (:mod:`.system`, run in its own precision).
+    """
     span = problem.t_end - problem.t_start
-    if get_integrator(method).implicit:
-        max_log2 = min(max_log2, IMPLICIT_MAX_LOG2_STEPS)
+    if is_system(method):  # an engine (or steplab behind the system protocol), in its own precision
+        system = method.build(problem.model, None, span / 2**min_log2, problem.y0)
+        max_log2 = min(max_log2, SYSTEM_MAX_LOG2_STEPS)
+        y0, dtype = problem.y0, np.float64
+
+        def run(y0, t_start, dt, n):
+            try:
+                return system.advance(y0, float(dt), n, t_start=float(t_start), save_every=n).y[-1], -1
+            except DivergenceError as err:
+                return None, err.step
+    else:
+        import jax.numpy as jnp
+
+        dtype = np.dtype(precision)
+        model = problem.model.cast(jnp, dtype)
+        run = final_state_function(model, method)
+        y0 = jnp.asarray(problem.y0, dtype)
+        if get_integrator(method).implicit:
+            max_log2 = min(max_log2, IMPLICIT_MAX_LOG2_STEPS)
     points, best, rising, falling, entered = [], np.inf, 0, 0, False
     for k in range(min_log2, max_log2 + 1):
         n = 2**k
         dt = span / n
-        y, bad = run(y0, jnp.asarray(problem.t_start, dtype), jnp.asarray(dt, dtype), n)
+        y, bad = run(y0, np.asarray(problem.t_start, dtype), np.asarray(dt, dtype), n)
         if int(bad) >= 0:
             points.append({"dt": dt, "steps": n, "error": None, "diverged_at_step": int(bad)})
             continue
@@ -116,38 +137,64 @@ def fit_order(points: list[dict], noise: float = 0.0) -> float | None:
     return float(slope)
 
 
-def compute(params: dict, progress=None) -> dict:
+def tasks(params: dict) -> list[list]:
+    """One task per problem and integrator (every precision)."""
+    return [["curve", problem, method] for problem in params["problems"] for method in params["integrators"]]
+
+
+@functools.cache
+def _problem_and_truth(name: str):
+    """A problem and its true final state, once per process (a reference solve can take seconds)."""
+    [problem] = _problems([name])
+    return problem, *true_final(problem)
+
+
+def task(params: dict, item: list) -> dict:
+    """One integrator on one problem: its error curve in each precision, the least error, the fitted order."""
+    _, name, method = item
+    problem, truth, info = _problem_and_truth(name)
+    result = {"problem": problem.name, "reference": info, "curves": [], "least_error": {}}
+    for precision in params["precisions"]:
+        try:
+            points = error_curve(problem, method, precision, truth, params["min_log2_steps"],
+                                 params["max_log2_steps"])
+        except DivergenceError:
+            points = []
+        result["curves"].append({"problem": problem.name, "title": problem.title, "integrator": method,
+                                 "precision": precision, "points": points})
+        finite = [p for p in points if p["error"] is not None]
+        if finite:
+            best = min(finite, key=lambda p: p["error"])
+            # the least error is a round-off floor only if smaller steps did worse
+            result["least_error"][precision] = {
+                "dt": best["dt"], "error": best["error"], "floor_reached": best is not finite[-1]}
+        if precision == "float64":
+            noise = ROUNDOFF_NOISE * np.finfo(np.float64).eps * max(1.0, float(np.max(np.abs(truth))))
+            result["order"] = fit_order(points, noise)
+    return result
+
+
+def reduce(params: dict, results: list) -> dict:
+    """The record: the lecture's tables, every error curve, the fitted and declared orders."""
     record = lecture_check()
     curves, orders, best_dt, references = [], {}, {}, {}
-    for problem in _problems(params["problems"]):
-        truth, info = true_final(problem)
-        references[problem.name] = info
-        orders[problem.name], best_dt[problem.name] = {}, {}
-        for method in params["integrators"]:
-            best_dt[problem.name][method] = {}
-            for precision in params["precisions"]:
-                try:
-                    points = error_curve(problem, method, precision, truth, params["min_log2_steps"],
-                                         params["max_log2_steps"])
-                except DivergenceError:
-                    points = []
-                curves.append({"problem": problem.name, "title": problem.title, "integrator": method,
-                               "precision": precision, "points": points})
-                finite = [p for p in points if p["error"] is not None]
-                if finite:
-                    best = min(finite, key=lambda p: p["error"])
-                    # the least error is a round-off floor only if smaller steps did worse
-                    best_dt[problem.name][method][precision] = {
-                        "dt": best["dt"], "error": best["error"], "floor_reached": best is not finite[-1]}
-                if precision == "float64":
-                    noise = ROUNDOFF_NOISE * np.finfo(np.float64).eps * max(1.0, float(np.max(np.abs(truth))))
-                    orders[problem.name][method] = fit_order(points, noise)
-            if progress is not None:
-                progress()
+    for (_, _, method), result in zip(tasks(params), results):
+        name = result["problem"]
+        references[name] = result["reference"]
+        curves += result["curves"]
+        best_dt.setdefault(name, {})[method] = result["least_error"]
+        orders.setdefault(name, {})
+        if "order" in result:
+            orders[name][method] = result["order"]
     declared = {name: get_integrator(name).order for name in params["integrators"]}
     record.update(curves=curves, orders=orders, declared_orders=declared, least_error=best_dt,
                   references=references)
     return record
+
+
+def compute(params: dict, progress=None) -> dict:
+    """Every task in turn, then the reduction (a run without a cluster)."""
+    return run_tasks(STUDY, params, progress)
 
 
 def plot(record: dict, out) -> list[str]:
@@ -238,4 +285,5 @@ TABLES = (
 
 
 STUDY = Study("truncation", "Truncation error: the lecture's tables, global error against dt, round-off",
-              parameters, compute, plot, summary, tables=TABLES)
+              parameters, compute, plot, summary, tables=TABLES,
+              tasks=tasks, task=task, reduce=reduce)

@@ -9,12 +9,25 @@ probability
 
     P(miss) = max(0, 1 - (w + 2r) / (v dt)),
 
-a function of the ratio v dt / (w + 2r) alone. Intersection (swept) testing computes the
-time of impact instead and never misses. The study measures both miss rates for several
-walls and steps against that curve; checks the lecture's design rule ("fastest object
-moves smaller distance than thinnest object"); counts the sub-steps overlap testing needs
-to stop missing against one swept test; and measures how bisection iterations trade the
-time-of-impact error for cost.
+a function of the ratio rho = v dt / (w + 2r) alone, if every overlapping sample stops the
+sphere. It does not quite: the response pushes the sphere out along the contact normal,
+and once the centre is past the wall's middle the nearest face is the far one, so the
+normal points forward, the sphere is not approaching, and it leaves through the far side.
+Only the front half of the band, (w + 2r) / 2 wide, stops it. Where the sphere is when the
+collision is resolved depends on the detector (:func:`bisection_miss_rate`):
+
+- without bisection (an engine that resolves at the end of the step, pushing out along the
+  nearest face) at the first overlapping sample: ``P(miss) = max(0, 1 - 1 / (2 rho))``;
+- with k >= 1 bisections at the first grid point ``m dt / 2^k`` inside the band, at most
+  ``v dt / 2^k`` deep: the curve above while ``rho <= 2^(k-1)`` (16 for the lecture's 5);
+  then the sphere is stopped with probability ``3 / (2 rho) - 2^-k`` up to ``rho = 2^k``,
+  and ``1 / (2 rho)`` beyond, as if it did not bisect.
+
+Intersection (swept) testing computes the time of impact instead and never misses. The study
+measures the miss rates of all three for several walls and steps against these curves;
+checks the lecture's design rule ("fastest object moves smaller distance than thinnest
+object"); counts the sub-steps overlap testing needs to stop missing against one swept test;
+and measures how bisection iterations trade the time-of-impact error for cost.
 """
 
 from __future__ import annotations
@@ -31,10 +44,12 @@ from steplab.physics.collision.time_of_impact import lecture_sphere_sphere, sphe
 
 from . import plotting
 from .lecture import LECTURE_ERRORS_TABLE
-from .runner import Study
+from .runner import Study, run_tasks
 
 #: the integrator: exact for straight-line motion, so every miss is the detector's
 INTEGRATOR = "semi-implicit-euler"
+#: the lecture's bisection iterations ("in practice, usually 5 iterations is pretty close")
+LECTURE_BISECTIONS = 5
 
 
 def parameters(quick: bool) -> dict:
@@ -42,8 +57,11 @@ def parameters(quick: bool) -> dict:
         "radius": 0.05, "seed": 20240611,
         # (wall thickness w, step dt): the miss rate should depend on v dt / (w + 2r) only
         "walls": [[0.01, 0.01], [0.1, 0.002]] if quick else [[0.01, 0.01], [0.01, 0.002], [0.1, 0.01], [0.002, 0.02]],
-        "ratios": np.round(np.geomspace(0.05, 30, 8) if quick else np.geomspace(0.015, 30, 16), 4).tolist(),
-        "trials": 30 if quick else 100,
+        # up to 50: the lecture's 5 bisections leave 1 - (w + 2r) / (v dt) above 16
+        "ratios": np.round(np.geomspace(0.05, 50, 9) if quick else np.geomspace(0.015, 50, 25), 4).tolist(),
+        "trials": 30 if quick else 200,
+        # overlap testing with the lecture's 5 bisections, and with none (push out along the nearest face)
+        "bisections": [LECTURE_BISECTIONS, 0],
         "cost_ratios": [1.5, 4.0, 12.0] if quick else [1.5, 3.0, 6.0, 12.0, 24.0],
         "cost_trials": 10 if quick else 40,
         "bisection_iterations": list(range(0, 13 if quick else 21)),
@@ -53,14 +71,16 @@ def parameters(quick: bool) -> dict:
 
 
 def shoot(ratio: float, w: float, dt: float, r: float, phases, detector: str, iterations: int = 5,
-          substeps: int = 1, batched: bool = False) -> dict:
+          substeps: int = 1, batched: bool = False, system=None, planar: bool = False) -> dict:
     """Shoot spheres at the wall x in [-w/2, w/2] at v = ratio (w + 2r) / dt, one per phase.
 
     ``phases`` (fractions of a step in [0, 1)) place each sphere's samples along its path.
     Each shot is its own run unless ``batched``: then all spheres fly side by side in one
     run (lanes far enough apart never to meet), and a collision of one splits the step for
     all, adding a sample of every sphere at that time. Returns the misses, each sphere's
-    first collision time and its true first-touch time, and the run time.
+    first collision time and its true first-touch time, and the run time. ``system`` (a
+    system under test, :mod:`.system`) runs the shots instead of steplab's integrator and
+    ``detector``; ``planar`` puts the lanes side by side in the plane z = 0 (a 2-D engine's).
     """
     phases = np.asarray(phases, dtype=float)
     v = ratio * (w + 2 * r) / dt
@@ -71,7 +91,7 @@ def shoot(ratio: float, w: float, dt: float, r: float, phases, detector: str, it
     for group in ([np.arange(len(phases))] if batched else [[k] for k in range(len(phases))]):
         n = len(group)
         lane = 2 * (r + travel) + 1.0
-        side = math.ceil(math.sqrt(n))
+        side = n if planar else math.ceil(math.sqrt(n))
         k = np.arange(n)
         y0 = np.zeros((2, n, 3))
         y0[0, :, 0], y0[0, :, 1], y0[0, :, 2] = x0[group], lane * (k % side), lane * (k // side)
@@ -81,12 +101,16 @@ def shoot(ratio: float, w: float, dt: float, r: float, phases, detector: str, it
         world = CollisionWorld(detector, (wall,), pair_properties=PairProperties(1.0),
                                bisection_iterations=iterations, max_impacts_per_step=2 * n + 10)
         start = time.perf_counter()
-        traj = simulate(Model(np.ones(n), np.full(n, r)), INTEGRATOR, y0, 0.0, steps * dt, dt / substeps,
-                        collisions=world, save_every=10**9)
+        if system is None:
+            traj = simulate(Model(np.ones(n), np.full(n, r)), INTEGRATOR, y0, 0.0, steps * dt, dt / substeps,
+                            collisions=world, save_every=10**9)
+        else:
+            run = system.build(Model(np.ones(n), np.full(n, r)), world, dt / substeps, y0)
+            traj = run.advance(y0, dt / substeps, steps * substeps, save_every=10**9)
         wall_time += time.perf_counter() - start
         misses += int(np.sum(traj.velocities[-1, :, 0] > 0))
         first = {}
-        for event in traj.collisions.events:
+        for event in traj.collisions.events if traj.collisions is not None else ():
             first.setdefault(event.body, event.t)
         toi += [first.get(b) for b in range(n)]
     return {"misses": misses, "trials": len(phases), "wall_time": wall_time, "toi": toi,
@@ -94,7 +118,48 @@ def shoot(ratio: float, w: float, dt: float, r: float, phases, detector: str, it
 
 
 def analytic_miss_rate(ratio: float) -> float:
+    """The miss rate if every sample that overlaps the wall stopped the sphere: 1 - 1 / rho.
+
+    A detector that bisects k times follows it while rho <= 2^(k-1) (:func:`bisection_miss_rate`).
+    """
     return max(0.0, 1.0 - 1.0 / ratio)
+
+
+def nearest_face_miss_rate(ratio: float) -> float:
+    """The miss rate of overlap testing without bisection, pushing out along the nearest face.
+
+    The collision is resolved where the first overlapping sample finds the centre: a uniformly
+    random depth in [0, v dt) into the band of width w + 2r. Only the band's front half pushes
+    the sphere back, so it is stopped with probability ((w + 2r) / 2) / (v dt) = 1 / (2 rho)
+    (capped at 1): ``P(miss) = max(0, 1 - 1 / (2 rho))``, which starts at rho = 1/2.
+    """
+    return max(0.0, 1.0 - 0.5 / ratio)
+
+
+def bisection_miss_rate(ratio: float, iterations: int) -> float:
+    """The miss rate of overlap testing that bisects ``iterations`` = k times, at rho = v dt / (w + 2r).
+
+    Bisection returns the first point of the grid m dt / 2^k (m = 1 .. 2^k) that overlaps, so
+    with N = 2^k, and y the time the sphere enters the band in the step of its first
+    overlapping sample, in grid units (uniform on [0, N] over the random phases):
+
+    - the step's end overlaps only when the entry lies in its last N / rho (capped at the
+      whole step, N): ``L = min(N, N / rho)`` of the N grid cells;
+    - the sphere is resolved at ``ceil(y)``, ``(ceil(y) - y) v dt / N`` deep, and pushed back
+      only when that is less than (w + 2r) / 2, i.e. ``ceil(y) - y < c = N / (2 rho)``:
+      the last c (capped at 1) of each cell.
+
+    The entries that are stopped are the last min(c, 1) of each of the floor(L) whole cells at
+    the end of the step, and the last min(c, 1, frac(L)) of the one before them:
+    ``P(stop) = (floor(L) min(c, 1) + min(frac(L), c, 1)) / N``. For rho <= N / 2 this is
+    min(1, 1 / rho) (:func:`analytic_miss_rate`), for N / 2 < rho < N it is 3 / (2 rho) - 1 / N
+    (when k >= 1), and from rho = N on 1 / (2 rho), as without bisection
+    (:func:`nearest_face_miss_rate`, which is k = 0).
+    """
+    n = 2.0**iterations
+    c = min(1.0, n / (2.0 * ratio))
+    whole, part = divmod(min(n, n / ratio), 1.0)
+    return max(0.0, 1.0 - (whole * c + min(part, c)) / n)
 
 
 def lecture_errors(points, params) -> list[dict]:
@@ -113,11 +178,15 @@ def lecture_errors(points, params) -> list[dict]:
     for w, dt in params["walls"]:
         thinnest = min(w, 2 * r)
         rule = thinnest / (w + 2 * r)
-        overlap = [p for p in points if p["detector"] == "overlap" and p["w"] == w and p["dt"] == dt]
-        within = [p["miss_rate"] for p in overlap if p["ratio"] < rule]
-        missing = [p["ratio"] for p in overlap if p["miss_rate"] > 0]
-        rule_rows.append({"w": w, "dt": dt, "rule_ratio": rule, "max_miss_rate_within_rule": max(within, default=None),
-                          "smallest_ratio_with_misses": min(missing, default=None)})
+        row = {"w": w, "dt": dt, "rule_ratio": rule}
+        for bisections, suffix in ((LECTURE_BISECTIONS, ""), (0, "_no_bisection")):
+            overlap = [p for p in points if p["detector"] == "overlap" and p["bisections"] == bisections
+                       and p["w"] == w and p["dt"] == dt]
+            row["max_miss_rate_within_rule" + suffix] = max((p["miss_rate"] for p in overlap if p["ratio"] < rule),
+                                                            default=None)
+            row["smallest_ratio_with_misses" + suffix] = min((p["ratio"] for p in overlap if p["miss_rate"] > 0),
+                                                             default=None)
+        rule_rows.append(row)
     return [
         {"where": "Complex Geometry - Bounding Volume (2 of 3)",
          "printed": "Sphere - if distance between centers less than sum of Radii then no collision",
@@ -143,63 +212,104 @@ def lecture_errors(points, params) -> list[dict]:
         {"where": "Overlap Testing: Limitations",
          "printed": "Design constraint on speed of objects "
                     "(fastest object moves smaller distance than thinnest object)",
-         "correct": "sufficient but conservative: overlap testing cannot miss while v dt <= w + 2r (the wall "
-                    "thickened by the sphere, the Minkowski sum), and for two moving objects the relative "
-                    "displacement is what counts",
+         "correct": "sufficient but conservative: overlap testing that bisects cannot miss while v dt <= w + 2r "
+                    "(the wall thickened by the sphere, the Minkowski sum); without bisection, pushing out along "
+                    "the nearest face, it misses from v dt > (w + 2r) / 2, still above the rule's "
+                    "min(w, 2r); for two moving objects the relative displacement is what counts",
          "evidence": "; ".join(
              f"w = {row['w']:g} m, dt = {row['dt']:g} s: the rule allows ratios < {row['rule_ratio']:.3g}, "
-             f"largest miss rate there {row['max_miss_rate_within_rule']}, first misses at ratio "
-             f"{row['smallest_ratio_with_misses']} (the first tested above 1)" for row in rule_rows),
+             f"largest miss rate there {row['max_miss_rate_within_rule']} ({LECTURE_BISECTIONS} bisections) and "
+             f"{row['max_miss_rate_within_rule_no_bisection']} (none), first misses at ratio "
+             f"{row['smallest_ratio_with_misses']} (the first tested above 1) and "
+             f"{row['smallest_ratio_with_misses_no_bisection']} (the first above 1/2)" for row in rule_rows),
          "is_error": False, "rule": rule_rows},
     ]
 
 
-def compute(params: dict, progress=None) -> dict:
-    r, trials = params["radius"], params["trials"]
+def phases(params: dict) -> dict:
+    """The random phases of every sweep, drawn in turn from the one seed (any task redraws them alike)."""
     rng = np.random.default_rng(params["seed"])
+    trials, cost_trials = params["trials"], params["cost_trials"]
     # stratified random phases, one per 1/trials of a step: the miss fraction is then within
     # 1/trials of the probability (plain uniform phases scatter by sqrt(p (1 - p) / trials))
-    phases = (np.arange(trials) + rng.uniform(0.0, 1.0, trials)) / trials
-    points = []
-    for w, dt in params["walls"]:
-        for ratio in params["ratios"]:
-            for detector in ("overlap", "swept"):
-                shot = shoot(ratio, w, dt, r, phases, detector)
-                points.append({"detector": detector, "ratio": ratio, "miss_rate": shot["misses"] / trials,
-                               "trials": trials, "w": w, "dt": dt, "speed": ratio * (w + 2 * r) / dt,
-                               "analytic_miss_rate": analytic_miss_rate(ratio) if detector == "overlap" else 0.0})
-        if progress is not None:
-            progress()
-    w, dt = params["walls"][0]
-    batched = [{"ratio": ratio, "miss_rate": shoot(ratio, w, dt, r, phases, "overlap", batched=True)["misses"] / trials,
-                "trials": trials, "w": w, "dt": dt} for ratio in params["ratios"]]
+    stratified = (np.arange(trials) + rng.uniform(0.0, 1.0, trials)) / trials
+    cost = (np.arange(cost_trials) + rng.uniform(0.0, 1.0, cost_trials)) / cost_trials
+    return {"miss_rate": stratified, "cost": cost, "bisection": rng.uniform(0.0, 1.0, params["bisection_trials"])}
 
-    cost = []
-    some = (np.arange(params["cost_trials"]) + rng.uniform(0.0, 1.0, params["cost_trials"])) / params["cost_trials"]
-    for ratio in params["cost_ratios"]:
+
+def tasks(params: dict) -> list[list]:
+    """The sweep's independent shots: each wall and ratio (every detector), the batched scene per
+    ratio, each bisection count, the swept reference, and the timed cost rows."""
+    return ([["point", w, dt, ratio] for w, dt in params["walls"] for ratio in params["ratios"]]
+            + [["batched", ratio] for ratio in params["ratios"]]
+            + [["bisection", k] for k in params["bisection_iterations"]] + [["swept_toi"]]
+            + [["cost", ratio] for ratio in params["cost_ratios"]])
+
+
+def timed(item: list) -> bool:
+    """The cost rows measure run time (sub-stepped overlap testing against swept testing)."""
+    return item[0] == "cost"
+
+
+def task(params: dict, item: list):
+    """One task of :func:`tasks`: the shots it names, as part of the record."""
+    r, trials = params["radius"], params["trials"]
+    w, dt = params["walls"][0]  # the batched, cost and bisection sweeps use the first wall
+    kind, drawn = item[0], phases(params)
+    if kind == "point":
+        _, w, dt, ratio = item
+        points = []
+        for detector, iterations in [("overlap", k) for k in params["bisections"]] + [("swept", None)]:
+            swept = iterations is None  # the swept detector does not bisect
+            shot = shoot(ratio, w, dt, r, drawn["miss_rate"], detector, 0 if swept else iterations)
+            points.append({"detector": detector, "bisections": iterations, "ratio": ratio,
+                           "miss_rate": shot["misses"] / trials, "trials": trials, "w": w, "dt": dt,
+                           "speed": ratio * (w + 2 * r) / dt,
+                           "analytic_miss_rate": 0.0 if swept else bisection_miss_rate(ratio, iterations),
+                           "sampling_miss_rate": 0.0 if swept else analytic_miss_rate(ratio)})
+        return points
+    if kind == "batched":
+        ratio = item[1]
+        shot = shoot(ratio, w, dt, r, drawn["miss_rate"], "overlap", batched=True)
+        return {"ratio": ratio, "miss_rate": shot["misses"] / trials, "trials": trials, "w": w, "dt": dt}
+    if kind == "cost":
+        ratio, some = item[1], drawn["cost"]
         substeps = math.ceil(ratio)
         sub = shoot(ratio, w, dt, r, some, "overlap", substeps=substeps)
         single = shoot(ratio, w, dt, r, some, "overlap")
         swept = shoot(ratio, w, dt, r, some, "swept")
-        cost.append({"ratio": ratio, "substeps": substeps, "trials": len(some),
-                     "miss_rate_overlap": single["misses"] / len(some),
-                     "miss_rate_overlap_substepped": sub["misses"] / len(some),
-                     "miss_rate_swept": swept["misses"] / len(some),
-                     "tests_per_step_overlap": substeps, "tests_per_step_swept": 1,
-                     "wall_time_overlap_substepped": sub["wall_time"], "wall_time_swept": swept["wall_time"]})
-
-    bisection = []
-    some = rng.uniform(0.0, 1.0, params["bisection_trials"])
-    for iterations in params["bisection_iterations"]:
+        return {"ratio": ratio, "substeps": substeps, "trials": len(some),
+                "miss_rate_overlap": single["misses"] / len(some),
+                "miss_rate_overlap_substepped": sub["misses"] / len(some),
+                "miss_rate_swept": swept["misses"] / len(some),
+                "tests_per_step_overlap": substeps, "tests_per_step_swept": 1,
+                "wall_time_overlap_substepped": sub["wall_time"], "wall_time_swept": swept["wall_time"]}
+    some = drawn["bisection"]
+    if kind == "bisection":
+        iterations = item[1]
         shot = shoot(params["bisection_ratio"], w, dt, r, some, "overlap", iterations, batched=True)
         errors = np.array([t - true for t, true in zip(shot["toi"], shot["true_toi"]) if t is not None])
-        bisection.append({"iterations": iterations, "toi_error": float(np.mean(np.abs(errors))),
-                          "toi_error_max": float(np.max(np.abs(errors))), "bound": dt * 2.0**-iterations,
-                          "detected": int(len(errors)), "overlap_tests_per_collision": iterations + 1})
-    swept_shot = shoot(params["bisection_ratio"], w, dt, r, some, "swept", batched=True)
-    swept_error = max(abs(t - true) for t, true in zip(swept_shot["toi"], swept_shot["true_toi"]))
-    return {"points": points, "batched": batched, "bisection": bisection, "swept_toi_error": swept_error,
-            "cost": cost, "lecture_errors": lecture_errors(points, params)}
+        return {"iterations": iterations, "toi_error": float(np.mean(np.abs(errors))),
+                "toi_error_max": float(np.max(np.abs(errors))), "bound": dt * 2.0**-iterations,
+                "detected": int(len(errors)), "overlap_tests_per_collision": iterations + 1}
+    shot = shoot(params["bisection_ratio"], w, dt, r, some, "swept", batched=True)  # "swept_toi"
+    return max(abs(t - true) for t, true in zip(shot["toi"], shot["true_toi"]))
+
+
+def reduce(params: dict, results: list) -> dict:
+    """The record from the results of :func:`tasks`, in their order."""
+    by_kind = {}
+    for item, result in zip(tasks(params), results):
+        by_kind.setdefault(item[0], []).append(result)
+    points = [point for row in by_kind["point"] for point in row]
+    return {"points": points, "batched": by_kind["batched"], "bisection": by_kind["bisection"],
+            "swept_toi_error": by_kind["swept_toi"][0], "cost": by_kind["cost"],
+            "lecture_errors": lecture_errors(points, params)}
+
+
+def compute(params: dict, progress=None) -> dict:
+    """Every task in turn, then the reduction (a run without a cluster)."""
+    return run_tasks(STUDY, params, progress)
 
 
 def plot(record: dict, out) -> list[str]:
@@ -208,20 +318,36 @@ def plot(record: dict, out) -> list[str]:
     params = record["parameters"]
     r = params["radius"]
 
-    # 1. miss rate against v dt / (w + 2r)
-    fig, ax = plt.subplots(figsize=(7.6, 5.0))
-    grid = np.geomspace(min(params["ratios"]), max(params["ratios"]), 400)
-    ax.plot(grid, [analytic_miss_rate(x) for x in grid], color="k", lw=1.5,
-            label="analytic, overlap: 1 - (w + 2r) / (v dt)")
+    # 1. miss rate against v dt / (w + 2r); right: the fraction stopped, where the models part
+    fig, (ax, stop) = plt.subplots(1, 2, figsize=(12.4, 5.2), width_ratios=(1.25, 1))
+    grid = np.geomspace(min(params["ratios"]), max(params["ratios"]), 600)
+    lecture = LECTURE_BISECTIONS
+    curves = [(f"{lecture} bisections (model)", [bisection_miss_rate(x, lecture) for x in grid], "-", "k"),
+              ("no bisection, nearest face: 1 - (w + 2r) / (2 v dt)", [nearest_face_miss_rate(x) for x in grid],
+               "--", "tab:purple"),
+              ("every overlapping sample stops it: 1 - (w + 2r) / (v dt)", [analytic_miss_rate(x) for x in grid],
+               ":", "gray")]
+    for label, miss, ls, color in curves:
+        ax.plot(grid, miss, ls=ls, color=color, lw=1.5 if color == "k" else 1.2, label=label)
+        stop.loglog(grid, 1.0 - np.asarray(miss), ls=ls, color=color, lw=1.5 if color == "k" else 1.2)
     markers = ["o", "s", "^", "D", "v"]
+    series = [(f"overlap, {lecture} bisections", lambda p: p["detector"] == "overlap" and p["bisections"] == lecture,
+               "tab:orange", "none", 7),
+              ("overlap, no bisection", lambda p: p["detector"] == "overlap" and p["bisections"] == 0,
+               "tab:purple", "none", 5),
+              ("swept", lambda p: p["detector"] == "swept", "tab:blue", None, 4)]
     for k, (w, dt) in enumerate(params["walls"]):
         pts = [p for p in record["points"] if p["w"] == w and p["dt"] == dt]
-        ov = [p for p in pts if p["detector"] == "overlap"]
-        sw = [p for p in pts if p["detector"] == "swept"]
-        ax.plot([p["ratio"] for p in ov], [p["miss_rate"] for p in ov], ls="none", marker=markers[k % 5],
-                color="tab:orange", mfc="none", ms=7, label=f"overlap, w = {w * 100:g} cm, dt = {dt * 1e3:g} ms")
-        ax.plot([p["ratio"] for p in sw], [p["miss_rate"] for p in sw], ls="none", marker=markers[k % 5],
-                color="tab:blue", ms=4, label=f"swept, w = {w * 100:g} cm, dt = {dt * 1e3:g} ms")
+        for label, chosen, color, mfc, ms in series:
+            sel = [p for p in pts if chosen(p)]
+            ax.plot([p["ratio"] for p in sel], [p["miss_rate"] for p in sel], ls="none", marker=markers[k % 5],
+                    color=color, mfc=mfc, ms=ms, label=f"measured: {label}" if k == 0 else None)
+            if mfc == "none":  # overlap: the fraction stopped, where some were
+                seen = [p for p in sel if p["miss_rate"] < 1 and p["ratio"] > 0.3]
+                stop.plot([p["ratio"] for p in seen], [1 - p["miss_rate"] for p in seen], ls="none",
+                          marker=markers[k % 5], color=color, mfc=mfc, ms=ms)
+        ax.plot([], [], ls="none", marker=markers[k % 5], color="gray", mfc="none",
+                label=f"  marker: w = {w * 100:g} cm, dt = {dt * 1e3:g} ms")
     batched = record["batched"]
     w0, dt0 = params["walls"][0]
     ax.plot([p["ratio"] for p in batched], [p["miss_rate"] for p in batched], ls=":", marker="x", color="tab:red",
@@ -232,15 +358,25 @@ def plot(record: dict, out) -> list[str]:
     for w, _ in params["walls"]:
         rule = min(w, 2 * r) / (w + 2 * r)
         ax.axvline(rule, color="tab:green", ls=":", lw=1)
-    ax.text(min(w / (w + 2 * r) for w, _ in params["walls"]) * 1.03, 0.55,
+    ax.text(min(w / (w + 2 * r) for w, _ in params["walls"]) * 1.03, 0.35,
             "lecture's rule:\nv dt = thinnest object", color="tab:green", fontsize=8, va="top")
     ax.set_xscale("log")
     ax.set_xlabel("distance per step / wall thickened by the sphere,  v dt / (w + 2r)")
     ax.set_ylabel(f"fraction of shots through the wall ({params['trials']} stratified random phases)")
     ax.set_ylim(-0.03, 1.03)
-    ax.set_title("Tunnelling: overlap testing misses as predicted, swept testing never")
+    ax.set_title("Tunnelling: overlap testing misses as modelled, swept testing never", fontsize=11)
     ax.legend(fontsize=7, loc="upper left")
     ax.grid(True, which="major", alpha=0.3)
+    for x, text, side in ((2.0 ** (lecture - 1), "2^(k-1): the bracket v dt / 2^k\nreaches the wall's middle ",
+                           "right"), (2.0**lecture, " 2^k: as if\n no bisection", "left")):
+        stop.axvline(x, color="gray", ls="--", lw=0.8)
+        stop.text(x, 0.5, text, color="gray", fontsize=7, va="top", ha=side)
+    stop.set_xlim(0.3, max(params["ratios"]) * 1.1)
+    stop.set_ylim(min(0.5 / params["trials"], 0.25 / max(params["ratios"])), 1.5)
+    stop.set_xlabel("v dt / (w + 2r)")
+    stop.set_ylabel("fraction of shots stopped by the wall")
+    stop.set_title(f"Where bisection stops helping (k = {lecture})", fontsize=11)
+    stop.grid(True, which="major", alpha=0.3)
     fig.tight_layout()
     figures += plotting.save_figure(fig, out, "tunnelling_miss_rate")
 
@@ -286,16 +422,19 @@ def plot(record: dict, out) -> list[str]:
 
 
 def summary(record: dict) -> list[tuple[str, str]]:
-    overlap = [p for p in record["points"] if p["detector"] == "overlap"]
     swept = [p for p in record["points"] if p["detector"] == "swept"]
-    worst = max(abs(p["miss_rate"] - p["analytic_miss_rate"]) for p in overlap)
+    rows = [("swept misses (all speeds)", f"{sum(p['miss_rate'] for p in swept):g}")]
+    for k in record["parameters"]["bisections"]:
+        overlap = [p for p in record["points"] if p["detector"] == "overlap" and p["bisections"] == k]
+        worst = max(abs(p["miss_rate"] - p["analytic_miss_rate"]) for p in overlap)
+        rows.append((f"overlap, {k} bisections: worst vs model", f"{worst:.3f}"))
     five = next(p for p in record["bisection"] if p["iterations"] == 5)
-    return [("swept misses (all speeds)", f"{sum(p['miss_rate'] for p in swept):g}"),
-            ("overlap miss rate vs analytic, worst difference", f"{worst:.3f}"),
-            ("time-of-impact error after 5 bisections", f"{five['toi_error_max']:.3g} s (bound {five['bound']:.3g})"),
-            ("lecture errors found (detection chapter)",
-             str(sum(1 for e in record["lecture_errors"] if e["is_error"])))]
+    return rows + [("time-of-impact error after 5 bisections",
+                    f"{five['toi_error_max']:.3g} s (bound {five['bound']:.3g})"),
+                   ("lecture errors found (detection chapter)",
+                    str(sum(1 for e in record["lecture_errors"] if e["is_error"])))]
 
 
 STUDY = Study("tunnelling", "Tunnelling: overlap testing against swept testing, and bisection",
-              parameters, compute, plot, summary, tables=(LECTURE_ERRORS_TABLE,))
+              parameters, compute, plot, summary, tables=(LECTURE_ERRORS_TABLE,),
+              tasks=tasks, task=task, reduce=reduce, timed=timed)

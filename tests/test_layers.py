@@ -1,4 +1,4 @@
-"""Layers point down only: physics <- integrators <- studies <- steplab's commands.
+"""Layers point down only: physics <- integrators <- engines <- studies <- steplab's commands.
 
 Read from the source with ``ast`` (every import, also those inside functions), so an
 upward import fails here even where no test happens to execute it.
@@ -13,12 +13,14 @@ import pytest
 
 ROOT = Path(__file__).resolve().parent.parent
 #: each layer's folder and installed name, lowest first; the commands (cli, io, paper,
-#: bench, animate, peers) sit above them all
-LAYERS = (("physics", "steplab.physics"), ("integrators", "steplab.integrators"), ("studies", "steplab.studies"))
+#: bench, animate, peers) sit above them all. The engine adapters (steplab/engines) build on
+#: the model and the integrators' trajectories, and the studies measure them
+LAYERS = (("physics", "steplab.physics"), ("integrators", "steplab.integrators"),
+          ("steplab/engines", "steplab.engines"), ("studies", "steplab.studies"))
 
 
 def layer_of(module: str) -> int:
-    """The rank of a ``steplab.*`` module: 0 physics, 1 integrators, 2 studies, 3 the commands."""
+    """The rank of a ``steplab.*`` module: 0 physics, 1 integrators, 2 engines, 3 studies, 4 the commands."""
     for rank, (_, package) in enumerate(LAYERS):
         if module == package or module.startswith(package + "."):
             return rank
@@ -64,4 +66,4 @@ def test_the_check_sees_an_upward_import(tmp_path):
                       "def f():\n    from steplab import paper\n    import steplab.bench as b\n")
     names = [name for _, name in imported_modules(module, "steplab.studies")]
     assert names == ["steplab.io", "steplab.integrators", "steplab.paper", "steplab.bench"]
-    assert [layer_of(n) for n in names] == [3, 1, 3, 3]
+    assert [layer_of(n) for n in names] == [4, 1, 4, 4]

@@ -81,3 +81,39 @@ def test_reference_entry_names_the_methods_it_knows():
     problem = oscillator()
     with pytest.raises(ValueError, match="unknown adaptive method 'diffrax Tsit5'.*diffrax-tsit5"):
         solve_adaptive(problem.model.vector_field, [0.0, 1.0], problem.y0, "diffrax Tsit5", 1e-6, 1e-6)
+
+
+@pytest.mark.parametrize("bodies", [2, 3000])  # the one exact reduction, and the sum-of-squares test first
+def test_divergence_check_is_exact_at_any_size(bodies):
+    import jax.numpy as jnp
+    from steplab.integrators.loop import LARGE_STATE, within_limit
+
+    assert (6 * bodies >= LARGE_STATE) == (bodies == 3000)
+    rng = np.random.default_rng(8)
+    q, v = rng.uniform(-1.0, 1.0, (2, bodies, 3))
+
+    def ok(limit, change=None):
+        x = q.copy()
+        if change is not None:
+            x[bodies - 1, 2] = change
+        return bool(within_limit((jnp.asarray(x), jnp.asarray(v)), limit))
+
+    assert ok(1.0) and ok(10.0, 10.0) and ok(1e200, -1e200)  # 1e200^2 overflows; still within
+    assert ok(1e6) and not ok(1e6, 1e6 * (1 + 1e-9))  # S far below, and near, (limit / 2)^2
+    assert not ok(10.0, np.nextafter(10.0, 11.0))  # a hair beyond the limit
+    assert not ok(10.0, np.nan) and not ok(10.0, np.inf) and not ok(1e200, np.nextafter(1e200, np.inf))
+
+
+def test_first_bad_step_of_a_large_state():
+    # no forces: q_k = k dt v exactly; one of 3,000 bodies passes |q| = 10.5 at step 11
+    import jax.numpy as jnp
+    from steplab.integrators import SemiImplicitEuler
+    from steplab.integrators.loop import compiled_loop
+    from steplab.physics import Model
+
+    n = 3000
+    y0 = np.zeros((2, n, 3))
+    y0[1, 1234, 0] = 1.0
+    run = compiled_loop(Model(np.ones(n), np.ones(n), xp=jnp), SemiImplicitEuler())
+    y, bad = run(jnp.asarray(y0), 0.0, 1.0, 20, 10.5)
+    assert int(bad) == 11 and float(y[0, 1234, 0]) == 20.0

@@ -6,6 +6,7 @@ neither, ``setup`` raises ``NotImplementedError`` and asv records the benchmark 
 
 from __future__ import annotations
 
+import dataclasses
 import time
 
 from steplab.integrators import simulate
@@ -38,37 +39,47 @@ PIT_STEPS = 6
 
 
 class BallPit:
-    """N spheres falling into a walled box (``steplab bench``'s ball pits), swept event loop.
+    """N spheres falling into a walled box (``steplab bench``'s ball pits), by each collision method:
+    the swept event loop and the contact solver (default settings).
 
     The scene is steplab.bench.ball_pit_scene's: r = 0.1 m, eps = 0.8, dt = 1/60 s,
     semi-implicit Euler. ``setup`` builds it and runs a small pit first, so that every
     Numba kernel is compiled before the clock starts.
     """
 
-    params = [1_000, 10_000]
-    param_names = ["balls"]
+    params = ([1_000, 10_000], ["event", "solver"])
+    param_names = ["balls", "method"]
     number = 1  # one run of 10^4 balls takes about a second
     repeat = (1, 5, 30.0)
     timeout = 600
 
-    def setup(self, balls):
+    def setup(self, balls, method):
         try:
             from steplab.bench.ball_pit_scene import ball_pit
         except ImportError:  # an older steplab
             raise NotImplementedError("steplab.bench.ball_pit_scene is not available") from None
         warm = ball_pit(50)
+        self.world = self._world(warm, method)
         self._run(warm, 30)
         self.scene = ball_pit(balls)
+        self.world = self._world(self.scene, method)
 
     @staticmethod
-    def _run(scene, steps):
-        return simulate(scene.model, scene.integrator, scene.y0, scene.t_start, dt=scene.dt, n_steps=steps,
-                        save_every=steps, collisions=scene.collisions)
+    def _world(scene, method):
+        if method == "event":
+            return scene.collisions
+        if "method" not in {f.name for f in dataclasses.fields(scene.collisions)}:  # an older steplab
+            raise NotImplementedError(f"no collision method {method!r} in this steplab")
+        return dataclasses.replace(scene.collisions, method=method)
 
-    def time_steps(self, balls):
+    def _run(self, scene, steps):
+        return simulate(scene.model, scene.integrator, scene.y0, scene.t_start, dt=scene.dt, n_steps=steps,
+                        save_every=steps, collisions=self.world)
+
+    def time_steps(self, balls, method):
         self._run(self.scene, PIT_STEPS)
 
-    def track_real_time_factor(self, balls):
+    def track_real_time_factor(self, balls, method):
         """Simulated seconds per wall second over the first PIT_STEPS steps (1: real time)."""
         start = time.perf_counter()
         self._run(self.scene, PIT_STEPS)

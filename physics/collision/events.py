@@ -84,6 +84,9 @@ class CollisionLog:
     resting_corrections: int = 0
     #: pairs whose collision a prologue cancelled, left alone until they separate
     cancelled_pairs: set = dataclasses.field(default_factory=set)
+    #: the contact solver's largest complementarity residual at the end of a step, m/s
+    #: (None for the event loop, which resolves every impact exactly)
+    largest_residual: float | None = None
 
     def remove(self, body: int) -> None:
         self.removed.add(int(body))
@@ -95,7 +98,8 @@ class CollisionLog:
         return {"impacts": self.count("impact"), "triggers": self.count("trigger"),
                 "cancelled": self.count("cancelled"),
                 "most_impacts_in_a_step": self.most_impacts_in_a_step,
-                "resting_corrections": self.resting_corrections}
+                "resting_corrections": self.resting_corrections,
+                **({} if self.largest_residual is None else {"largest_residual": self.largest_residual})}
 
     def to_csv(self) -> str:
         text = io.StringIO()

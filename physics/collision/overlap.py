@@ -12,7 +12,10 @@ overlap is small and the normal still points the right way.
 Its weakness: a pair that does not overlap at the end of any step is never seen. A
 sphere of radius r crossing a wall of thickness w overlaps it while its centre is within
 a band w + 2r wide, so it is missed when v dt > w + 2r and the band falls between two
-steps (``studies/tunnelling.py`` measures it). In a busy scene it misses somewhat less:
+steps. Seen is not stopped, either: resolved past the wall's middle, the nearest face is
+the far one and the push-out sends the sphere on, which the bisection bracket, v dt / 2^k,
+allows from v dt > 2^(k-1) (w + 2r) (``studies/tunnelling.py`` derives both miss rates and
+measures them). In a busy scene it misses somewhat less:
 resolving one collision splits the step for every body (:mod:`.step`), and the state at the
 split is one more place where overlaps are seen.
 """

@@ -13,6 +13,7 @@ from .impact_cap import default_cap
 from .pairs import DEFAULT_BROADPHASE
 from .response import PairProperties
 from .shapes import DEFAULT_MATERIAL, Shape
+from .solver_settings import METHODS, ContactSolver
 
 #: bisection iterations of overlap testing (the lecture: "usually 5 iterations is pretty close")
 DEFAULT_BISECTION_ITERATIONS = 5
@@ -57,6 +58,13 @@ class CollisionWorld:
         One of :data:`EVENT_LOOPS`: ``"auto"`` (default: ``"incremental"`` where it gives the
         full loop's results to round-off, else ``"full"``), ``"incremental"`` or ``"full"``,
         the reference that re-tests everything after every impact (see :mod:`.step`).
+    method : str
+        One of :data:`.solver_settings.METHODS`: ``"event"`` (default), the lecture's event
+        loop, exact, every impact at its time (:mod:`.step`); ``"solver"``, the engines' way,
+        every contact of the step solved together by sequential impulses (:mod:`.solver_step`).
+        The solver finds its own (speculative) contacts: of the detectors it only heeds "none".
+    solver : ContactSolver
+        The solver's settings (iterations, substeps, position correction).
     """
 
     detector: str = "swept"
@@ -70,6 +78,8 @@ class CollisionWorld:
     prologues: tuple[Callable, ...] = (cancel_triggers,)
     epilogues: tuple[Callable, ...] = ()
     event_loop: str = "auto"
+    method: str = "event"
+    solver: ContactSolver = dataclasses.field(default_factory=ContactSolver)
 
     def __post_init__(self):
         if self.detector not in DETECTOR_NAMES:
@@ -82,6 +92,8 @@ class CollisionWorld:
             raise ValueError(f"max_impacts_per_step must be >= 1, got {self.max_impacts_per_step}")
         if self.event_loop not in EVENT_LOOPS:
             raise ValueError(f"unknown event loop {self.event_loop!r}; valid: {', '.join(EVENT_LOOPS)}")
+        if self.method not in METHODS:
+            raise ValueError(f"unknown collision method {self.method!r}; valid: {', '.join(METHODS)}")
 
     def impact_cap(self, n_bodies: int) -> int:
         """Impacts resolved per step at most, for a scene of ``n_bodies``."""
@@ -116,6 +128,10 @@ class CollisionWorld:
             backend = model.xp.__name__.split(".")[0]
             raise ValueError(f"collision detection runs on the NumPy backend only, not {backend!r} "
                              "(use backend 'numpy', or the detector 'none')")
+        if self.method == "solver":
+            from .solver_step import SolverStep
+
+            return SolverStep(self, model, integrator)
         from .step import CollisionStep
 
         return CollisionStep(self, model, integrator)

@@ -17,6 +17,7 @@ move alike in every engine, it shows that they started from the same state.
 
 from __future__ import annotations
 
+import dataclasses
 import time
 
 import numpy as np
@@ -24,7 +25,7 @@ import numpy as np
 from steplab.studies.timing import interleaved_times
 
 from .ball_pit_scene import ball_pit, box_side
-from .config import REAL_TIME_TARGETS, Config
+from .config import REAL_TIME_TARGETS, SOLVER_ENGINE_TARGETS, SOLVER_REAL_TIME_TARGETS, Config
 from .engines import ENGINES, engine_runs
 from .record import Record, size_label
 
@@ -65,15 +66,20 @@ def _ball_pit(balls: int, steps: int, config: Config, record: Record) -> None:
             f"{steps} steps of dt = 1/{round(1 / dt)} s")
     finals, setup = {}, {}
 
-    def steplab(k: int):
+    solver_world = dataclasses.replace(world, method="solver")  # the contact solver, default settings
+
+    def steplab(k: int, name="steplab", collisions=world):
         traj = simulate(scene.model, scene.integrator, scene.y0, scene.t_start, dt=dt, n_steps=k, save_every=k,
-                        collisions=world)  # keeps the first and the last state only
-        finals["steplab"] = traj
+                        collisions=collisions)  # keeps the first and the last state only
+        finals[name] = traj
         return traj
 
     start = time.perf_counter()
     steplab(1)  # the scene's first step (the kernels are compiled: WARM_UP_PIT)
     setup["steplab"] = time.perf_counter() - start
+    start = time.perf_counter()
+    steplab(1, "steplab_solver", solver_world)
+    setup["steplab_solver"] = time.perf_counter() - start
     if balls <= config.collision_peer_max_balls:
         start = time.perf_counter()
         engines, not_compared = engine_runs(scene)
@@ -84,7 +90,8 @@ def _ball_pit(balls: int, steps: int, config: Config, record: Record) -> None:
         engines = []
         not_compared = {name: f"{name}: not set up above {config.collision_peer_max_balls:,} balls "
                               "(collision_peer_max_balls)" for name in ENGINES}
-    calls = {"steplab": lambda: steplab(steps)}
+    calls = {"steplab": lambda: steplab(steps),
+             "steplab_solver": lambda: steplab(steps, "steplab_solver", solver_world)}
     for engine in engines:
         calls[engine.name] = lambda engine=engine: finals.__setitem__(engine.name, engine.run(steps))
     t = interleaved_times(calls, config.collision_repeats, warm_up=False)
@@ -96,6 +103,18 @@ def _ball_pit(balls: int, steps: int, config: Config, record: Record) -> None:
                               **_speed(t["steplab"], steps, dt),
                               "balls_inside": balls_inside(finals["steplab"].y[-1][0], side),
                               **log.summary()}}
+    solver = finals["steplab_solver"].collisions
+    contenders["steplab_solver"] = {
+        "settings": f"steplab, contact solver, {solver_world.solver.substeps} substeps x "
+                    f"{solver_world.solver.iterations} iterations, {solver_world.solver.correction} correction",
+        **_speed(t["steplab_solver"], steps, dt),
+        "balls_inside": balls_inside(finals["steplab_solver"].y[-1][0], side),
+        "median_distance_to_steplab": float(np.median(np.linalg.norm(
+            finals["steplab_solver"].y[-1][0] - finals["steplab"].y[-1][0], axis=1))), **solver.summary()}
+    record.compare(f"solver_vs_event_loop_{label}", "collisions", what, "steplab's event loop",
+                   t["steplab_solver"], t["steplab"], None,
+                   steplab_real_time_factor=contenders["steplab_solver"]["real_time_factor"],
+                   peer_real_time_factor=contenders["steplab"]["real_time_factor"])
     q = finals["steplab"].y[-1][0]
     for engine in engines:
         # bodies in free flight move alike in every engine (each steps semi-implicit Euler)
@@ -110,15 +129,23 @@ def _ball_pit(balls: int, steps: int, config: Config, record: Record) -> None:
         record.compare(f"vs_{engine.name}_{label}", "collisions", what, engine.settings, t["steplab"],
                        t[engine.name], None, steplab_real_time_factor=contenders["steplab"]["real_time_factor"],
                        peer_real_time_factor=contenders[engine.name]["real_time_factor"])
-    if balls in REAL_TIME_TARGETS:
-        # a target on the wall time per simulated second, so that "met" reads as every
-        # other target's, value <= target: at least x times real time is at most 1/x s
-        factor = REAL_TIME_TARGETS[balls]
-        seconds = t["steplab"].median / simulated
-        record.data["targets"][f"real_time_{label}"] = {
-            "target": 1.0 / factor, "seconds": seconds, "met": seconds <= 1.0 / factor,
-            "real_time_target": factor, "real_time_factor": contenders["steplab"]["real_time_factor"],
-            "what": "wall seconds per simulated second"}
+        name = f"solver_vs_{engine.name}_{label}"
+        record.compare(name, "collisions", what, engine.settings, t["steplab_solver"], t[engine.name], None,
+                       steplab_real_time_factor=contenders["steplab_solver"]["real_time_factor"],
+                       peer_real_time_factor=contenders[engine.name]["real_time_factor"])
+        if (engine.name, balls) in SOLVER_ENGINE_TARGETS:
+            target, ratio = SOLVER_ENGINE_TARGETS[(engine.name, balls)], record.data["ratios"][name]
+            record.data["targets"][name] = {"target": target, "ratio": ratio, "met": ratio <= target}
+    for name, targets, key in (("steplab", REAL_TIME_TARGETS, f"real_time_{label}"),
+                               ("steplab_solver", SOLVER_REAL_TIME_TARGETS, f"solver_real_time_{label}")):
+        if balls in targets:
+            # a target on the wall time per simulated second, so that "met" reads as every
+            # other target's, value <= target: at least x times real time is at most 1/x s
+            factor, seconds = targets[balls], t[name].median / simulated
+            record.data["targets"][key] = {
+                "target": 1.0 / factor, "seconds": seconds, "met": seconds <= 1.0 / factor,
+                "real_time_target": factor, "real_time_factor": contenders[name]["real_time_factor"],
+                "what": f"wall seconds per simulated second, {contenders[name]['settings']}"}
 
 
 def _speed(times, steps: int, dt: float) -> dict:

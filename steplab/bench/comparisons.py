@@ -4,7 +4,8 @@
 2. large systems (10^6 particles, a 10^5-spring cloth) against Numba and the memory bound;
 3. accuracy-matched: time to a final error of 1e-8 m against scipy and diffrax;
 4. broadphase against scipy's cKDTree; 5. compile times; 6. batching with ``jax.vmap``;
-7. collisions: ball pits of 10^3 to 10^5 spheres against MuJoCo and pybullet (:mod:`.collisions`).
+7. collisions: ball pits of 10^3 to 10^5 spheres against MuJoCo and pybullet (:mod:`.collisions`);
+8. implicit Euler's step on the cloth against semi-implicit Euler's (:mod:`.implicit`, issue 16).
 
 Each section takes the :class:`.Config`, the :class:`.Record` and a progress callback.
 """
@@ -21,6 +22,7 @@ from steplab.studies.timing import Times, interleaved_samples, interleaved_times
 
 from .collisions import ball_pits
 from .config import COMPILE_TARGET_SECONDS, SEED, Config
+from .implicit import implicit_euler_cloth
 from .profile import compiled_text, loop_kernels
 from .record import Record, final_difference, size_label
 from .systems import cloth_model, particles_model, step_bytes
@@ -390,4 +392,5 @@ def batching(config: Config, record: Record, progress) -> None:
     progress("batching: done")
 
 
-SECTIONS = (small_system, large_systems, accuracy_matched, broadphase, compile_times, batching, ball_pits)
+SECTIONS = (small_system, large_systems, accuracy_matched, broadphase, compile_times, batching, ball_pits,
+            implicit_euler_cloth)

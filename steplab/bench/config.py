@@ -13,12 +13,23 @@ TARGETS = {
     "vs_diffrax_rk4": 0.5,
     "vs_numba_semi_implicit_euler": 1.5,
     "vs_memory_bound_1e6": 1.5,
+    # issue 16: the cloth's semi-implicit Euler step against the memory-traffic bound and Numba
+    "vs_memory_bound_cloth_1e5_springs": 3.0,
+    "vs_numba_cloth_1e5_springs": 1.0,
     "vs_scipy_at_1e-8": 0.05,
     "vs_ckdtree_1e5": 0.5,
+    # issue 16: one implicit Euler step on the cloth, at its largest useful dt, against a semi-implicit one
+    "implicit_euler_cloth_step": 10.0,
+    "implicit_euler_one_newton_cloth_step": 10.0,
 }
 #: smallest acceptable simulated seconds per wall second of a ball pit, by its balls
 #: (issue 13, "Targets": 10^4 spheres at 0.25x real time, MuJoCo's PGS; 2,000 at 1x)
 REAL_TIME_TARGETS = {2_000: 1.0, 10_000: 0.25}
+#: the contact solver's (issue 14), default settings: balls -> at least this many times real time
+SOLVER_REAL_TIME_TARGETS = {10_000: 1.0, 100_000: 0.1}
+#: largest acceptable ratio solver / engine of wall times on a ball pit, where the engine runs
+#: (issue 14: at least 4x MuJoCo's throughput on 10^4 spheres)
+SOLVER_ENGINE_TARGETS = {("mujoco", 10_000): 0.25}
 #: longest acceptable JIT compilation of a built-in scene, s
 COMPILE_TARGET_SECONDS = 2.0
 #: the ratios ``--json`` always carries (the issue's JSON contract)
@@ -65,11 +76,17 @@ class Config:
     #: the largest pit the engines are set up for: MuJoCo's compiler takes time quadratic
     #: in the free bodies (12 s for 10^4) and its broadphase 2 bytes per pair (20 GB for 10^5)
     collision_peer_max_balls: int = 10_000
+    #: implicit Euler on the cloth (:mod:`.implicit`): search both methods' largest useful dt
+    #: (about 30 s), or time them at dt = 0.2 s / these step counts, the last full run's finding
+    implicit_search: bool = False
+    implicit_steps: int = 28
+    semi_implicit_steps: int = 80
 
 
 FULL = Config(small_steps=100_000, particles=1_000_000, cloth_side=160, broadphase_n=100_000, periods=100,
               max_log2_steps=22, batch=256, batch_steps=2_500, repeats=9, python_repeats=3, python_steps=100_000,
-              collision_runs=((1_000, 60), (2_000, 60), (10_000, 60), (100_000, 6)), collision_repeats=3)
+              collision_runs=((1_000, 60), (2_000, 60), (10_000, 60), (100_000, 6)), collision_repeats=3,
+              implicit_search=True)
 #: the systems the targets are stated for, with fewer rounds, smaller batches, 20 oscillator
 #: periods for the accuracy match and 10^4 steps for the Python loop: under a minute; the
 #: ball pits of 10^3 and 10^4 balls for their first 0.2 and 0.1 s (a per-step cost), the

@@ -1,16 +1,17 @@
 """Game-physics engines as peers of the collision bench: MuJoCo and pybullet, when installed.
 
-Neither is a dependency of steplab: each is imported when the bench asks for it, and
-:func:`engine_runs` names the ones that are missing instead (the record says so). Each
-peer is built once from a ball-pit scene (:mod:`.ball_pit_scene`) with the scene's initial
-state, step and gravity, and gives a call that puts the bodies back at the start and
-takes ``steps`` steps: the timed work is the stepping alone.
+Neither is a dependency of steplab (they are the extra ``pip install -e ".[engines]"``):
+each is imported when the bench asks for it, and :func:`engine_runs` names the ones that
+are missing instead (the record says so). Each peer is an adapter of
+:mod:`steplab.engines` built once from a ball-pit scene (:mod:`.ball_pit_scene`) with the
+scene's initial state, step, gravity and restitution, and gives a call that puts the
+bodies back at the start and takes ``steps`` steps: the timed work is the stepping alone.
 
 - MuJoCo: the issue's settings, the PGS solver, the sparse Jacobian, 10 iterations
   (MuJoCo's default Newton solver did not finish 61 steps of 2,000 spheres in 5 minutes).
-- pybullet: its defaults (sequential impulses, 10 iterations), as the issue measured; its
-  restitution stays at the default 0 (pybullet multiplies the two bodies' coefficients, so
-  no one setting gives the scene's eps = 0.8 for both balls and walls).
+- pybullet: its default solver (sequential impulses) on rigid bodies
+  (:mod:`steplab.engines.bullet_engine`); pybullet multiplies the two bodies'
+  restitutions, so the walls' eps = 0.8 becomes 0.64 between two balls.
 """
 
 from __future__ import annotations
@@ -20,8 +21,6 @@ from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
-
-from .ball_pit_scene import mujoco_model
 
 #: the engines the bench knows, in the order it runs them
 ENGINES = ("mujoco", "pybullet")
@@ -51,51 +50,28 @@ def engine_runs(scene, engines=ENGINES) -> tuple[list[EngineRun], dict[str, str]
 
 def mujoco_run(scene, version: str) -> EngineRun:
     """MuJoCo on the scene's MJCF (:func:`.ball_pit_scene.mujoco_model`): ``run`` returns the centres."""
-    import mujoco
+    from steplab.engines import build_scene
 
-    model = mujoco.MjModel.from_xml_string(mujoco_model(scene))
-    data = mujoco.MjData(model)
-    n = scene.model.n_bodies
-    # a free joint's qpos is the position and a unit quaternion (w, x, y, z); its qvel is
-    # the linear and the angular velocity
-    qpos = np.zeros((n, 7))
-    qpos[:, :3], qpos[:, 3] = scene.y0[0], 1.0
-    qvel = np.zeros((n, 6))
-    qvel[:, :3] = scene.y0[1]
+    engine = build_scene("mujoco", scene, integrator="Euler", solver="PGS", iterations=10, jacobian="sparse")
 
     def run(steps: int) -> np.ndarray:
-        mujoco.mj_resetData(model, data)
-        data.qpos[:], data.qvel[:] = qpos.ravel(), qvel.ravel()
-        mujoco.mj_step(model, data, nstep=steps)
-        return data.qpos.reshape(n, 7)[:, :3].copy()
+        engine.set_state(scene.y0)
+        engine.run(steps)
+        return engine.state()[0]
 
     return EngineRun("mujoco", f"MuJoCo {version}, PGS, sparse Jacobian, 10 iterations", run)
 
 
 def pybullet_run(scene, version: str) -> EngineRun:
-    """pybullet (DIRECT, no GUI) with its default solver: spheres and five static planes."""
-    import pybullet
+    """pybullet (DIRECT, no GUI) with its default solver: rigid spheres and five static planes."""
+    from steplab.engines import build_scene
 
-    client = pybullet.connect(pybullet.DIRECT)
-    p = {"physicsClientId": client}
-    pybullet.setGravity(0.0, 0.0, -9.81, **p)
-    pybullet.setTimeStep(scene.dt, **p)
-    for plane in scene.collisions.shapes:
-        shape = pybullet.createCollisionShape(pybullet.GEOM_PLANE, planeNormal=list(plane.normal), **p)
-        # a plane shape passes through its body's origin: put the origin on the plane
-        pybullet.createMultiBody(0.0, shape, basePosition=list(plane.offset * plane.normal), **p)
-    sphere = pybullet.createCollisionShape(pybullet.GEOM_SPHERE, radius=float(scene.model.radii[0]), **p)
-    positions, velocities = scene.y0[0], scene.y0[1]
-    bodies = pybullet.createMultiBody(float(scene.model.masses[0]), sphere, batchPositions=positions.tolist(), **p)
-    for body, v in zip(bodies, velocities):
-        pybullet.resetBaseVelocity(body, v.tolist(), [0.0, 0.0, 0.0], **p)
-    start = pybullet.saveState(**p)
+    engine = build_scene("bullet", scene)
 
     def run(steps: int) -> np.ndarray:
-        pybullet.restoreState(start, **p)
-        for _ in range(steps):
-            pybullet.stepSimulation(**p)
-        return np.array([pybullet.getBasePositionAndOrientation(b, **p)[0] for b in bodies])
+        engine.set_state(scene.y0)
+        engine.run(steps)
+        return engine.state()[0]
 
     return EngineRun("pybullet", f"pybullet {version}, default solver", run)
 

@@ -26,12 +26,13 @@ def collision_rows(record: dict) -> list[dict]:
     """One row per ball pit and contender: per-step cost, real-time factor, the target on it."""
     out = []
     for label, pit in record.get("collisions", {}).items():
-        target = record["targets"].get(f"real_time_{label}")
+        targets = {"steplab": record["targets"].get(f"real_time_{label}"),
+                   "steplab_solver": record["targets"].get(f"solver_real_time_{label}")}
         for name, c in pit["contenders"].items():
-            mine = name == "steplab"
+            mine = name in targets
             out.append({"pit": label, "balls": pit["balls"], "steps": pit["steps"], "contender": c["settings"],
                         "per_step": c["per_step_seconds"], "real_time_factor": c["real_time_factor"],
-                        "target": target if mine else None, "balls_inside": c["balls_inside"],
+                        "target": targets.get(name), "balls_inside": c["balls_inside"],
                         "impacts": f"{c['impacts']:,}" if mine else ""})
         for note in pit["not_compared"].values():
             out.append({"pit": label, "balls": pit["balls"], "steps": pit["steps"], "contender": note,

@@ -1,0 +1,112 @@
+"""The contact solver's settings: iterations, substeps and the position correction.
+
+The solver (:mod:`.solver_step`) is the engines' way of handling contact: every contact
+of the step is gathered once and all are solved together by sequential impulses
+(projected Gauss-Seidel on the velocities, Catto, "Iterative Dynamics with Temporal
+Coherence", GDC 2005), with the step cut into ``substeps`` (Box2D v3's "soft step";
+Macklin et al., "Small Steps in Physics Simulation", SCA 2019).
+
+Bodies that overlap are pushed apart by one of three position corrections:
+
+- ``"soft"`` (the default): each contact is a stiff, heavily damped spring of natural
+  frequency ``contact_hertz`` and damping ratio ``damping_ratio``, integrated implicitly
+  with the substep h, which gives the velocity bias and the softened mass of Catto's
+  "Soft Constraints" (GDC 2011), as Box2D v3 uses them:
+
+      omega = 2 pi f,  a1 = 2 zeta + h omega,  a2 = h omega a1,
+      bias = (omega / a1) s,  mass scale a2 / (1 + a2),  impulse scale 1 / (1 + a2)
+
+  with s < 0 the penetration. It cannot overshoot however stiff, and its push is capped
+  at ``push_speed``; a relaxation pass without the bias after the positions are moved
+  removes the push velocity again, so a push-out moves bodies without launching them.
+- ``"baumgarte"``: the velocity bias beta / h * (s + slop) of Baumgarte, "Stabilization of
+  constraints and integrals of motion in dynamical systems" (1972), on the rigid
+  constraint; beta = ``baumgarte`` in (0, 1].
+- ``"none"``: no position correction; penetration is only prevented, never undone.
+
+Speculative contacts (Catto, "Speculative Contacts", 2013) keep bodies from tunnelling:
+a pair a gap s > 0 apart may close at most s / h in a substep, so a fast body arrives
+exactly at the surface instead of passing it.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+
+#: position corrections, the default first
+CORRECTIONS = ("soft", "baumgarte", "none")
+#: collision-handling methods of a scene: the lecture's event loop (the exact reference) and the solver
+METHODS = ("event", "solver")
+
+
+@dataclasses.dataclass(frozen=True)
+class ContactSolver:
+    """Settings of the contact solver (``[collisions.solver]`` in a scene file).
+
+    Parameters
+    ----------
+    iterations : int
+        Gauss-Seidel sweeps over the contacts per substep, in the solve and again in the
+        relaxation, and sweeps of the restitution pass at the end of the step (>= 1).
+    substeps : int
+        Substeps per step (>= 1): forces, contacts and positions are integrated with
+        h = dt / substeps; the contacts are found once per step.
+    correction : str
+        One of :data:`CORRECTIONS`.
+    contact_hertz : float
+        Soft correction: natural frequency of the contact spring, Hz (> 0; Box2D's 30).
+    damping_ratio : float
+        Soft correction: its damping ratio (>= 0; Box2D's 10, overdamped: no bounce).
+    baumgarte : float
+        Baumgarte correction: the fraction beta in (0, 1] of the penetration undone per substep.
+    slop : float
+        Penetration left alone, m (>= 0): bodies sunk less than this are not pushed.
+    push_speed : float
+        The fastest a correction pushes bodies apart, m/s (> 0; Box2D's 3).
+    """
+
+    iterations: int = 4
+    substeps: int = 4
+    correction: str = "soft"
+    contact_hertz: float = 30.0
+    damping_ratio: float = 10.0
+    baumgarte: float = 0.2
+    slop: float = 0.0
+    push_speed: float = 3.0
+
+    def __post_init__(self):
+        for name in ("iterations", "substeps"):
+            value = getattr(self, name)
+            if isinstance(value, bool) or not isinstance(value, int) or value < 1:
+                raise ValueError(f"contact solver: {name} must be an integer >= 1, got {value!r}")
+        if self.correction not in CORRECTIONS:
+            raise ValueError(f"contact solver: unknown correction {self.correction!r}; valid: {', '.join(CORRECTIONS)}")
+        checks = (("contact_hertz", self.contact_hertz > 0, "> 0"),
+                  ("damping_ratio", self.damping_ratio >= 0, ">= 0"),
+                  ("baumgarte", 0 < self.baumgarte <= 1, "in (0, 1]"),
+                  ("slop", self.slop >= 0, ">= 0"),
+                  ("push_speed", self.push_speed > 0, "> 0"))
+        for name, ok, allowed in checks:
+            value = getattr(self, name)
+            if not (math.isfinite(value) and ok):
+                raise ValueError(f"contact solver: {name} must be {allowed}, got {value!r}")
+
+    def softness(self, h: float) -> tuple[float, float, float]:
+        """(bias rate 1/s, mass scale, impulse scale) of the correction for a substep of ``h`` s.
+
+        The soft contact is the implicit (backward Euler) step of a spring k = m omega^2 and
+        damper c = 2 m zeta omega acting on the penetration; eliminating the spring force
+        from the velocity update gives a velocity constraint with the bias rate omega / a1
+        and a mass softened by a2 / (1 + a2), and the accumulated impulse leaking at
+        1 / (1 + a2) (Catto 2011). The rigid constraint is (0, 1, 0); Baumgarte's bias
+        rate is beta / h.
+        """
+        if self.correction == "soft":
+            omega = 2.0 * math.pi * self.contact_hertz
+            a1 = 2.0 * self.damping_ratio + h * omega
+            a2 = h * omega * a1
+            return omega / a1, a2 / (1.0 + a2), 1.0 / (1.0 + a2)
+        if self.correction == "baumgarte":
+            return self.baumgarte / h, 1.0, 0.0
+        return 0.0, 1.0, 0.0

@@ -1,0 +1,279 @@
+"""One physics step by the contact solver, read as its stages (``[collisions] method = "solver"``).
+
+    forces -> contacts (broadphase once, narrow phase) -> warm start -> substeps
+           (velocities, solve, positions, relax) -> restitution -> events
+
+This is how engines (Box2D, Bullet, PhysX, MuJoCo) handle contact, and it is not the
+lecture's: instead of splitting the step at each impact and resolving impacts one after
+another at their times (:mod:`.step`, the event loop, exact, the default), every contact
+of the step is gathered once and all are solved together, iteratively, by sequential
+impulses (:mod:`.sequential_impulses`), with the settings of :mod:`.solver_settings`. The
+motion between contacts is semi-implicit Euler with the substep h = dt / substeps: the
+scene's integrator must be semi-implicit Euler.
+
+What it trades: the work per step is a fixed number of sweeps over the contacts, however
+many impacts there are, and resting contact (piles, stacks) is solved as a whole instead
+of as an endless series of tiny impacts. The price is accuracy: an impact is resolved
+at the end of the step it happens in (not at its time), restitution acts on the approach
+speed at the start of that step, and a chain of simultaneous contacts (Newton's cradle)
+passes its impulse along only as far as the iterations reach. ``steplab study contacts``
+measures each of these against the event loop.
+
+Warm starting: each contact starts from its impulse of the last substep, and a contact
+found again in the next step (the same pair) from its impulse at the end of this one, so
+a pile at rest is solved in one sweep. Collision events: a contact that receives an
+impulse in a step, having received none in the step before, is an impact; each one goes
+through the world's prologues (one saying no cancels it: the step is solved again without
+that pair, which is then left alone until the pair is no longer a contact, so a trigger
+reports once) and after the solve, with its impulse, through the epilogues, into the log.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+
+from .contact_buffer import Contacts, Materials, find_contacts
+from .events import Collision, CollisionLog, cancel_triggers
+from .sequential_impulses import finish, step_members, step_members_parallel, substep
+from .step import RESTING_STEPS
+
+#: the semi-implicit Euler the solver's substeps are
+INTEGRATOR = "semi-implicit-euler"
+
+
+@dataclasses.dataclass
+class SolverStep:
+    """The contact solver's physics step of one run: ``step(t, y, dt, carry) -> (y, carry)``.
+
+    Attributes
+    ----------
+    world : CollisionWorld
+        With ``method = "solver"``; ``world.solver`` holds the settings.
+    model : physics.Model
+    integrator : Stepper
+        Semi-implicit Euler (what the substeps are).
+    log : CollisionLog
+        Every impact of the run; ``log.largest_residual`` is the largest complementarity
+        residual (m/s) left by the solver at the end of a step.
+    """
+
+    world: object
+    model: object
+    integrator: object
+    log: CollisionLog = dataclasses.field(default_factory=CollisionLog)
+
+    def __post_init__(self):
+        if getattr(self.integrator, "name", None) != INTEGRATOR:
+            raise ValueError(f"the contact solver integrates with {INTEGRATOR} (velocities, contacts, then "
+                             f"positions, per substep), not '{self.integrator.name}'; use integrator "
+                             f"'{INTEGRATOR}', or the collision method 'event'")
+        self.settings = self.world.solver
+        self.radii = np.asarray(self.model.radii, dtype=float)
+        self.inverse_masses = np.ascontiguousarray(self.model.inverse_masses, dtype=float)
+        field = self.model.constant_acceleration  # (N, 3) when every force is constant, else None
+        self.field = None if field is None else np.ascontiguousarray(field, dtype=float)
+        self.materials = Materials.of(self.world, len(self.radii))
+        self.log.largest_residual = 0.0
+        # the built-in prologue says no to triggers only: asked here without a call per impact
+        self._prologues = tuple(p for p in self.world.prologues if p is not cancel_triggers)
+        self._triggers_cancel = len(self._prologues) < len(self.world.prologues)
+        self._previous = _NO_CONTACTS  # last step's contacts: keys (sorted), impulses, whether hit
+        self._cancelled = set()  # keys of pairs a prologue cancelled, until they are no longer contacts
+
+    def __call__(self, t, y, dt, carry):
+        """Advance ``y`` (2, N, 3) from ``t`` by ``dt``; returns ``(y, carry)``."""
+        start = self.prepare(t, y, dt)
+        return self.conclude(start, *self.solve(start)), carry
+
+    # --- stages --------------------------------------------------------------------------
+
+    def prepare(self, t, y, dt) -> StepStart:
+        """Forces, contacts and warm start: everything the kernel needs for the step from ``t``."""
+        q0, v0 = np.ascontiguousarray(y[0], dtype=float), np.ascontiguousarray(y[1], dtype=float)
+        a = self.field if self.field is not None else np.asarray(self.model.acceleration(t, q0, v0), dtype=float)
+        contacts = find_contacts(self.world, self.materials, q0, v0, a, self.radii, self.inverse_masses, dt,
+                                 self.log.removed)
+        if self._cancelled:
+            self._cancelled &= set(contacts.key.tolist())  # pairs no longer in contact are free again
+            contacts = contacts.subset(~np.isin(contacts.key, list(self._cancelled)))
+        return self._start(t, dt, q0, v0, a, contacts)
+
+    def _start(self, t, dt, q0, v0, a, contacts) -> StepStart:
+        s = self.settings
+        h = dt / s.substeps
+        threshold = self.world.rest_speed + RESTING_STEPS * np.maximum(contacts.pressing, 0.0) * dt
+        return StepStart(t, dt, h, q0, v0, a, contacts, threshold, s.softness(h), *self._warm_start(contacts))
+
+    def solve(self, start: StepStart):
+        """The substeps and the restitution pass; returns (q, v, solved contacts)."""
+        s, c = self.settings, start.contacts
+        bias_rate, mass_scale, impulse_scale = start.softness
+        n, m, h = len(self.radii), len(c), start.h
+        if self.field is not None:  # constant forces: the whole step in one compiled call
+            [result] = solve_members([start], [s], np.array([0, n]), self.inverse_masses, start.a)
+            return result
+        q, v = start.q.copy(), start.v.copy()
+        pn, pt, total = start.pn.copy(), start.pt.copy(), np.zeros(m)
+        dq, most = np.zeros_like(q), np.zeros(m)  # forces of the state: evaluated in every substep
+        for k in range(s.substeps):
+            a_k = start.a if k == 0 else np.asarray(self.model.acceleration(start.t + k * h, q, v), dtype=float)
+            substep(q, v, dq, self.inverse_masses, np.ascontiguousarray(a_k), c.i, c.j, c.normal, c.separation,
+                    c.mass, c.friction, pn, pt, total, most, 0, n, 0, m, h, s.iterations, bias_rate, mass_scale,
+                    impulse_scale, s.push_speed, s.slop)
+        residual = finish(v, dq, self.inverse_masses, c.i, c.j, c.normal, c.separation, c.normal_speed, c.mass,
+                          c.restitution, start.threshold, pn, total, most, 0, m, h, s.iterations)
+        return q, v, Solved(c, pn, pt, total, residual)
+
+    def conclude(self, start: StepStart, q, v, solved) -> np.ndarray:
+        """Events through the prologues (solving again without what they cancel), the epilogues,
+        the log, and what the next step warm-starts from; returns the new state (2, N, 3)."""
+        asked, said_no = set(), []  # keys the prologues have seen this step, and the events they cancelled
+        while True:
+            events, cancelled = self._events(start.t, start.dt, start.contacts, solved, asked)
+            said_no += [e for e in events if e.kind != "impact"]
+            if not cancelled:
+                break
+            self._cancelled |= cancelled
+            keep = ~np.isin(start.contacts.key, list(cancelled))
+            start = self._start(start.t, start.dt, start.q, start.v, start.a, start.contacts.subset(keep))
+            q, v, solved = self.solve(start)
+        events = said_no + [e for e in events if e.kind == "impact"]
+        for event in events:
+            self.log.events.append(event)
+            if event.kind == "impact":
+                for epilogue in self.world.epilogues:
+                    epilogue(event, self.log)
+        self.log.most_impacts_in_a_step = max(self.log.most_impacts_in_a_step,
+                                              sum(e.kind == "impact" for e in events))
+        self.log.largest_residual = max(self.log.largest_residual, solved.residual)
+        self._previous = solved
+        if not (np.all(np.isfinite(q)) and np.all(np.isfinite(v))):
+            raise FloatingPointError(f"the contact solver's state became non-finite in the step from "
+                                     f"t = {start.t:g} s (largest residual {self.log.largest_residual:.3g} m/s)")
+        return np.stack([q, v])
+
+    def _warm_start(self, contacts: Contacts):
+        """Each contact's impulses from the last step where the pair was a contact too (else 0)."""
+        pn, pt = np.zeros(len(contacts)), np.zeros((len(contacts), 3))
+        old = self._previous
+        if len(old.contacts) and len(contacts):
+            at = np.minimum(np.searchsorted(old.contacts.key, contacts.key), len(old.contacts) - 1)
+            found = old.contacts.key[at] == contacts.key
+            pn[found] = old.pn[at[found]]
+            # the tangential impulse, kept in the new contact plane
+            n = contacts.normal[found]
+            p = old.pt[at[found]]
+            pt[found] = p - np.sum(p * n, axis=1)[:, None] * n
+        return pn, pt
+
+    def _events(self, t, dt, contacts: Contacts, solved, asked: set):
+        """Impacts of the step (contacts hit now and not in the last step), through the prologues.
+
+        Returns (events, keys cancelled now); each pair meets the prologues once per step.
+        """
+        hit = solved.total > 0
+        old = self._previous
+        if len(old.contacts):
+            at = np.minimum(np.searchsorted(old.contacts.key, contacts.key), len(old.contacts) - 1)
+            hit &= ~((old.contacts.key[at] == contacts.key) & (old.total[at] > 0))
+        events, cancelled = [], set()
+        names, shapes = self.model.names, self.world.shapes
+        k = np.flatnonzero(hit)
+        c = contacts.subset(k)
+        approach = -c.normal_speed
+        # the time of touching, had the approach speed stayed what it was; in the bracket (t, t + dt)
+        t_touch = t + np.where(approach > 0, np.minimum(np.maximum(c.separation, 0.0) / np.where(
+            approach > 0, approach, 1.0), dt), 0.0)
+        bracket = (float(t), float(t + dt))
+        for body, j, shape_index, key, normal, t_k, speed, e, mu, impulse in zip(
+                c.i.tolist(), c.j.tolist(), c.shape.tolist(), c.key.tolist(), c.normal, t_touch.tolist(),
+                approach.tolist(), c.restitution.tolist(), c.friction.tolist(), solved.total[k].tolist()):
+            shape = shapes[shape_index] if j < 0 else None
+            event = Collision(t=t_k, body=body, other=shape.name if shape else j, body_name=names[body],
+                              other_name=shape.name if shape else names[j], normal=normal, impact_speed=speed,
+                              restitution=e, friction=mu, bracket=bracket, impulse=impulse,
+                              trigger=shape is not None and shape.trigger)
+            if key not in asked:
+                asked.add(key)
+                if ((event.trigger and self._triggers_cancel)
+                        or not all(prologue(event, self.log) for prologue in self._prologues)):
+                    event.kind, event.impulse = ("trigger" if event.trigger else "cancelled"), 0.0
+                    cancelled.add(key)
+            events.append(event)
+        return events, cancelled
+
+
+def solve_members(starts, settings, bodies, inverse_mass, accel, parallel=False):
+    """The substeps and restitution passes of members under constant forces, in one kernel call.
+
+    ``starts`` (their :class:`StepStart`) and ``settings`` per member; ``bodies`` the offsets of
+    their bodies in ``inverse_mass`` and ``accel``, all members' joined. ``parallel``: spread
+    the members over the cores (a batch; one member runs faster serially). Returns, per
+    member, (q, v, solved).
+    """
+    counts = np.array([len(start.contacts) for start in starts])
+    contacts = np.concatenate([[0], np.cumsum(counts)])
+    shift = [bodies[m] for m in range(len(starts))]
+
+    def joined(name):
+        return np.concatenate([getattr(start.contacts, name) for start in starts])
+
+    ci = np.concatenate([start.contacts.i + shift[m] for m, start in enumerate(starts)])
+    cj = np.concatenate([np.where(start.contacts.j >= 0, start.contacts.j + shift[m], -1)
+                         for m, start in enumerate(starts)])
+    normal = np.concatenate([start.contacts.normal for start in starts]).reshape(-1, 3)
+    q = np.concatenate([start.q for start in starts])
+    v = np.concatenate([start.v for start in starts])
+    pn = np.concatenate([start.pn for start in starts])
+    pt = np.concatenate([start.pt for start in starts]).reshape(-1, 3)
+    total = np.zeros(len(pn))
+    residual = np.zeros(len(starts))
+    soft = np.array([start.softness for start in starts])
+    (step_members_parallel if parallel else step_members)(
+        q, v, inverse_mass, accel, ci, cj, normal, joined("separation"), joined("normal_speed"), joined("mass"),
+        joined("friction"), joined("restitution"), np.concatenate([start.threshold for start in starts]),
+        pn, pt, total, bodies, contacts, np.array([start.dt for start in starts]),
+        np.array([s.substeps for s in settings]), np.array([s.iterations for s in settings]),
+        np.ascontiguousarray(soft[:, 0]), np.ascontiguousarray(soft[:, 1]), np.ascontiguousarray(soft[:, 2]),
+        np.array([s.push_speed for s in settings]), np.array([s.slop for s in settings]), residual)
+    results = []
+    for m, start in enumerate(starts):
+        b, c = slice(bodies[m], bodies[m + 1]), slice(contacts[m], contacts[m + 1])
+        results.append((q[b].copy(), v[b].copy(),
+                        Solved(start.contacts, pn[c].copy(), pt[c].copy(), total[c].copy(), float(residual[m]))))
+    return results
+
+
+@dataclasses.dataclass(frozen=True)
+class StepStart:
+    """What a step starts from: the state, the accelerations, the contacts and their warm start."""
+
+    t: float
+    dt: float
+    h: float  # the substep, s
+    q: np.ndarray
+    v: np.ndarray
+    a: np.ndarray
+    contacts: Contacts
+    threshold: np.ndarray  # approach speeds at or below this do not bounce, m/s
+    softness: tuple  # (bias rate, mass scale, impulse scale) of the correction
+    pn: np.ndarray
+    pt: np.ndarray
+
+
+@dataclasses.dataclass(frozen=True)
+class Solved:
+    """A step's contacts with their impulses: the last substep's (pn, pt), the step's total, the residual."""
+
+    contacts: Contacts
+    pn: np.ndarray
+    pt: np.ndarray
+    total: np.ndarray
+    residual: float = 0.0
+
+
+_EMPTY = np.zeros(0)
+_NO_CONTACTS = Solved(Contacts(*(np.zeros(0, np.int64),) * 4, np.zeros((0, 3)), *(_EMPTY,) * 6),
+                       _EMPTY, np.zeros((0, 3)), _EMPTY)

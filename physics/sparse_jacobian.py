@@ -1,0 +1,289 @@
+"""Sparse force Jacobians: one 3x3 block per pair force or per body, assembled block-sparse.
+
+A spring, a damper or drag couples only the bodies it acts on, so the Jacobians dF/dq
+and dF/dv of N bodies under P pair forces have at most N + 2P nonzero 3x3 blocks, not
+(3N)^2 entries. For the bench's cloth (25,600 particles, 101,442 springs and dampers on
+the same pairs) that is 228,484 blocks, 16 MB; the dense (3N)^2 matrix of
+:meth:`Model.jacobian` would take 47 GB.
+
+Each force with a Jacobian describes it by blocks (:meth:`Force.jacobian_blocks`):
+
+- a pair force acts on body i as f(x_j - x_i) and on body j as -f (Newton's third law),
+  so one block per pair, B = d f_i / d x_j, fixes all four of its blocks: (i, j) and
+  (j, i) are +B, (i, i) and (j, j) are -B (:class:`PairJacobian`). The assembled matrix
+  is symmetric when every B is;
+- a per-body force (drag, central gravity) has one block per body, on the diagonal
+  (:class:`BodyJacobian`).
+
+:class:`BlockPattern` knows where each block goes in a block-sparse-row (BSR) matrix
+(built once per model and cached: the pairs never change) and adds them up;
+:func:`sparse_jacobian` assembles the exact da/dq, da/dv (what :meth:`Model.jacobian`
+gives densely); :func:`newton_matrix` assembles implicit Euler's mass-weighted Newton
+matrix M - h D - h^2 K over the bodies that are not pinned
+(:mod:`steplab.integrators.implicit_euler`), the springs' and dampers' blocks through
+compiled kernels (:mod:`.sparse_kernels`). NumPy, Numba and scipy.sparse; no JAX path.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import weakref
+
+import numpy as np
+from numba import njit
+
+
+@dataclasses.dataclass(frozen=True)
+class PairJacobian:
+    """The Jacobian of a pair force, one 3x3 block per pair.
+
+    Parameters
+    ----------
+    i, j : int ndarray, shape (P,)
+        The two bodies of each pair.
+    dq, dv : ndarray, shape (P, 3, 3), or None
+        ``d f_i / d q_j`` and ``d f_i / d v_j``; None where identically zero.
+    """
+
+    i: np.ndarray
+    j: np.ndarray
+    dq: np.ndarray | None
+    dv: np.ndarray | None
+
+
+@dataclasses.dataclass(frozen=True)
+class BodyJacobian:
+    """The Jacobian of a per-body force (F_i depends on q_i, v_i only): one 3x3 block per body.
+
+    Parameters
+    ----------
+    dq, dv : ndarray, shape (N, 3, 3), or None
+        ``d F_i / d q_i`` and ``d F_i / d v_i``; None where identically zero.
+    """
+
+    dq: np.ndarray | None
+    dv: np.ndarray | None
+
+
+def symmetric_part(blocks):
+    """The symmetric part (J + J^T) / 2 of a force's Jacobian, as blocks: (B + B^T) / 2 each.
+
+    The closest symmetric matrix to J; a pair force's (i, j) and (j, i) blocks are both B,
+    so J^T has B^T at both and the symmetric part is the pair force of (B + B^T) / 2.
+    """
+    def half(block):
+        return None if block is None else 0.5 * (block + block.transpose(0, 2, 1))
+
+    return dataclasses.replace(blocks, dq=half(blocks.dq), dv=half(blocks.dv))
+
+
+@njit(cache=True)
+def _add_pair_blocks(data, slots, block, coefficient):  # pragma: no cover - compiled
+    # The four blocks of each pair, sequentially (a deterministic sum): +B at (i, j) and
+    # (j, i), -B at (i, i) and (j, j); a slot of -1 is a block outside the matrix.
+    for p in range(block.shape[0]):
+        for k in range(4):
+            slot = slots[p, k]
+            if slot < 0:
+                continue
+            sign = coefficient if k < 2 else -coefficient
+            for r in range(3):
+                for c in range(3):
+                    data[slot, r, c] += sign * block[p, r, c]
+
+
+class BlockPattern:
+    """Where the blocks of a model's forces go in a BSR matrix over some of its bodies.
+
+    The block rows and columns are the kept bodies (all of them, or those not pinned), in
+    order; there is a block on the diagonal for each, and one on either side of it for
+    every pair of two different kept bodies that some pair force connects (a pair listed
+    by several forces, the springs and the dampers of a cloth, shares its blocks). A pair
+    with one body dropped adds to the diagonal block of the other only; a pair of a body
+    with itself adds nothing (its four blocks cancel).
+
+    Parameters
+    ----------
+    n_bodies : int
+    keep : bool ndarray, shape (N,)
+    pairs : sequence of (i, j) int ndarrays
+        Each pair force's bodies, in the order of its blocks.
+    """
+
+    def __init__(self, n_bodies: int, keep, pairs):
+        keep = np.asarray(keep, bool)
+        size = self.size = int(keep.sum())
+        self.index = np.full(n_bodies, -1, np.int64)
+        self.index[keep] = np.arange(size)
+        self.kept = np.flatnonzero(keep)
+        ends = [(self.index[np.asarray(i)], self.index[np.asarray(j)]) for i, j in pairs]
+        keys = [np.minimum(a, b) * size + np.maximum(a, b) for a, b in ends]
+        both = [(a >= 0) & (b >= 0) & (a != b) for a, b in ends]
+        unique = np.unique(np.concatenate([k[w] for k, w in zip(keys, both)] + [np.zeros(0, np.int64)]))
+        self.n_pairs = unique.size
+        lo, hi = unique // max(size, 1), unique % max(size, 1)
+        diagonal = np.arange(size)
+        rows = np.concatenate([diagonal, lo, hi])
+        cols = np.concatenate([diagonal, hi, lo])
+        order = np.lexsort((cols, rows))  # BSR: block rows in order, columns sorted within each
+        slot = np.empty_like(order)
+        slot[order] = np.arange(order.size)
+        self.indices, self.block_rows = cols[order], rows[order]
+        self.indptr = np.searchsorted(self.block_rows, np.arange(size + 1))
+        self.diagonal_slots = slot[:size]
+        upper, lower = slot[size:size + unique.size], slot[size + unique.size:]
+        # per pair force, the slots of each pair's (i, j), (j, i), (i, i), (j, j) blocks
+        self._slots = []
+        for (a, b), key, w in zip(ends, keys, both):
+            u = np.searchsorted(unique, key[w])
+            above = a[w] < b[w]  # the (i, j) block is above the diagonal
+            slots = np.full((a.size, 4), -1, np.int64)
+            slots[w, 0] = np.where(above, upper[u], lower[u])
+            slots[w, 1] = np.where(above, lower[u], upper[u])
+            distinct = a != b
+            slots[:, 2] = np.where((a >= 0) & distinct, self.diagonal_slots[np.maximum(a, 0)], -1)
+            slots[:, 3] = np.where((b >= 0) & distinct, self.diagonal_slots[np.maximum(b, 0)], -1)
+            self._slots.append(slots)
+
+    @property
+    def n_blocks(self) -> int:
+        return self.size + 2 * self.n_pairs
+
+    def assemble(self, blocks, coefficient_q: float, coefficient_v: float):
+        """``coefficient_q dF/dq + coefficient_v dF/dv`` of ``blocks``, a (3 size, 3 size) scipy BSR array.
+
+        ``blocks`` are those the pattern was built from (its pair forces' in the same
+        order); the per-body ones of dropped bodies are ignored.
+        """
+        from scipy.sparse import bsr_array
+
+        data = np.zeros((self.n_blocks, 3, 3))
+        pair = iter(self._slots)
+        for b in blocks:
+            if isinstance(b, _CompiledPairs):
+                b.add(data, next(pair), coefficient_q, coefficient_v)
+            elif isinstance(b, PairJacobian):
+                slots = next(pair)
+                for block, coefficient in ((b.dq, coefficient_q), (b.dv, coefficient_v)):
+                    if block is not None and coefficient != 0:
+                        _add_pair_blocks(data, slots, np.ascontiguousarray(block, dtype=np.float64), coefficient)
+            else:
+                for block, coefficient in ((b.dq, coefficient_q), (b.dv, coefficient_v)):
+                    if block is not None and coefficient != 0:
+                        data[self.diagonal_slots] += coefficient * np.asarray(block)[self.kept]
+        shape = (3 * self.size, 3 * self.size)
+        return bsr_array((data, self.indices, self.indptr), shape=shape, copy=False)
+
+
+#: each model's patterns, built on first use (the pairs never change): {model: {key: BlockPattern}}
+_PATTERNS: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()
+
+
+@dataclasses.dataclass(frozen=True)
+class _CompiledPairs:
+    """A spring or damper force whose symmetric (or definite) blocks a compiled kernel adds (:mod:`.sparse_kernels`)."""
+
+    force: object
+    q: np.ndarray
+    v: np.ndarray
+    definite: bool
+
+    @property
+    def i(self):
+        return self.force.i
+
+    @property
+    def j(self):
+        return self.force.j
+
+    def add(self, data, slots, coefficient_q, coefficient_v):
+        from .sparse_kernels import add_symmetric_blocks
+
+        add_symmetric_blocks(self.force, data, slots, self.q, self.v, coefficient_q, coefficient_v, self.definite)
+
+
+def block_pattern(model, blocks, free_only: bool) -> BlockPattern:
+    """The (cached) pattern of ``blocks``' pair forces over all of ``model``'s bodies or the free ones."""
+    pairs = tuple((b.i, b.j) for b in blocks if isinstance(b, PairJacobian | _CompiledPairs))
+    cache = _PATTERNS.setdefault(model, {})
+    key = (free_only, tuple((id(i), id(j)) for i, j in pairs))
+    if key not in cache:
+        keep = ~np.asarray(model.pinned) if free_only else np.ones(model.n_bodies, bool)
+        cache[key] = BlockPattern(model.n_bodies, keep, pairs)
+    return cache[key]
+
+
+def is_complete(model) -> bool:
+    """Whether the blocks are ``model``'s whole Jacobian: every force that depends on the
+    state provides them (:meth:`Force.jacobian_blocks`), and none is reactive."""
+    from .force import Force
+
+    return all(f.constant or (not f.reactive and type(f).jacobian_blocks is not Force.jacobian_blocks)
+               for f in model.forces)
+
+
+def _require_numpy(model, what: str) -> None:
+    if model.xp is not np:
+        raise ValueError(f"{what} is assembled with scipy.sparse on the NumPy backend; this model is on "
+                         f"{model.xp.__name__} (use model.cast(numpy))")
+
+
+def sparse_jacobian(model, t, q, v):
+    """``(da/dq, da/dv)`` of ``model`` at (q, v), each a (3N, 3N) :class:`scipy.sparse.bsr_array`.
+
+    The sparse counterpart of :meth:`Model.jacobian` (equal to it to round-off): the
+    forces' exact blocks, each row divided by its body's mass (zero for a pinned body).
+    Forces without :meth:`Force.jacobian_blocks` and reactive forces are left out, as
+    the dense Jacobian leaves out the reactive ones.
+    """
+    _require_numpy(model, "the sparse Jacobian")
+    blocks = model.jacobian_blocks(t, q, v)
+    pattern = block_pattern(model, blocks, free_only=False)
+    row_scale = np.asarray(model.inverse_masses, dtype=float)[pattern.block_rows][:, None, None]
+    out = []
+    for a, b in ((1.0, 0.0), (0.0, 1.0)):
+        matrix = pattern.assemble(blocks, a, b)
+        matrix.data *= row_scale
+        out.append(matrix)
+    return tuple(out)
+
+
+def newton_matrix(model, t, q, v, h: float, definite: bool = False, compiled: bool = True):
+    """Implicit Euler's Newton matrix A = M - h D - h^2 K over the free bodies, mass-weighted.
+
+    K = dF/dq and D = dF/dv are the symmetric part of the forces' Jacobians, (J + J^T) / 2
+    block by block (:func:`symmetric_part`), so that A is symmetric; it is also positive
+    definite, what conjugate gradients need, unless the indefinite terms (a compressed
+    spring's negative stiffness, a damper's dependence on positions) outweigh the
+    masses, h^2 k (L / l - 1) ~ m. With ``definite``, K and D are the forces' definite
+    parts instead (:meth:`Force.jacobian_blocks`), and A is positive definite at any h.
+    The rows and columns of pinned bodies are left out (their velocity never changes).
+    Springs and dampers add their blocks through compiled kernels (:mod:`.sparse_kernels`,
+    the same numbers as their ``jacobian_blocks``; ``compiled=False``: through those).
+
+    Returns
+    -------
+    A : scipy.sparse.bsr_array, shape (3 F, 3 F)
+        F free bodies, in order.
+    pattern : BlockPattern
+        Its ``kept`` bodies and ``diagonal_slots`` (the 3x3 diagonal blocks, for a preconditioner).
+    """
+    _require_numpy(model, "implicit Euler's sparse Newton matrix")
+    from .sparse_kernels import has_kernel
+
+    q, v = np.asarray(q, dtype=float), np.asarray(v, dtype=float)
+    blocks = []
+    for force in model.forces:
+        if force.reactive:
+            continue
+        if compiled and has_kernel(force):
+            blocks.append(_CompiledPairs(force, q, v, definite))
+            continue
+        b = force.jacobian_blocks(np, q, v, model.masses, definite)
+        if b is not None:
+            blocks.append(b if definite else symmetric_part(b))
+    pattern = block_pattern(model, blocks, free_only=True)
+    matrix = pattern.assemble(blocks, -h * h, -h)  # -(h^2 K + h D) ...
+    masses = np.asarray(model.masses, dtype=float)[pattern.kept]
+    matrix.data[pattern.diagonal_slots] += masses[:, None, None] * np.eye(3)  # ... + M
+    return matrix, pattern

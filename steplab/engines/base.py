@@ -1,0 +1,264 @@
+"""What every engine adapter shares: the scene it is built from, its errors and its run loop.
+
+An adapter turns a steplab scene (a :class:`steplab.physics.Model`, optionally a
+:class:`steplab.physics.collision.CollisionWorld`) into the engine's own bodies, forces and
+shapes, and is then a *system under test*: ``advance(y0, dt, n_steps)`` puts the bodies at
+``y0`` (positions and velocities, shape (2, N, 3)), takes ``n_steps`` engine steps of
+``dt`` and returns a steplab :class:`~steplab.integrators.Trajectory`, with a collision log
+of the contacts the engine reports. The studies measure it by the same code as steplab's
+own integrators (:mod:`steplab.studies.system`).
+
+What a scene holds that an engine cannot express raises :class:`UnsupportedFeatureError`,
+one line naming the feature and the engine, before anything is built.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import importlib.metadata
+import time
+
+import numpy as np
+
+from steplab.integrators.simulate import DivergenceError, Trajectory, divergence_limit, saved_steps
+from steplab.physics import Dampers, Gravity, Springs
+from steplab.physics.collision import Box, Collision, CollisionLog, OrientedBox, Plane
+
+#: approach speed recorded for a contact that began in a step, when the engine does not say
+UNKNOWN = float("nan")
+
+
+class UnsupportedFeatureError(ValueError):
+    """A scene feature an engine has no counterpart for (one line: the feature and the engine)."""
+
+
+class EngineNotInstalledError(ImportError):
+    """The engine's Python package is not installed (the line says how to install it)."""
+
+
+def require(package: str, engine: str):
+    """Import ``package`` for ``engine``, or EngineNotInstalledError saying how to install it."""
+    import importlib
+
+    try:
+        return importlib.import_module(package)
+    except ImportError:
+        raise EngineNotInstalledError(
+            f"{engine} needs the Python package {package!r}, which is not installed "
+            '(pip install -e ".[engines]")') from None
+
+
+def version(distribution: str) -> str | None:
+    try:
+        return importlib.metadata.version(distribution)
+    except importlib.metadata.PackageNotFoundError:
+        return None
+
+
+@dataclasses.dataclass(frozen=True)
+class SceneParts:
+    """A scene as an adapter reads it: bodies, the forces split by kind, static shapes.
+
+    ``springs`` and ``dampers`` are lists of (i, j, stiffness, rest_length, damping):
+    a spring and a damper on the same pair are one element (an engine's spring-damper).
+    """
+
+    masses: np.ndarray
+    radii: np.ndarray
+    pinned: np.ndarray
+    names: tuple[str, ...]
+    gravity: np.ndarray
+    links: list[tuple[int, int, float, float | None, float]]
+    collisions: object  # a CollisionWorld with a detector other than "none", or None
+
+    @property
+    def n(self) -> int:
+        return len(self.masses)
+
+    @property
+    def shapes(self):
+        return () if self.collisions is None else self.collisions.shapes
+
+    def restitution(self, body: int, other) -> float:
+        return self.collisions.properties(body, other)[0]
+
+    def friction(self, body: int, other) -> float:
+        return self.collisions.properties(body, other)[1]
+
+    def against_shapes(self, body: int) -> tuple[float, float]:
+        """(restitution, friction) of ``body`` against the static shapes (the first one's), or
+        against another body where there are no shapes."""
+        if self.collisions is None:
+            return 0.0, 0.0
+        other = self.shapes[0] if self.shapes else body
+        return self.collisions.properties(body, other)
+
+
+def scene_parts(model, collisions, engine: str, forces=(Gravity, Springs, Dampers),
+                shapes=(Plane, Box, OrientedBox)) -> SceneParts:
+    """Read ``model`` and ``collisions`` for ``engine``: UnsupportedFeatureError for a force
+    class outside ``forces``, a shape outside ``shapes``, a trigger shape."""
+    gravity = np.zeros(3)
+    links: dict[tuple[int, int], list] = {}
+    for force in model._source_forces:
+        if not isinstance(force, forces):
+            raise UnsupportedFeatureError(f"the {force.name} force has no counterpart in {engine} "
+                                          f"(it expresses: {', '.join(f.name for f in forces)})")
+        if isinstance(force, Gravity):
+            gravity = gravity + np.asarray(force.g, dtype=float)
+        elif isinstance(force, Springs):
+            for i, j, k, rest in zip(force.i, force.j, force.stiffness, force.rest_length):
+                entry = links.setdefault((int(i), int(j)), [0.0, None, 0.0])
+                if entry[1] is not None:
+                    raise UnsupportedFeatureError(f"two springs on one pair of bodies ({model.names[i]}, "
+                                                  f"{model.names[j]}): {engine} gets one spring-damper per pair")
+                entry[0], entry[1] = float(k), float(rest)
+        else:
+            for i, j, c in zip(force.i, force.j, force.damping):
+                links.setdefault((int(i), int(j)), [0.0, None, 0.0])[2] += float(c)
+    if collisions is not None and collisions.detector == "none":
+        collisions = None
+    if collisions is not None:
+        for shape in collisions.shapes:
+            if shape.trigger:
+                raise UnsupportedFeatureError(f"trigger shape {shape.name!r}: the {engine} adapter has no "
+                                              "trigger volumes")
+            if not isinstance(shape, shapes):
+                raise UnsupportedFeatureError(f"shape {shape.name!r} ({shape.kind}) has no counterpart in {engine}")
+    pinned = np.asarray(model.pinned, bool)
+    return SceneParts(np.asarray(model.masses, float), np.asarray(model.radii, float), pinned,
+                      tuple(model.names), gravity, [(i, j, *v) for (i, j), v in links.items()], collisions)
+
+
+def plane_axes(parts: SceneParts, y0, engine: str) -> tuple[int, int]:
+    """The two world axes a 2-D engine simulates in, for a scene that stays in a plane.
+
+    The dropped axis is the first of z, y, x along which every body starts at the same
+    coordinate at rest and gravity is zero (the drop test, in x-z; the oscillator, in x-y);
+    a plane's normal and an oriented box's turn must then lie in the other two.
+    UnsupportedFeatureError for a 3-D scene.
+    """
+    q, v = np.asarray(y0[0], float), np.asarray(y0[1], float)
+    for drop in (2, 1, 0):
+        if np.ptp(q[:, drop]) == 0 and not np.any(v[:, drop]) and parts.gravity[drop] == 0:
+            break
+    else:
+        raise UnsupportedFeatureError(f"a 3-D scene: {engine} simulates bodies in a plane, and these bodies "
+                                      "do not start in one plane at rest across it")
+    axes = tuple(k for k in range(3) if k != drop)
+    for shape in parts.shapes:
+        if isinstance(shape, Plane) and shape.normal[drop] != 0:
+            raise UnsupportedFeatureError(f"plane {shape.name!r} is tilted out of the bodies' plane: {engine} is 2-D")
+        if isinstance(shape, OrientedBox) and (abs(abs(shape.rotation[drop, drop]) - 1) > 1e-12):
+            raise UnsupportedFeatureError(f"oriented box {shape.name!r} is turned out of the bodies' plane: "
+                                          f"{engine} is 2-D")
+        if isinstance(shape, Box) and not shape.lo[drop] <= q[0, drop] <= shape.hi[drop]:
+            raise UnsupportedFeatureError(f"box {shape.name!r} does not reach the bodies' plane")
+    return axes
+
+
+class EngineRun:
+    """One engine set up on one scene: a system under test.
+
+    Subclasses set ``engine`` (the engine's name), ``settings`` (a line saying how it is
+    set up), ``precision`` (the engine's float type, "float64" or "float32") and implement
+    ``set_state(y)``, ``step(dt)``, ``state() -> y`` and, where the engine reports contacts,
+    ``touching() -> {(body, other): normal}`` (``other`` a body index or a shape's name).
+    """
+
+    engine: str = "engine"
+    settings: str = ""
+    precision: str = "float64"
+
+    def __init__(self, parts: SceneParts):
+        self.parts = parts
+        self._pinned_y = None
+
+    @property
+    def name(self) -> str:
+        return self.settings or self.engine
+
+    def set_state(self, y) -> None:
+        raise NotImplementedError
+
+    def step(self, dt: float) -> None:
+        raise NotImplementedError
+
+    def state(self) -> np.ndarray:
+        raise NotImplementedError
+
+    def touching(self) -> dict:
+        return {}
+
+    def close(self) -> None:
+        """Release what the engine holds outside Python (a pybullet connection)."""
+
+    def _rebuild(self) -> None:
+        """Set the engine up again from the scene (:func:`steplab.engines.build` records how)."""
+        rebuild = getattr(self, "rebuild", None)
+        if rebuild is not None:
+            self.close()
+            rebuild(self)
+
+    def advance(self, y0, dt: float, n_steps: int, t_start: float = 0.0, save_every: int = 1,
+                log_contacts: bool | None = None) -> Trajectory:
+        """Put the bodies at ``y0``, take ``n_steps`` steps of ``dt``, return the trajectory.
+
+        The trajectory keeps every ``save_every``-th state (and the last); its collision log
+        holds one ``"contact"`` event per pair that began to touch in a step, at the step's
+        end (``log_contacts``: default, when the scene has collisions). DivergenceError when
+        the state becomes non-finite or absurdly large, as for steplab's own integrators.
+        """
+        y0 = np.asarray(y0, dtype=float)
+        if n_steps < 1:
+            raise ValueError(f"n_steps must be >= 1, got {n_steps}")
+        log_contacts = self.parts.collisions is not None if log_contacts is None else log_contacts
+        saves = saved_steps(n_steps, save_every)
+        out = np.empty((len(saves),) + y0.shape)
+        out[0] = y0
+        saved, limit = 1, divergence_limit(y0, np.float64)
+        log = CollisionLog() if log_contacts else None
+        touching: dict = {}
+        self.set_state(y0)
+        start = time.perf_counter()
+        y = y0
+        for k in range(n_steps):
+            self.step(dt)
+            if log is not None:
+                touching = self._log_contacts(log, touching, y, t_start + (k + 1) * dt, dt)
+            if saved < len(saves) and saves[saved] == k + 1 or log is not None or k + 1 == n_steps:
+                y = self.state()
+                if not np.abs(y).max() <= limit:
+                    self._rebuild()  # a non-finite state can stay in the engine's caches
+                    raise DivergenceError(self.name, dt, k + 1, t_start + (k + 1) * dt)
+                if saved < len(saves) and saves[saved] == k + 1:
+                    out[saved] = y
+                    saved += 1
+        wall = time.perf_counter() - start
+        return Trajectory(t_start + saves * dt, out, self.name, dt, n_steps, self.engine, wall, collisions=log)
+
+    def _log_contacts(self, log, before: dict, y_before, t: float, dt: float) -> dict:
+        """Record the pairs that began touching in the step that ended at ``t``."""
+        now = self.touching()
+        names = self.parts.names
+        for (body, other), normal in now.items():
+            if (body, other) in before:
+                continue
+            v = y_before[1, body] - (y_before[1, other] if isinstance(other, int) else 0.0)
+            speed = float(np.dot(v, normal)) if normal is not None else UNKNOWN
+            other_name = names[other] if isinstance(other, int) else other
+            e, mu = self.parts.collisions.properties(body, other if isinstance(other, int) else
+                                                     _shape(self.parts, other))
+            log.events.append(Collision(t, body, other, names[body], other_name,
+                                        np.zeros(3) if normal is None else np.asarray(normal, float),
+                                        speed, e, mu, (t - dt, t), kind="contact"))
+        return now
+
+
+def _shape(parts: SceneParts, name: str):
+    return next(s for s in parts.shapes if s.name == name)
+
+
+def body_indices(parts: SceneParts) -> np.ndarray:
+    """The bodies that move (the engine's dynamic bodies), in scene order."""
+    return np.flatnonzero(~parts.pinned)

@@ -1,0 +1,166 @@
+"""Box2D (pybox2d, Box2D 2.3) for scenes in a plane: circles, static boxes, distance joints.
+
+- The scene must stay in a plane (:func:`.base.plane_axes`); its two axes become Box2D's
+  x and y. Box2D computes in float32.
+- Bodies are dynamic bodies with a circle fixture of their mass (a body without
+  collisions has a fixture that collides with nothing); pinned bodies are static; no
+  sleeping (Box2D stops integrating a body slower than 1 cm/s for half a second).
+- A spring and damper on a pair is a distance joint with ``frequencyHz`` and
+  ``dampingRatio``: Box2D's soft constraint, k = m_eff (2 pi f)^2 and c = 2 m_eff zeta (2 pi f)
+  with m_eff = 1 / (1/m_a + 1/m_b), solved inside the velocity solver. A damper without a
+  spring has no counterpart (``frequencyHz = 0`` makes the joint rigid).
+- Planes become static boxes behind them (a half-space does not exist in Box2D), boxes
+  static boxes; every polygon carries Box2D's skin, ``b2_polygonRadius`` = 1 cm.
+- Restitution and friction: Box2D takes the larger restitution of the two fixtures and
+  the geometric mean of the frictions, so static shapes get restitution 0 (each body's
+  against them wins) and friction 1, and each body mu^2 (the mean is then mu).
+- Settings: ``continuous=False`` turns off Box2D's continuous physics (time of impact
+  against static bodies); ``bullet=True`` makes every body a "bullet" (time of impact
+  against moving bodies too).
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from steplab.physics import Dampers, Gravity, Springs
+from steplab.physics.collision import Box, OrientedBox, Plane
+
+from .base import EngineRun, UnsupportedFeatureError, body_indices, plane_axes, require, scene_parts, version
+
+ENGINE = "Box2D"
+#: Box2D's recommended iterations (its testbed's): velocity and position
+VELOCITY_ITERATIONS, POSITION_ITERATIONS = 8, 3
+
+
+def plane_box(normal2, offset: float, reach: float):
+    """The four corners of a box standing for the half-plane normal . x <= offset, in 2-D.
+
+    The box is ``reach`` deep behind the line and 2 ``reach`` long along it, far beyond any
+    body of the scene (the caller's ``reach``).
+    """
+    n = np.asarray(normal2, float)
+    tangent = np.array([-n[1], n[0]])
+    on = offset * n
+    return [tuple(on + s * reach * tangent - d * reach * n) for s, d in ((-1, 0), (1, 0), (1, 1), (-1, 1))]
+
+
+def box_corners(center2, half2, turn2) -> list[tuple[float, float]]:
+    """Corners of a box of half-extents ``half2`` turned by the 2x2 ``turn2`` around ``center2``."""
+    c, h, r = np.asarray(center2, float), np.asarray(half2, float), np.asarray(turn2, float)
+    return [tuple(c + r @ (h * s)) for s in (np.array([-1, -1]), np.array([1, -1]), np.array([1, 1]),
+                                             np.array([-1, 1]))]
+
+
+def static_polygons(parts, axes, q0) -> list[tuple[object, list]]:
+    """(shape, corners in the plane) of each static shape, for the 2-D engines."""
+    a, b = axes
+    reach = 100.0 * (1.0 + float(np.max(np.abs(q0[:, list(axes)])))) if len(q0) else 100.0
+    out = []
+    for shape in parts.shapes:
+        if isinstance(shape, Plane):
+            out.append((shape, plane_box(shape.normal[[a, b]], shape.offset, reach)))
+        elif isinstance(shape, Box):
+            out.append((shape, box_corners(shape.center[[a, b]], shape.half_extents[[a, b]], np.eye(2))))
+        else:
+            out.append((shape, box_corners(shape.center[[a, b]], shape.half_extents[[a, b]],
+                                           shape.rotation[np.ix_([a, b], [a, b])])))
+    return out
+
+
+def spring_frequency(k: float, c: float, m_eff: float) -> tuple[float, float]:
+    """(frequencyHz, dampingRatio) of a Box2D distance joint that is the spring k and damper c."""
+    omega = math.sqrt(k / m_eff)
+    return omega / (2 * math.pi), c / (2 * m_eff * omega)
+
+
+class Box2DRun(EngineRun):
+    engine = "box2d"
+    precision = "float32"
+
+    def __init__(self, model, collisions=None, dt: float = 0.01, continuous: bool = True, bullet: bool = False,
+                 y0=None):
+        b2 = require("Box2D", ENGINE)
+        super().__init__(scene_parts(model, collisions, ENGINE, forces=(Gravity, Springs, Dampers),
+                                     shapes=(Plane, Box, OrientedBox)))
+        parts = self.parts
+        y0 = np.zeros((2, parts.n, 3)) if y0 is None else np.asarray(y0, float)
+        self.axes = axes = plane_axes(parts, y0, ENGINE)
+        self._y = y0.copy()
+        self.world = world = b2.b2World(gravity=tuple(parts.gravity[list(axes)]), doSleep=False)
+        world.continuousPhysics = continuous
+        contacts = parts.collisions is not None
+        for shape, corners in static_polygons(parts, axes, y0[0]):
+            ground = world.CreateStaticBody(userData=shape.name)
+            ground.CreatePolygonFixture(vertices=corners, restitution=0.0, friction=1.0)
+        self.bodies = []
+        for i in range(parts.n):
+            position = tuple(y0[0, i, list(axes)])
+            if parts.pinned[i]:
+                body = world.CreateStaticBody(position=position, userData=i)
+            else:
+                body = world.CreateDynamicBody(position=position, bullet=bullet, userData=i)
+            e, mu = parts.against_shapes(i)
+            r = float(parts.radii[i])
+            fixture = body.CreateCircleFixture(radius=r, density=float(parts.masses[i]) / (math.pi * r * r),
+                                               restitution=e, friction=mu * mu)
+            if not contacts:
+                fixture.filterData = b2.b2Filter(categoryBits=1, maskBits=0)
+            self.bodies.append(body)
+        for i, j, k, rest, c in parts.links:
+            if rest is None or k == 0:
+                raise UnsupportedFeatureError(f"a damper without a spring (bodies {parts.names[i]}, {parts.names[j]}): "
+                                              f"{ENGINE}'s distance joint is rigid without a spring frequency")
+            inverse = sum(0.0 if parts.pinned[b] else 1.0 / parts.masses[b] for b in (i, j))
+            if inverse == 0:
+                continue
+            hz, ratio = spring_frequency(k, c, 1.0 / inverse)
+            world.CreateDistanceJoint(bodyA=self.bodies[i], bodyB=self.bodies[j],
+                                      anchorA=self.bodies[i].position, anchorB=self.bodies[j].position,
+                                      frequencyHz=hz, dampingRatio=ratio, collideConnected=True, length=rest)
+        self.moving = body_indices(parts)
+        mode = "bullets" if bullet else "continuous physics" if continuous else "continuous physics off"
+        self.settings = f"Box2D {version('Box2D')}, {mode}"
+
+    def set_state(self, y) -> None:
+        a, b = self.axes
+        self._y = np.array(y, dtype=float)
+        for i in self.moving:
+            body = self.bodies[i]
+            body.position = (float(self._y[0, i, a]), float(self._y[0, i, b]))
+            body.linearVelocity = (float(self._y[1, i, a]), float(self._y[1, i, b]))
+            body.angle, body.angularVelocity = 0.0, 0.0
+
+    def step(self, dt: float) -> None:
+        self.world.Step(dt, VELOCITY_ITERATIONS, POSITION_ITERATIONS)
+
+    def run(self, steps: int, dt: float) -> None:
+        for _ in range(steps):
+            self.world.Step(dt, VELOCITY_ITERATIONS, POSITION_ITERATIONS)
+
+    def state(self) -> np.ndarray:
+        a, b = self.axes
+        for i in self.moving:
+            body = self.bodies[i]
+            self._y[0, i, a], self._y[0, i, b] = body.position
+            self._y[1, i, a], self._y[1, i, b] = body.linearVelocity
+        return self._y.copy()
+
+    def touching(self) -> dict:
+        a, b = self.axes
+        out = {}
+        for contact in self.world.contacts:
+            if not contact.touching:
+                continue
+            u, w = contact.fixtureA.body.userData, contact.fixtureB.body.userData
+            manifold = contact.worldManifold  # kept alive while its normal is read
+            n2 = tuple(manifold.normal)  # from A to B
+            normal = np.zeros(3)
+            normal[a], normal[b] = n2
+            if isinstance(u, int):
+                out[(u, w)] = normal
+            elif isinstance(w, int):
+                out[(w, u)] = -normal
+        return out

@@ -1,0 +1,118 @@
+"""Chipmunk2D through pymunk, for scenes in a plane: circles, static polygons, damped springs.
+
+- The scene must stay in a plane (:func:`.base.plane_axes`); Chipmunk computes in float64.
+- Bodies are dynamic bodies of their mass (the moment of a disc), with a circle shape when
+  the scene has collisions; pinned bodies are static. Chipmunk does not sleep by default.
+- A spring and damper on a pair is a ``DampedSpring``: Hooke's force from the positions at
+  the start of the step, and the damping applied inside the solver as an exact
+  exponential decay of the relative speed along the spring.
+- Planes become static polygons behind them, boxes static polygons. Chipmunk has no
+  continuous collision detection.
+- Restitution ("elasticity") and friction: Chipmunk multiplies the two shapes'
+  coefficients, so static shapes get 1 and each body its coefficient against them.
+- ``collision_slop``: the overlap Chipmunk leaves uncorrected; its default, 0.1, is meant
+  for pixels: in metres it lets a golf ball sink 10 cm into the floor. The adapter uses
+  5 mm, Box2D's linear slop (:data:`COLLISION_SLOP`).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from steplab.physics import Dampers, Gravity, Springs
+from steplab.physics.collision import Box, OrientedBox, Plane
+
+from .base import EngineRun, body_indices, plane_axes, require, scene_parts, version
+from .box2d_engine import static_polygons
+
+ENGINE = "Chipmunk"
+#: m, the overlap Chipmunk leaves to its position correction (Box2D's linear slop)
+COLLISION_SLOP = 0.005
+
+
+class ChipmunkRun(EngineRun):
+    engine = "chipmunk"
+    precision = "float64"
+
+    def __init__(self, model, collisions=None, dt: float = 0.01, collision_slop: float = COLLISION_SLOP, y0=None):
+        pymunk = require("pymunk", ENGINE)
+        super().__init__(scene_parts(model, collisions, ENGINE, forces=(Gravity, Springs, Dampers),
+                                     shapes=(Plane, Box, OrientedBox)))
+        parts = self.parts
+        y0 = np.zeros((2, parts.n, 3)) if y0 is None else np.asarray(y0, float)
+        self.axes = axes = plane_axes(parts, y0, ENGINE)
+        self._y = y0.copy()
+        self.space = space = pymunk.Space()
+        space.gravity = tuple(float(g) for g in parts.gravity[list(axes)])
+        space.collision_slop = collision_slop
+        contacts = parts.collisions is not None
+        self._owner = {}  # shape -> body index or static shape name
+        for shape, corners in static_polygons(parts, axes, y0[0]):
+            poly = pymunk.Poly(space.static_body, corners)
+            poly.elasticity, poly.friction = 1.0, 1.0
+            space.add(poly)
+            self._owner[poly] = shape.name
+        self.bodies = []
+        for i in range(parts.n):
+            m, r = float(parts.masses[i]), float(parts.radii[i])
+            if parts.pinned[i]:
+                body = pymunk.Body(body_type=pymunk.Body.STATIC)
+            else:
+                body = pymunk.Body(m, pymunk.moment_for_circle(m, 0.0, r))
+            body.position = tuple(float(x) for x in y0[0, i, list(axes)])
+            space.add(body)
+            if contacts:
+                circle = pymunk.Circle(body, r)
+                circle.elasticity, circle.friction = parts.against_shapes(i)
+                space.add(circle)
+                self._owner[circle] = i
+            self.bodies.append(body)
+        for i, j, k, rest, c in parts.links:
+            if parts.pinned[i] and parts.pinned[j]:
+                continue
+            length = rest if rest is not None else float(np.linalg.norm(y0[0, j] - y0[0, i]))
+            space.add(pymunk.DampedSpring(self.bodies[i], self.bodies[j], (0, 0), (0, 0), length, k, c))
+        self.moving = body_indices(parts)
+        self.settings = f"Chipmunk (pymunk {version('pymunk')}), collision slop {collision_slop * 1e3:g} mm"
+
+    def set_state(self, y) -> None:
+        a, b = self.axes
+        self._y = np.array(y, dtype=float)
+        for i in self.moving:
+            body = self.bodies[i]
+            body.position = (float(self._y[0, i, a]), float(self._y[0, i, b]))
+            body.velocity = (float(self._y[1, i, a]), float(self._y[1, i, b]))
+            body.angle, body.angular_velocity = 0.0, 0.0
+
+    def step(self, dt: float) -> None:
+        self.space.step(dt)
+
+    def run(self, steps: int, dt: float) -> None:
+        for _ in range(steps):
+            self.space.step(dt)
+
+    def state(self) -> np.ndarray:
+        a, b = self.axes
+        for i in self.moving:
+            body = self.bodies[i]
+            self._y[0, i, a], self._y[0, i, b] = body.position
+            self._y[1, i, a], self._y[1, i, b] = body.velocity
+        return self._y.copy()
+
+    def touching(self) -> dict:
+        a, b = self.axes
+        out = {}
+
+        def record(arbiter):
+            s1, s2 = arbiter.shapes
+            u, w = self._owner.get(s1), self._owner.get(s2)
+            normal = np.zeros(3)
+            normal[a], normal[b] = arbiter.normal  # from the first shape to the second
+            if isinstance(u, int):
+                out[(u, w)] = normal
+            elif isinstance(w, int):
+                out[(w, u)] = -normal
+
+        for i in self.moving:
+            self.bodies[i].each_arbiter(record)
+        return out

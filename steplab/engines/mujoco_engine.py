@@ -1,0 +1,86 @@
+"""MuJoCo: the scene's MJCF (:mod:`.mjcf`) compiled and stepped with ``mj_step``.
+
+The state is read and written through the free joints: ``qpos`` holds each moving body's
+position and a unit quaternion (w, x, y, z), ``qvel`` its linear and angular velocity
+(spheres: the rotation never changes where a centre goes, and starts at rest).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from .base import EngineRun, body_indices, require, scene_parts, version
+from .mjcf import ENGINE, mjcf
+
+
+def _quiet(mujoco) -> None:
+    """MuJoCo's warnings ("the simulation is unstable") off stderr: the run's own checks report."""
+    mujoco.set_mju_user_warning(lambda message: None)
+
+
+class MujocoRun(EngineRun):
+    engine = "mujoco"
+    precision = "float64"
+
+    def __init__(self, model, collisions=None, dt: float = 0.01, integrator: str = "Euler",
+                 solver: str | None = None, iterations: int | None = None, jacobian: str | None = None,
+                 y0=None):
+        mujoco = require("mujoco", ENGINE)
+        super().__init__(scene_parts(model, collisions, ENGINE))
+        n = self.parts.n
+        y0 = np.zeros((2, n, 3)) if y0 is None else np.asarray(y0, float)
+        self._mujoco = mujoco
+        self.xml = mjcf(model, y0, dt, collisions, integrator, solver, iterations, jacobian)
+        _quiet(mujoco)
+        self.model = mujoco.MjModel.from_xml_string(self.xml)
+        # MuJoCo puts a diverging simulation back at its start (auto-reset) and carries on;
+        # the measurements must see the divergence instead
+        self.model.opt.disableflags |= mujoco.mjtDisableBit.mjDSBL_AUTORESET
+        self.data = mujoco.MjData(self.model)
+        self.moving = body_indices(self.parts)
+        self._dt = dt
+        self._y = y0.copy()
+        solver_text = "" if solver is None else f", {solver}" + (f", {iterations} iterations" if iterations else "")
+        self.settings = f"MuJoCo {version('mujoco')} {integrator}{solver_text}"
+        # geom id -> body index or shape name, for the contact log
+        self._geoms = {}
+        for g in range(self.model.ngeom):
+            name = mujoco.mj_id2name(self.model, mujoco.mjtObj.mjOBJ_GEOM, g)
+            self._geoms[g] = int(name[4:]) if name and name.startswith("body") and name[4:].isdigit() else name
+
+    def set_state(self, y) -> None:
+        mujoco, m, d = self._mujoco, self.model, self.data
+        mujoco.mj_resetData(m, d)
+        self._y = np.array(y, dtype=float)
+        k = len(self.moving)
+        qpos = np.zeros((k, 7))
+        qpos[:, :3], qpos[:, 3] = self._y[0, self.moving], 1.0
+        qvel = np.zeros((k, 6))
+        qvel[:, :3] = self._y[1, self.moving]
+        d.qpos[:], d.qvel[:] = qpos.ravel(), qvel.ravel()
+
+    def step(self, dt: float) -> None:
+        if dt != self._dt:
+            self.model.opt.timestep = self._dt = dt
+        self._mujoco.mj_step(self.model, self.data)
+
+    def run(self, steps: int) -> None:
+        """``steps`` steps in one call (MuJoCo's own loop, for timing)."""
+        self._mujoco.mj_step(self.model, self.data, nstep=steps)
+
+    def state(self) -> np.ndarray:
+        k = len(self.moving)
+        self._y[0, self.moving] = self.data.qpos.reshape(k, 7)[:, :3]
+        self._y[1, self.moving] = self.data.qvel.reshape(k, 6)[:, :3]
+        return self._y.copy()
+
+    def touching(self) -> dict:
+        out = {}
+        for c in self.data.contact[: self.data.ncon]:
+            a, b = self._geoms.get(int(c.geom1)), self._geoms.get(int(c.geom2))
+            normal = np.array(c.frame[:3])  # from geom1 to geom2
+            if isinstance(a, int):
+                out[(a, b)] = normal
+            elif isinstance(b, int):
+                out[(b, a)] = -normal
+        return out

@@ -1,0 +1,105 @@
+"""Studies on a Dask cluster: the serial records, a lost worker, resuming task by task, bad addresses."""
+
+from __future__ import annotations
+
+import json
+import os
+import signal
+import threading
+import time
+
+import pytest
+from steplab.studies import STUDIES, distributed, runner
+from steplab.studies.task_cache import FOLDER
+
+from steplab import cluster as clusters
+from steplab.cli import main
+
+#: quick studies that do not time: their records must be the serial ones to the byte
+STUDIES_COMPARED = ("frame_rate", "restitution")
+
+
+def without_provenance(path) -> bytes:
+    """A record's bytes as written, less the provenance (date, machine, cluster)."""
+    record = json.loads(path.read_text())
+    record.pop("provenance")
+    return json.dumps(record, indent=2, sort_keys=True).encode()
+
+
+@pytest.fixture(scope="module")
+def serial(tmp_path_factory):
+    """The serial quick records of the compared studies."""
+    out = tmp_path_factory.mktemp("serial")
+    for name in STUDIES_COMPARED:
+        runner.run_study(STUDIES[name], out, quick=True)
+    return out
+
+
+@pytest.fixture(scope="module")
+def client():
+    with clusters.connect(workers=2) as client:
+        yield client
+
+
+def test_distributed_quick_run_writes_the_serial_records(serial, client, tmp_path):
+    records = distributed.run_studies([STUDIES[name] for name in STUDIES_COMPARED], tmp_path, client, quick=True)
+    for name, record in zip(STUDIES_COMPARED, records):
+        assert without_provenance(tmp_path / f"{name}.json") == without_provenance(serial / f"{name}.json")
+        assert record["provenance"]["cluster"]["workers"] == 2
+    assert not (tmp_path / FOLDER).exists()  # the stored tasks go once the records are written
+
+
+def test_a_worker_killed_mid_run_loses_nothing(serial, client, tmp_path):
+    pids = set(client.run(os.getpid).values())
+    stored = tmp_path / FOLDER / "restitution"
+    seen = {}
+
+    def kill_one_worker_once_tasks_come_back():
+        deadline = time.monotonic() + 60
+        while time.monotonic() < deadline and len(list(stored.glob("*.json"))) < 2:
+            time.sleep(0.005)
+        seen["record_before_kill"] = (tmp_path / "restitution.json").exists()
+        os.kill(min(pids), signal.SIGKILL)
+
+    killer = threading.Thread(target=kill_one_worker_once_tasks_come_back)
+    killer.start()
+    distributed.run_studies([STUDIES["restitution"]], tmp_path, client, quick=True)
+    killer.join()
+    assert seen == {"record_before_kill": False}  # the worker died while the study was running
+    assert without_provenance(tmp_path / "restitution.json") == without_provenance(serial / "restitution.json")
+    assert min(pids) not in set(client.run(os.getpid).values())
+
+
+def _counting_study(calls: list, fail_at: int | None = None) -> runner.Study:
+    """Five tasks squaring their item (one raising KeyboardInterrupt, like a Ctrl-C, if asked)."""
+    def task(parameters, item):
+        if item == fail_at:
+            raise KeyboardInterrupt
+        calls.append(item)
+        return {"square": item * item}
+
+    return runner.Study("counting", "five squares", lambda quick: {"n": 5}, lambda p, progress=None: {},
+                        lambda record, out: [], tasks=lambda p: list(range(p["n"])), task=task,
+                        reduce=lambda p, results: {"squares": [r["square"] for r in results]})
+
+
+def test_an_interrupted_run_resumes_task_by_task(tmp_path):
+    calls = []
+    with pytest.raises(KeyboardInterrupt):
+        runner.run_study(_counting_study(calls, fail_at=3), tmp_path)
+    assert calls == [0, 1, 2] and len(list((tmp_path / FOLDER / "counting").glob("*.json"))) == 3
+    record = runner.run_study(_counting_study(calls), tmp_path)
+    assert calls == [0, 1, 2, 3, 4]  # only the missing tasks ran
+    assert record["squares"] == [0, 1, 4, 9, 16] and not (tmp_path / FOLDER).exists()
+
+
+@pytest.mark.parametrize("address", ["nonsense", "tcp://127.0.0.1:1"])
+def test_bad_scheduler_address_is_one_line_and_status_2(address, capsys, monkeypatch, tmp_path):
+    monkeypatch.setattr(clusters, "CONNECT_TIMEOUT_S", 0.5)
+    status = main(["study", "frame_rate", "--quick", "--out", str(tmp_path), "--scheduler", address])
+    out, err = capsys.readouterr()
+    assert status == 2 and out == ""
+    assert len(err.splitlines()) == 1 and address in err and "dask scheduler" in err
+    with pytest.raises(SystemExit) as exit_:
+        main(["reproduce", "--workers", "0"])
+    assert exit_.value.code == 2 and len(capsys.readouterr().err.splitlines()) == 1

@@ -1,0 +1,198 @@
+"""The engine adapters (steplab.engines): each engine against closed forms, the identification,
+the MJCF export, and one-line errors for what an engine cannot express.
+
+Every test needs the engines extra (pip install -e ".[engines]") and is skipped per engine
+without it.
+"""
+
+import math
+
+import numpy as np
+import pytest
+from steplab.physics import Drag, Gravity, Model, Springs
+from steplab.studies.problems import oscillator_problem
+
+from steplab.cli import main
+from steplab.engines import ENGINES, SETTINGS, UnsupportedFeatureError, build
+
+G = 9.81
+#: relative round-off of an engine's float type over a few hundred steps
+ROUND_OFF = {"float64": 1e-12, "float32": 2e-6}
+#: under constant gravity, where each engine's positions sit against the exact parabola, in
+#: units of g dt t / 2: semi-implicit Euler (and backward Euler, the same there) lead by one,
+#: Chipmunk's position-first Euler lags by one, RK4 is exact
+FREE_FALL_LEAD = {"mujoco-euler": 1, "mujoco-rk4": 0, "mujoco-implicit": 1, "mujoco-implicitfast": 1,
+                  "mujoco-discrete": 1, "bullet-default": 1, "bullet-no-position-correction": 1, "bullet-ccd": 1,
+                  "box2d-continuous-off": 1, "box2d-default": 1, "box2d-bullet": 1, "chipmunk": -1}
+#: the steplab method each setting steps (the engines study's finding)
+EQUALS = {"mujoco-euler": "semi-implicit-euler", "mujoco-rk4": "rk4", "mujoco-implicit": "implicit-damping-euler",
+          "mujoco-implicitfast": "implicit-damping-euler", "mujoco-discrete": "implicit-euler",
+          "bullet-default": "semi-implicit-euler", "box2d-default": "implicit-euler",
+          "chipmunk": "exponential-damping-euler"}
+
+
+def needs(engine: str):
+    return pytest.importorskip(ENGINES[engine][1])
+
+
+def precision(setting) -> str:
+    return "float32" if setting.engine == "box2d" else "float64"
+
+
+@pytest.mark.parametrize("key", list(SETTINGS))
+def test_free_fall_is_the_parabola_plus_the_methods_known_lead(key):
+    """q_n = q0 + v0 t + g t^2 / 2 + c g dt t / 2 exactly, c = FREE_FALL_LEAD (sums of n kicks)."""
+    setting = SETTINGS[key]
+    needs(setting.engine)
+    dt, n = 0.01, 50
+    model = Model([2.0], [0.1], [Gravity(np.array([0.0, 0.0, -G]))])
+    y0 = np.array([[[0.3, 0.0, 5.0]], [[1.5, 0.0, 4.0]]])  # in the x-z plane: the 2-D engines run it too
+    traj = setting.build(model, None, dt, y0).advance(y0, dt, n)
+    t = traj.t[-1]
+    assert traj.steps == n and t == pytest.approx(n * dt)
+    exact_z = 5.0 + 4.0 * t - 0.5 * G * t * t
+    expected_z = exact_z - FREE_FALL_LEAD[key] * 0.5 * G * dt * t
+    tolerance = ROUND_OFF[precision(setting)] * 10
+    assert traj.positions[-1, 0, 2] == pytest.approx(expected_z, rel=tolerance)
+    assert traj.positions[-1, 0, 0] == pytest.approx(0.3 + 1.5 * t, rel=tolerance)
+    assert traj.velocities[-1, 0, 2] == pytest.approx(4.0 - G * t, rel=tolerance)
+
+
+@pytest.mark.parametrize("key", ["mujoco-euler", "mujoco-rk4", "bullet-default", "box2d-default", "chipmunk"])
+def test_oscillator_converges_to_the_cosine_at_the_methods_order(key):
+    """x(t) = 1 + A cos(omega t): halving dt divides the error by 2^p (p = 4 for RK4, else 1), and
+    the error is within the global bound of a p-th order method, A (omega dt)^p omega t."""
+    setting = SETTINGS[key]
+    needs(setting.engine)
+    problem = oscillator_problem(0.0)
+    errors = []
+    for steps in (128, 256):
+        dt = (problem.t_end - problem.t_start) / steps
+        traj = setting.build(problem.model, None, dt, problem.y0).advance(problem.y0, dt, steps)
+        errors.append(abs(traj.positions[-1, 1, 0] - problem.exact_final()[0, 1, 0]))
+    order = 4 if key == "mujoco-rk4" else 1
+    assert math.log2(errors[0] / errors[1]) == pytest.approx(order, abs=0.2)
+    omega_t = problem.omega * problem.t_end
+    assert errors[1] < 0.5 * (omega_t / 256) ** order * omega_t
+
+
+@pytest.fixture(scope="module")
+def identification():
+    """The study's parameters and steplab's trajectories of the identification problems (computed once)."""
+    from steplab.studies.engines import identification_problems, parameters
+
+    params = parameters(quick=True)
+    return params, identification_problems(params)
+
+
+@pytest.mark.parametrize("key", list(EQUALS))
+def test_identification_names_the_method_each_engine_steps(key, identification):
+    from steplab.studies.engines import identify
+    from steplab.studies.system import engine_system
+
+    setting = SETTINGS[key]
+    needs(setting.engine)
+    params, problems = identification
+    result = identify(engine_system(setting), params, problems)
+    assert result["nearest"] == EQUALS[key] and EQUALS[key] in result["equals"]
+    assert result["difference"] <= {"float64": 1e-12, "float32": 1e-5}[precision(setting)]
+    others = [max(d.values()) for m, d in result["differences"].items() if m not in result["equals"]]
+    assert min(others) > 1e-4  # every other method is measurably different
+
+
+def test_mujoco_euler_and_rk4_differ_from_steplab_by_round_off_not_bits():
+    """"bit for bit" was never true of the oscillator: MuJoCo computes the tendon's length and
+    force in its own order; free fall (no tendon) is exact."""
+    from steplab.integrators import simulate
+
+    needs("mujoco")
+    problem = oscillator_problem(0.1)
+    dt = 0.1 / problem.omega
+    for integrator, method in (("Euler", "semi-implicit-euler"), ("RK4", "rk4")):
+        ours = simulate(problem.model, method, problem.y0, 0.0, dt=dt, n_steps=100).y
+        theirs = build("mujoco", problem.model, None, dt, problem.y0, integrator=integrator).advance(
+            problem.y0, dt, 100).y
+        assert 0 < np.max(np.abs(theirs - ours)) < 1e-14
+
+
+@pytest.mark.parametrize("engine", list(ENGINES))
+def test_engine_contacts_come_back_as_a_collision_log(engine):
+    needs(engine)
+    from steplab.physics.scene import load_scene
+
+    scene = load_scene("drop")
+    traj = build(engine, scene.model, scene.collisions, scene.dt, scene.y0).advance(scene.y0, scene.dt, 600)
+    first = next(e for e in traj.collisions.events if e.kind == "contact")
+    assert (first.body_name, first.other_name) == ("ball", "floor")
+    fall = math.sqrt(2 * 0.92 / G)  # the bottom starts 0.92 m above the floor
+    assert first.t == pytest.approx(fall, abs=3 * scene.dt)
+    assert first.impact_speed == pytest.approx(G * fall, rel=0.02)
+    np.testing.assert_allclose(first.normal, [0.0, 0.0, -1.0], atol=1e-6)  # from the ball towards the floor
+
+
+@pytest.mark.parametrize("scene", ["oscillator", "drop", "tunnelling", "billiards", "soft-cube", "cloth"])
+def test_exported_mjcf_loads_in_mujoco_with_the_scenes_start(scene, tmp_path, capsys):
+    from steplab.physics.scene import load_scene
+
+    mujoco = needs("mujoco")
+    path = tmp_path / f"{scene}.xml"
+    assert main(["export", scene, "--to", "mjcf", "--out", str(path)]) == 0
+    loaded = load_scene(scene)
+    model = mujoco.MjModel.from_xml_path(str(path))
+    moving = ~np.asarray(loaded.model.pinned)
+    assert model.nbody - 1 == moving.sum() and model.opt.timestep == loaded.dt
+    data = mujoco.MjData(model)
+    mujoco.mj_resetDataKeyframe(model, data, 0)
+    np.testing.assert_array_equal(data.qpos.reshape(-1, 7)[:, :3], loaded.y0[0, moving])
+    np.testing.assert_array_equal(data.qvel.reshape(-1, 6)[:, :3], loaded.y0[1, moving])
+    if scene == "oscillator":  # one Euler step of the file is one semi-implicit Euler step
+        mujoco.mj_step(model, data)
+        k, m, x = 4 * math.pi**2, 1.0, 1.5
+        v1 = -loaded.dt * k * (x - 1.0) / m
+        assert data.qvel[0] == pytest.approx(v1, rel=1e-12) and data.qpos[0] == pytest.approx(x + loaded.dt * v1)
+
+
+def test_export_bad_input_is_one_line_with_status_2(capsys):
+    for argv, expected in ((["export", "drag-projectile", "--to", "mjcf"], "the drag force has no counterpart in MuJoCo"
+                                                                           ),
+                           (["export", "kepler", "--to", "mjcf"], "the central_gravity force"),
+                           (["export", "no-such-scene", "--to", "mjcf"], "unknown scene")):
+        assert main(argv) == 2, argv
+        err = capsys.readouterr().err
+        assert expected in err and err.count("\n") == 1, err
+    with pytest.raises(SystemExit) as exit_:  # argparse's own errors end the process, with one line
+        main(["export", "oscillator", "--to", "urdf"])
+    err = capsys.readouterr().err
+    assert exit_.value.code == 2 and "invalid choice: 'urdf'" in err and err.count("\n") == 1
+
+
+def test_what_an_engine_cannot_express_is_one_line_naming_it():
+    needs("bullet")
+    needs("box2d")
+    drag = Model([1.0], [0.1], [Drag.from_coefficients([0.1])])
+    with pytest.raises(UnsupportedFeatureError, match="the drag force has no counterpart in Bullet"):
+        build("bullet", drag, None, 0.01)
+    flying = np.array([[[0.0, 0.0, 0.0]], [[1.0, 1.0, 1.0]]])  # moves along all three axes
+    with pytest.raises(UnsupportedFeatureError, match="a 3-D scene: Box2D simulates bodies in a plane"):
+        build("box2d", Model([1.0], [0.1]), None, 0.01, flying)
+    damped = oscillator_problem(0.1)
+    model = Model([1.0, 1.0], [0.05, 0.05], [f for f in damped.model.forces if not isinstance(f, Springs)],
+                  pinned=[True, False])
+    with pytest.raises(UnsupportedFeatureError, match="a damper without a spring"):
+        build("box2d", model, None, 0.01, damped.y0)
+    with pytest.raises(ValueError, match="unknown engine 'havok'"):
+        build("havok", drag)
+
+
+def test_engines_study_says_how_to_install_the_extra(monkeypatch, capsys):
+    import steplab.engines
+    from steplab import studies
+
+    monkeypatch.setattr(steplab.engines, "missing", lambda: ["Box2D"])
+    assert main(["study", "engines", "--quick", "--out", "unused"]) == 2
+    err = capsys.readouterr().err
+    assert 'pip install -e ".[engines]"' in err and "Box2D" in err and err.count("\n") == 1
+    monkeypatch.setattr(studies, "builtin_studies", lambda: [studies.STUDIES["engines"]])
+    assert main(["reproduce", "--quick", "--out", "unused"]) == 0
+    out, err = capsys.readouterr()
+    assert "engines: skipped: the engines study needs Box2D" in out + err
