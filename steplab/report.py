@@ -1,30 +1,37 @@
 """``steplab report``: a static HTML site of a results folder, to browse every study.
 
 One page per study (its summary lines, its figures, the tables the paper prints from
-its record, the record's provenance), an errata page (the lecture's errors the studies
+its record, the numbers the paper's text quotes from it, each with the words around it, and
+the record's provenance), an errata page (the lecture's errors the studies
 found), the bench and engines tables when ``bench.json`` is there, and an index of them all. The
 pages are Markdown drawn from the records alone, turned into HTML by the paper's own
 :func:`steplab.paper.to_html`; the tables are the studies' own (``Study.tables``,
 studies/tables.py), so the site and the paper never disagree. Every link is relative,
 so ``python -m http.server -d SITE`` (or opening ``index.html`` as a file) serves it.
-Figures are the static PNGs the studies draw.
+Figures are the static PNGs the studies draw; the error-against-dt and work-precision plots
+also come as zoomable Plotly pages (:mod:`steplab.report_figures`).
 """
 
 from __future__ import annotations
 
 import json
+import re
 from pathlib import Path
 
+from steplab import report_figures
 from steplab.bench.report import collision_markdown
-from steplab.paper import BENCH_TABLE, load_records, to_html
+from steplab.paper import BENCH_TABLE, PLACEHOLDER, PaperError, load_records, lookup, to_html
 from steplab.studies import STUDIES
 from steplab.studies.records import write_atomic
+from steplab.studies.tables import format_value, markdown_table
 
 #: the tables that list the lecture's errors (truncation: its misprinted formulas;
 #: restitution and tunnelling: the response and detection chapters' errors)
 ERRATA_TABLES = ("misprints", "lecture_errors")
 #: where the copied figures go, inside the site
 FIGURES = "figures"
+#: the paper's text, whose numbers the study pages list (in a checkout; absent, they are left out)
+PAPER_TEMPLATE = Path(__file__).resolve().parent.parent / "paper" / "paper.template.md"
 
 
 class ReportError(ValueError):
@@ -51,7 +58,7 @@ def build(results: Path, out: Path) -> list[Path]:
                           f"run `steplab reproduce --out {results}` first")
     pages = {"index.html": index_page(studies, bench)}
     for study, record in studies:
-        pages[f"{study.name}.html"] = study_page(study, record, results)
+        pages[f"{study.name}.html"] = study_page(study, record, results, report_figures.write(study.name, record, out))
     pages["errata.html"] = errata_page(studies)
     if bench is not None:
         pages["bench.html"] = bench_page(bench)
@@ -95,7 +102,7 @@ def index_page(studies: list, bench: dict | None) -> str:
     return text
 
 
-def study_page(study, record: dict, results: Path) -> str:
+def study_page(study, record: dict, results: Path, interactive=()) -> str:
     text = f"# {record['title']}\n\n" + _nav("") + f"Study `{study.name}`; record `{study.name}.json`.\n\n"
     summary = _summary_lines(study, record)
     if summary:
@@ -106,11 +113,38 @@ def study_page(study, record: dict, results: Path) -> str:
         for figure in figures:
             what = Path(figure).stem.removeprefix(f"{study.name}_").replace("_", " ")
             text += f"![{study.name}, figure: {what}]({FIGURES}/{figure})\n\n"
+    if interactive:  # (title, link) of zoomable versions (steplab/report_figures.py)
+        text += "Zoomable versions (drag to zoom, double-click to reset): " + ", ".join(
+            f"[{title}]({link})" for title, link in interactive) + ".\n\n"
     drawn = [(table.name, _draw(table, record)) for table in study.tables]
     if drawn:
         text += "## Tables\n\n" + "".join(f"### {name.replace('_', ' ')}\n\n{markdown}\n\n"
                                            for name, markdown in drawn)
+    quoted = quoted_numbers(study.name, record)
+    if quoted:
+        text += "## Numbers the paper quotes\n\n" + quoted + "\n\n"
     return text + provenance(record)
+
+
+def quoted_numbers(name: str, record: dict, template: Path = PAPER_TEMPLATE) -> str:
+    """The values of ``record`` the paper's text quotes (``{{name/...}}``), from this record, as the
+    paper prints them, each with the words before it; "" without the template or any."""
+    if not Path(template).exists():
+        return ""
+    text = Path(template).read_text()
+    rows = []
+    for match in PLACEHOLDER.finditer(text):
+        path, _, spec = match.group(1).partition(":")
+        if path.split("/")[0] != name:
+            continue
+        try:
+            value = format_value(lookup({name: record}, path), spec)
+        except PaperError:  # a quick run's record lacks what only the full run has
+            value = "not in this record"
+        before = PLACEHOLDER.sub("…", text[max(0, match.start() - 90):match.start()])
+        words = " ".join(re.split(r"(?<=[.:;])\s", " ".join(before.split()))[-1].split()[-12:])
+        rows.append([f"`{path}`", value, f"… {words}"])
+    return markdown_table(["record path", "value", "where the paper quotes it"], rows) if rows else ""
 
 
 def errata_page(studies: list) -> str:

@@ -15,7 +15,7 @@ from steplab.cli import main
 from steplab.report import build
 
 #: the cheapest real studies that between them have figures, tables and lecture errors
-SITE_STUDIES = ("frame_rate", "restitution")
+SITE_STUDIES = ("frame_rate", "restitution", "truncation")
 #: a bench record written by hand: the bench page must print its ratio and both times
 BENCH = {"order": ["step"], "ratios": {"step": 0.5}, "targets": {},
          "seconds": {"step": {"what": "one oscillator step", "peer_name": "scipy", "steplab": 0.002, "peer": 0.004}},
@@ -129,7 +129,9 @@ def _chromium(*args, cwd):
 
 
 def test_every_page_loads_in_chromium_without_console_errors(site, tmp_path):
-    for path in sorted(site.glob("*.html")):
+    interactive = sorted((site / "interactive").glob("*.html"))
+    assert interactive and (site / "interactive" / "plotly.min.js").is_file()  # truncation's zoomable figures
+    for path in sorted(site.glob("*.html")) + interactive:
         run = _chromium("--dump-dom", path.resolve().as_uri(), cwd=tmp_path)
         assert html.escape(_parse(path).title, quote=False) in run.stdout, f"{path.name}: its title is not in the DOM"
         console = [line for line in run.stderr.splitlines() if "Uncaught" in line or "Failed to load resource" in line]
@@ -137,3 +139,12 @@ def test_every_page_loads_in_chromium_without_console_errors(site, tmp_path):
     shot = tmp_path / "index.png"
     _chromium("--window-size=1200,1600", f"--screenshot={shot}", (site / "index.html").resolve().as_uri(), cwd=tmp_path)
     assert shot.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+
+
+def test_a_study_page_lists_the_numbers_the_paper_quotes_from_its_record(site, results):
+    # the paper quotes frame_rate/final_state_spread/naive with :.2f: the page prints the record's value so
+    record = json.loads((results / "frame_rate.json").read_text())
+    page = (site / "frame_rate.html").read_text()
+    assert "Numbers the paper quotes" in page
+    assert f"<td>{record['final_state_spread']['naive']:.2f}</td>" in page
+    assert "frame_rate/final_state_spread/naive" in page
