@@ -59,22 +59,9 @@ class Dampers(Force):
         return scatter_pairs(xp, q.shape[0], self.i, self.j, f)
 
     def jacobian(self, xp, q, v, m):
-        d, length, u = self._terms(xp, q, v)
-        c = self.damping[:, None, None]
-        ddT = d[:, :, None] * d[:, None, :]
-        dv_block = c * ddT
-        # d/d delta of (d . u) d, with d d / d delta = P / l and P = I - d d^T:
-        # [ (d . u) P + d u^T P ] / l
-        eye = xp.eye(3, dtype=q.dtype)
-        proj = eye - ddT
-        du = xp.sum(d * u, axis=1)[:, None, None]
-        inv_l = xp.where(length > 0, 1 / xp.where(length > 0, length, 1), 0)[:, None, None]
-        dq_block = c * inv_l * (du * proj + d[:, :, None] * (u[:, None, :] @ proj))
-        n = q.shape[0]
-        return (
-            scatter_pair_blocks(xp, n, self.i, self.j, dq_block),
-            scatter_pair_blocks(xp, n, self.i, self.j, dv_block),
-        )
+        blocks, n = self.jacobian_blocks(xp, q, v, m), q.shape[0]
+        return (scatter_pair_blocks(xp, n, self.i, self.j, blocks.dq),
+                scatter_pair_blocks(xp, n, self.i, self.j, blocks.dv))
 
     def jacobian_blocks(self, xp, q, v, m, definite=False):
         """One block per damper: d f_i / d v_j = c d d^T and d f_i / d q_j = c [(d . u) P + d u^T P] / l.
@@ -91,6 +78,8 @@ class Dampers(Force):
         dv_block = c * ddT
         if definite:
             return PairJacobian(self.i, self.j, None, dv_block)
+        # d/d delta of (d . u) d, with d d / d delta = P / l and P = I - d d^T:
+        # [ (d . u) P + d u^T P ] / l
         proj = xp.eye(3, dtype=q.dtype) - ddT
         du = xp.sum(d * u, axis=1)[:, None, None]
         inv_l = xp.where(length > 0, 1 / xp.where(length > 0, length, 1), 0)[:, None, None]

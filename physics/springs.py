@@ -67,14 +67,7 @@ class Springs(Force):
         return scatter_pairs(xp, q.shape[0], self.i, self.j, f)
 
     def jacobian(self, xp, q, v, m):
-        # f_i = k (l - L) d with d = delta / l, delta = q_j - q_i:
-        # d f_i / d q_j = k [ d d^T + (1 - L / l) (I - d d^T) ]  (the geometric stiffness)
-        d, length = self._geometry(xp, q)
-        ddT = d[:, :, None] * d[:, None, :]
-        eye = xp.eye(3, dtype=q.dtype)
-        ratio = xp.where(length > 0, self.rest_length / xp.where(length > 0, length, 1), 0)
-        block = self.stiffness[:, None, None] * (ddT + (1 - ratio)[:, None, None] * (eye - ddT))
-        return scatter_pair_blocks(xp, q.shape[0], self.i, self.j, block), None
+        return scatter_pair_blocks(xp, q.shape[0], self.i, self.j, self.jacobian_blocks(xp, q, v, m).dq), None
 
     def jacobian_blocks(self, xp, q, v, m, definite=False):
         """One block per spring, B = d f_i / d q_j = k [d d^T + (1 - L / l) (I - d d^T)], symmetric.
@@ -85,13 +78,15 @@ class Springs(Force):
         """
         from .sparse_jacobian import PairJacobian
 
+        # f_i = k (l - L) d with d = delta / l, delta = q_j - q_i: the axial term k d d^T and
+        # the geometric stiffness k (1 - L / l) (I - d d^T)
         d, length = self._geometry(xp, q)
         transverse = 1 - xp.where(length > 0, self.rest_length / xp.where(length > 0, length, 1), 0)
         if definite:
             transverse = xp.maximum(transverse, 0)
-        k = self.stiffness[:, None, None]
         ddT = d[:, :, None] * d[:, None, :]
-        block = k * (1 - transverse[:, None, None]) * ddT + (k * transverse[:, None, None]) * xp.eye(3, dtype=q.dtype)
+        eye = xp.eye(3, dtype=q.dtype)
+        block = self.stiffness[:, None, None] * (ddT + transverse[:, None, None] * (eye - ddT))
         return PairJacobian(self.i, self.j, block, None)
 
     def potential(self, xp, q, m):

@@ -216,7 +216,8 @@ def _run_command(args) -> int:
         return command(args) or 0
     except (SceneError, UnknownIntegratorError, NotConstantForceError, PaperError, ValueError) as err:
         return _fail(args.command, str(err), EXIT_BAD_INPUT)
-    except (DivergenceError, ReferenceFailedError, NoFixedStepError, ImpactCapError) as err:
+    # FloatingPointError: the contact solver's state became non-finite inside a step
+    except (DivergenceError, ReferenceFailedError, NoFixedStepError, ImpactCapError, FloatingPointError) as err:
         return _fail(args.command, str(err), EXIT_DIVERGED)
     except OSError as err:  # an unwritable --out or results folder, a full disk
         where = f"{err.filename}: " if err.filename else ""

@@ -67,6 +67,11 @@ class Contacts:
     restitution: np.ndarray
     friction: np.ndarray
 
+    @classmethod
+    def empty(cls) -> Contacts:
+        index, value = np.zeros(0, np.int64), np.zeros(0)
+        return cls(index, index, index, index, np.zeros((0, 3)), value, value, value, value, value, value)
+
     def __len__(self) -> int:
         return len(self.key)
 
@@ -101,8 +106,7 @@ def find_contacts(world, materials: Materials, q, v, a, radii, inverse_masses, d
                       np.sum((v_other - v[i]) * normal, axis=1), np.sum((a[i] - a_other) * normal, axis=1),
                       1.0 / (inverse_masses[i] + w_other), np.broadcast_to(e, i.shape), np.broadcast_to(mu, i.shape)))
     if not parts:
-        empty = np.zeros(0)
-        return Contacts(*(np.zeros(0, np.int64),) * 4, np.zeros((0, 3)), *(empty,) * 6)
+        return Contacts.empty()
     columns = [np.concatenate(column) for column in zip(*parts)]
     contacts = Contacts(*columns)
     order = np.argsort(contacts.key, kind="stable")

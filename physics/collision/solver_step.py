@@ -275,5 +275,5 @@ class Solved:
 
 
 _EMPTY = np.zeros(0)
-_NO_CONTACTS = Solved(Contacts(*(np.zeros(0, np.int64),) * 4, np.zeros((0, 3)), *(_EMPTY,) * 6),
+_NO_CONTACTS = Solved(Contacts.empty(),
                        _EMPTY, np.zeros((0, 3)), _EMPTY)

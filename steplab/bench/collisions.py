@@ -62,8 +62,10 @@ def _ball_pit(balls: int, steps: int, config: Config, record: Record) -> None:
     world, side, dt = scene.collisions, box_side(balls), scene.dt
     simulated = steps * dt
     label = f"ball_pit_{size_label(balls)}"
-    what = (f"{balls:,} balls falling into a {side:g} m box, {scene.integrator}, {world.detector} detector, "
+    what = (f"{balls:,} balls falling into a {side:g} m box, {scene.integrator}, "
             f"{steps} steps of dt = 1/{round(1 / dt)} s")
+    # what each of steplab's contenders ran, in the comparisons' words
+    event_what, solver_what = f"{what}, {world.detector} event loop", f"{what}, contact solver"
     finals, setup = {}, {}
 
     solver_world = dataclasses.replace(world, method="solver")  # the contact solver, default settings
@@ -111,7 +113,7 @@ def _ball_pit(balls: int, steps: int, config: Config, record: Record) -> None:
         "balls_inside": balls_inside(finals["steplab_solver"].y[-1][0], side),
         "median_distance_to_steplab": float(np.median(np.linalg.norm(
             finals["steplab_solver"].y[-1][0] - finals["steplab"].y[-1][0], axis=1))), **solver.summary()}
-    record.compare(f"solver_vs_event_loop_{label}", "collisions", what, "steplab's event loop",
+    record.compare(f"solver_vs_event_loop_{label}", "collisions", solver_what, "steplab's event loop",
                    t["steplab_solver"], t["steplab"], None,
                    steplab_real_time_factor=contenders["steplab_solver"]["real_time_factor"],
                    peer_real_time_factor=contenders["steplab"]["real_time_factor"])
@@ -126,11 +128,11 @@ def _ball_pit(balls: int, steps: int, config: Config, record: Record) -> None:
         "what": what, "balls": balls, "steps": steps, "dt": dt, "simulated_seconds": simulated, "box_side": side,
         "setup_seconds": setup, "contenders": contenders, "not_compared": not_compared}
     for engine in engines:
-        record.compare(f"vs_{engine.name}_{label}", "collisions", what, engine.settings, t["steplab"],
+        record.compare(f"vs_{engine.name}_{label}", "collisions", event_what, engine.settings, t["steplab"],
                        t[engine.name], None, steplab_real_time_factor=contenders["steplab"]["real_time_factor"],
                        peer_real_time_factor=contenders[engine.name]["real_time_factor"])
         name = f"solver_vs_{engine.name}_{label}"
-        record.compare(name, "collisions", what, engine.settings, t["steplab_solver"], t[engine.name], None,
+        record.compare(name, "collisions", solver_what, engine.settings, t["steplab_solver"], t[engine.name], None,
                        steplab_real_time_factor=contenders["steplab_solver"]["real_time_factor"],
                        peer_real_time_factor=contenders[engine.name]["real_time_factor"])
         if (engine.name, balls) in SOLVER_ENGINE_TARGETS:

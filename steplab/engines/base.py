@@ -255,6 +255,46 @@ class EngineRun:
         return now
 
 
+class PlanarRun(EngineRun):
+    """An engine of bodies in a plane (Box2D, Chipmunk): steplab's axes ``self.axes`` are its x and y.
+
+    Subclasses set ``self.bodies`` and ``self.moving`` and name the engine's body attributes.
+    """
+
+    #: the engine's names of a body's linear velocity and of its spin
+    velocity_attribute = "velocity"
+    spin_attribute = "angular_velocity"
+
+    def set_state(self, y) -> None:
+        a, b = self.axes
+        self._y = np.array(y, dtype=float)
+        for i in self.moving:
+            body = self.bodies[i]
+            body.position = (float(self._y[0, i, a]), float(self._y[0, i, b]))
+            setattr(body, self.velocity_attribute, (float(self._y[1, i, a]), float(self._y[1, i, b])))
+            body.angle = 0.0
+            setattr(body, self.spin_attribute, 0.0)
+
+    def state(self) -> np.ndarray:
+        a, b = self.axes
+        for i in self.moving:
+            body = self.bodies[i]
+            self._y[0, i, a], self._y[0, i, b] = body.position
+            self._y[1, i, a], self._y[1, i, b] = getattr(body, self.velocity_attribute)
+        return self._y.copy()
+
+    def _enter_contact(self, out: dict, u, w, normal_in_plane) -> None:
+        """Enter a contact of owners ``u`` and ``w`` (a body index or a shape name), its normal
+        in the plane from u to w, into ``out`` as (body, other) -> the normal in 3-D from the body."""
+        a, b = self.axes
+        normal = np.zeros(3)
+        normal[a], normal[b] = normal_in_plane
+        if isinstance(u, int):
+            out[(u, w)] = normal
+        elif isinstance(w, int):
+            out[(w, u)] = -normal
+
+
 def _shape(parts: SceneParts, name: str):
     return next(s for s in parts.shapes if s.name == name)
 

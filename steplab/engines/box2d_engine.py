@@ -28,7 +28,7 @@ import numpy as np
 from steplab.physics import Dampers, Gravity, Springs
 from steplab.physics.collision import Box, OrientedBox, Plane
 
-from .base import EngineRun, UnsupportedFeatureError, body_indices, plane_axes, require, scene_parts, version
+from .base import PlanarRun, UnsupportedFeatureError, body_indices, plane_axes, require, scene_parts, version
 
 ENGINE = "Box2D"
 #: Box2D's recommended iterations (its testbed's): velocity and position
@@ -76,9 +76,11 @@ def spring_frequency(k: float, c: float, m_eff: float) -> tuple[float, float]:
     return omega / (2 * math.pi), c / (2 * m_eff * omega)
 
 
-class Box2DRun(EngineRun):
+class Box2DRun(PlanarRun):
     engine = "box2d"
     precision = "float32"
+    velocity_attribute = "linearVelocity"
+    spin_attribute = "angularVelocity"
 
     def __init__(self, model, collisions=None, dt: float = 0.01, continuous: bool = True, bullet: bool = False,
                  y0=None):
@@ -124,15 +126,6 @@ class Box2DRun(EngineRun):
         mode = "bullets" if bullet else "continuous physics" if continuous else "continuous physics off"
         self.settings = f"Box2D {version('Box2D')}, {mode}"
 
-    def set_state(self, y) -> None:
-        a, b = self.axes
-        self._y = np.array(y, dtype=float)
-        for i in self.moving:
-            body = self.bodies[i]
-            body.position = (float(self._y[0, i, a]), float(self._y[0, i, b]))
-            body.linearVelocity = (float(self._y[1, i, a]), float(self._y[1, i, b]))
-            body.angle, body.angularVelocity = 0.0, 0.0
-
     def step(self, dt: float) -> None:
         self.world.Step(dt, VELOCITY_ITERATIONS, POSITION_ITERATIONS)
 
@@ -140,27 +133,12 @@ class Box2DRun(EngineRun):
         for _ in range(steps):
             self.world.Step(dt, VELOCITY_ITERATIONS, POSITION_ITERATIONS)
 
-    def state(self) -> np.ndarray:
-        a, b = self.axes
-        for i in self.moving:
-            body = self.bodies[i]
-            self._y[0, i, a], self._y[0, i, b] = body.position
-            self._y[1, i, a], self._y[1, i, b] = body.linearVelocity
-        return self._y.copy()
-
     def touching(self) -> dict:
-        a, b = self.axes
         out = {}
         for contact in self.world.contacts:
             if not contact.touching:
                 continue
-            u, w = contact.fixtureA.body.userData, contact.fixtureB.body.userData
             manifold = contact.worldManifold  # kept alive while its normal is read
-            n2 = tuple(manifold.normal)  # from A to B
-            normal = np.zeros(3)
-            normal[a], normal[b] = n2
-            if isinstance(u, int):
-                out[(u, w)] = normal
-            elif isinstance(w, int):
-                out[(w, u)] = -normal
+            self._enter_contact(out, contact.fixtureA.body.userData, contact.fixtureB.body.userData,
+                                tuple(manifold.normal))  # from A to B
         return out

@@ -22,7 +22,7 @@ import numpy as np
 from steplab.physics import Dampers, Gravity, Springs
 from steplab.physics.collision import Box, OrientedBox, Plane
 
-from .base import EngineRun, body_indices, plane_axes, require, scene_parts, version
+from .base import PlanarRun, body_indices, plane_axes, require, scene_parts, version
 from .box2d_engine import static_polygons
 
 ENGINE = "Chipmunk"
@@ -30,7 +30,7 @@ ENGINE = "Chipmunk"
 COLLISION_SLOP = 0.005
 
 
-class ChipmunkRun(EngineRun):
+class ChipmunkRun(PlanarRun):
     engine = "chipmunk"
     precision = "float64"
 
@@ -75,15 +75,6 @@ class ChipmunkRun(EngineRun):
         self.moving = body_indices(parts)
         self.settings = f"Chipmunk (pymunk {version('pymunk')}), collision slop {collision_slop * 1e3:g} mm"
 
-    def set_state(self, y) -> None:
-        a, b = self.axes
-        self._y = np.array(y, dtype=float)
-        for i in self.moving:
-            body = self.bodies[i]
-            body.position = (float(self._y[0, i, a]), float(self._y[0, i, b]))
-            body.velocity = (float(self._y[1, i, a]), float(self._y[1, i, b]))
-            body.angle, body.angular_velocity = 0.0, 0.0
-
     def step(self, dt: float) -> None:
         self.space.step(dt)
 
@@ -91,27 +82,12 @@ class ChipmunkRun(EngineRun):
         for _ in range(steps):
             self.space.step(dt)
 
-    def state(self) -> np.ndarray:
-        a, b = self.axes
-        for i in self.moving:
-            body = self.bodies[i]
-            self._y[0, i, a], self._y[0, i, b] = body.position
-            self._y[1, i, a], self._y[1, i, b] = body.velocity
-        return self._y.copy()
-
     def touching(self) -> dict:
-        a, b = self.axes
         out = {}
 
         def record(arbiter):
-            s1, s2 = arbiter.shapes
-            u, w = self._owner.get(s1), self._owner.get(s2)
-            normal = np.zeros(3)
-            normal[a], normal[b] = arbiter.normal  # from the first shape to the second
-            if isinstance(u, int):
-                out[(u, w)] = normal
-            elif isinstance(w, int):
-                out[(w, u)] = -normal
+            s1, s2 = arbiter.shapes  # the normal runs from the first shape to the second
+            self._enter_contact(out, self._owner.get(s1), self._owner.get(s2), arbiter.normal)
 
         for i in self.moving:
             self.bodies[i].each_arbiter(record)
