@@ -1,19 +1,29 @@
-"""Compiled Newton blocks of springs and dampers: the hot loop of implicit Euler at cloth sizes.
+"""Compiled springs and dampers for implicit Euler: their forces and Newton blocks in one pass.
 
-:func:`.sparse_jacobian.newton_matrix` needs, every Newton iteration, the symmetric (or
-definite) part of the springs' and dampers' Jacobians, added into the Newton matrix with
-the coefficients -h^2 (positions) and -h (velocities). Through NumPy that is a dozen
-(P, 3, 3) temporaries per force (:meth:`Springs.jacobian_blocks`, 25 ms for the bench's
-101,442 springs and dampers); these kernels compute each pair's 3x3 block where it is
-added, in one pass (about 2 ms). They repeat the forces' formulas, written out once more
-for the compiler; ``tests/test_implicit_sparse.py`` holds them equal to the NumPy blocks.
+Every Newton iteration of implicit Euler's conjugate-gradient step needs, at the same
+state (q1, v1), the acceleration (for the residual) and the symmetric (or definite)
+part of the springs' and dampers' Jacobians, added into the Newton matrix with the
+coefficients -h^2 (positions) and -h (velocities) (:func:`.sparse_jacobian.newton_system`).
+Through NumPy that is 12 ms for the forces of the bench's 101,442 springs and dampers and
+a dozen (P, 3, 3) temporaries per force for the blocks (:meth:`Springs.jacobian_blocks`,
+25 ms); here one loop over the pairs computes each pair's separation, length and
+direction once and from them its force and its 3x3 block, added where they go
+(2.5 ms for both; 0.9 ms for the forces alone, without the blocks' 27 scattered
+additions per pair). The kernel repeats the forces' formulas, written out once more
+for the compiler; ``tests/test_implicit_sparse.py`` holds it equal to the NumPy forces
+and blocks.
 
-A kernel adds ``sign x`` to ``data[slot]`` for the pair's four blocks (``slots[p]``:
-(i, j) and (j, i) with +, (i, i) and (j, j) with -, -1 where the block is not in the
-matrix), as :func:`.sparse_jacobian._add_pair_blocks` does.
+Springs and dampers on the same pairs (a cloth's, from :func:`.soft_body.connect`) are
+one group and share the pass; a spring or damper force alone is a group of its own.
+A group adds ``sign S`` to ``data[slot]`` for the pair's three blocks (``slots[p]``:
+the pair's stored block with +, (i, i) and (j, j) with -, -1 where the block is not in
+the matrix), as :func:`.sparse_jacobian._add_symmetric_pair_blocks` does.
 """
 
 from __future__ import annotations
+
+import dataclasses
+import weakref
 
 import numpy as np
 from numba import njit
@@ -23,53 +33,116 @@ from .springs import Springs
 
 
 @njit(cache=True, inline="always")
-def _add(data, slots, p, r, c, x):  # pragma: no cover - compiled
-    for k in range(4):
+def _add(data, slots, p, s00, s11, s22, s01, s02, s12):  # pragma: no cover - compiled
+    # the symmetric block S (its six entries): +S at the pair's stored block, -S at (i, i)
+    # and (j, j); a slot of -1 is a block outside the matrix
+    for k in range(3):
         slot = slots[p, k]
-        if slot >= 0:
-            data[slot, r, c] += x if k < 2 else -x
+        if slot < 0:
+            continue
+        sign = 1.0 if k == 0 else -1.0
+        block = data[slot]
+        block[0, 0] += sign * s00
+        block[1, 1] += sign * s11
+        block[2, 2] += sign * s22
+        block[0, 1] += sign * s01
+        block[1, 0] += sign * s01
+        block[0, 2] += sign * s02
+        block[2, 0] += sign * s02
+        block[1, 2] += sign * s12
+        block[2, 1] += sign * s12
 
 
 @njit(cache=True)
-def _spring_blocks(data, slots, q, i, j, stiffness, rest_length, coefficient, definite):  # pragma: no cover
-    # B = k [d d^T + t (I - d d^T)], t = 1 - L / l (1 at l = 0, where d = 0); definite: t >= 0
+def _pair_system(force, data, slots, q, v, i, j, stiffness, rest_length, damping, coefficient_q, coefficient_v,
+                 definite, with_force, with_blocks):  # pragma: no cover - compiled
+    # Springs where stiffness is given (size > 0), dampers where damping is. With d the
+    # unit vector from i to j, l the length, u = v_j - v_i:
+    #   force on i (-it on j): [k (l - L) + c (d . u)] d
+    #   spring block d f_i / d q_j = k [d d^T + t (I - d d^T)], t = 1 - L / l (definite: t >= 0)
+    #   damper blocks: d f_i / d v_j = c d d^T, and the symmetric part of d f_i / d q_j,
+    #   c [(d . u) (I - d d^T) + (d w^T + w d^T) / 2] / l with w = u - (d . u) d (definite: none)
+    # all in one symmetric S = a d d^T + b I + e (d w^T + w d^T) / 2.
+    springs, dampers = stiffness.size > 0, damping.size > 0
     for p in range(i.size):
-        d0, d1, d2 = q[j[p], 0] - q[i[p], 0], q[j[p], 1] - q[i[p], 1], q[j[p], 2] - q[i[p], 2]
+        bi, bj = i[p], j[p]
+        d0, d1, d2 = q[bj, 0] - q[bi, 0], q[bj, 1] - q[bi, 1], q[bj, 2] - q[bi, 2]
         length = np.sqrt(d0 * d0 + d1 * d1 + d2 * d2)
-        t = 1.0
-        if length > 0:
-            d0, d1, d2 = d0 / length, d1 / length, d2 / length
-            t = 1.0 - rest_length[p] / length
-        if definite and t < 0:
-            t = 0.0
-        k = coefficient * stiffness[p]
-        a, b = k * (1.0 - t), k * t
-        d = (d0, d1, d2)
-        for r in range(3):
-            for c in range(3):
-                _add(data, slots, p, r, c, a * d[r] * d[c] + (b if r == c else 0.0))
+        # at l = 0 (no direction) 1 / l is taken as 0: d = 0, so no force, a spring's block
+        # k I (t = 1) and a damper's zero, as the forces define them (one path, no branch:
+        # a second one doubles the kernel's time)
+        inverse_length = 1.0 / length if length > 0 else 0.0
+        d0, d1, d2 = d0 * inverse_length, d1 * inverse_length, d2 * inverse_length
+        s = a = b = e = 0.0
+        w0 = w1 = w2 = 0.0
+        if springs:
+            s += stiffness[p] * (length - rest_length[p])
+            t = 1.0 - rest_length[p] * inverse_length
+            if definite and t < 0:
+                t = 0.0
+            k = coefficient_q * stiffness[p]
+            a += k * (1.0 - t)
+            b += k * t
+        if dampers:
+            u0, u1, u2 = v[bj, 0] - v[bi, 0], v[bj, 1] - v[bi, 1], v[bj, 2] - v[bi, 2]
+            du = d0 * u0 + d1 * u1 + d2 * u2
+            s += damping[p] * du
+            a += coefficient_v * damping[p]
+            if not definite:
+                e = coefficient_q * damping[p] * inverse_length
+                a -= e * du
+                b += e * du
+                w0, w1, w2 = u0 - du * d0, u1 - du * d1, u2 - du * d2
+        if with_force:
+            force[bi, 0] += s * d0
+            force[bi, 1] += s * d1
+            force[bi, 2] += s * d2
+            force[bj, 0] -= s * d0
+            force[bj, 1] -= s * d1
+            force[bj, 2] -= s * d2
+        if not with_blocks:
+            continue
+        _add(data, slots, p, a * d0 * d0 + b + e * d0 * w0, a * d1 * d1 + b + e * d1 * w1,
+             a * d2 * d2 + b + e * d2 * w2, a * d0 * d1 + 0.5 * e * (d0 * w1 + w0 * d1),
+             a * d0 * d2 + 0.5 * e * (d0 * w2 + w0 * d2), a * d1 * d2 + 0.5 * e * (d1 * w2 + w1 * d2))
 
 
-@njit(cache=True)
-def _damper_blocks(data, slots, q, v, i, j, damping, coefficient_q, coefficient_v, definite):  # pragma: no cover
-    # d f_i / d v_j = c d d^T; the symmetric part of d f_i / d q_j = c [(d . u) P + d w^T] / l
-    # (P = I - d d^T, u the relative velocity, w = P u) is c [(d . u) P + (d w^T + w d^T) / 2] / l
-    for p in range(i.size):
-        d0, d1, d2 = q[j[p], 0] - q[i[p], 0], q[j[p], 1] - q[i[p], 1], q[j[p], 2] - q[i[p], 2]
-        length = np.sqrt(d0 * d0 + d1 * d1 + d2 * d2)
-        if not length > 0:
-            continue  # no axis: no damping force, a zero Jacobian
-        d = (d0 / length, d1 / length, d2 / length)
-        u = (v[j[p], 0] - v[i[p], 0], v[j[p], 1] - v[i[p], 1], v[j[p], 2] - v[i[p], 2])
-        du = d[0] * u[0] + d[1] * u[1] + d[2] * u[2]
-        w = (u[0] - du * d[0], u[1] - du * d[1], u[2] - du * d[2])
-        cv = coefficient_v * damping[p]
-        cq = 0.0 if definite else coefficient_q * damping[p] / length
-        for r in range(3):
-            for c in range(3):
-                projection = (1.0 if r == c else 0.0) - d[r] * d[c]
-                x = cv * d[r] * d[c] + cq * (du * projection + 0.5 * (d[r] * w[c] + w[r] * d[c]))
-                _add(data, slots, p, r, c, x)
+_NONE = np.zeros(0)
+_NO_BLOCKS = np.zeros((0, 3, 3))
+_NO_SLOTS = np.zeros((0, 3), np.int64)
+
+
+@dataclasses.dataclass(frozen=True, eq=False)
+class PairGroup:
+    """Springs and/or dampers on the same pairs, whose forces and blocks one kernel pass adds."""
+
+    springs: Springs | None
+    dampers: Dampers | None
+
+    @property
+    def i(self):
+        return (self.springs or self.dampers).i
+
+    @property
+    def j(self):
+        return (self.springs or self.dampers).j
+
+    def add(self, force, data, slots, q, v, coefficient_q: float, coefficient_v: float, definite: bool,
+            with_force: bool) -> None:
+        """Add the group's Newton blocks into ``data`` and, ``with_force``, its forces into ``force`` (N, 3)."""
+        self._run(force, data, slots, q, v, coefficient_q, coefficient_v, definite, with_force, True)
+
+    def add_forces(self, force, q, v) -> None:
+        """Add the group's forces into ``force`` (N, 3), without any blocks."""
+        self._run(force, _NO_BLOCKS, _NO_SLOTS, q, v, 0.0, 0.0, False, True, False)
+
+    def _run(self, force, data, slots, q, v, coefficient_q, coefficient_v, definite, with_force, with_blocks):
+        springs, dampers = self.springs, self.dampers
+        _pair_system(force, data, slots, q, v, np.asarray(self.i), np.asarray(self.j),
+                     _NONE if springs is None else np.asarray(springs.stiffness, float),
+                     _NONE if springs is None else np.asarray(springs.rest_length, float),
+                     _NONE if dampers is None else np.asarray(dampers.damping, float),
+                     float(coefficient_q), float(coefficient_v), bool(definite), bool(with_force), bool(with_blocks))
 
 
 def has_kernel(force) -> bool:
@@ -77,20 +150,24 @@ def has_kernel(force) -> bool:
     return type(force) in (Springs, Dampers)
 
 
-def add_symmetric_blocks(force, data, slots, q, v, coefficient_q: float, coefficient_v: float,
-                         definite: bool) -> bool:
-    """Add ``force``'s symmetric (or definite) Newton blocks into ``data``; False if it has no kernel.
+#: each model's groups, found on first use: {model: tuple of PairGroup}
+_GROUPS: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()
 
-    ``coefficient_q`` multiplies d f / d q, ``coefficient_v`` d f / d v (a spring has no
-    velocity block).
+
+def pair_groups(model) -> tuple[PairGroup, ...]:
+    """``model``'s springs and dampers as groups: each damper force with the first spring force on the same pairs.
+
+    Only forces with a kernel (:func:`has_kernel`); a force without a partner is a group alone.
     """
-    if type(force) is Springs:
-        if coefficient_q != 0:
-            _spring_blocks(data, slots, q, force.i, force.j, np.asarray(force.stiffness, float),
-                           np.asarray(force.rest_length, float), coefficient_q, definite)
-        return True
-    if type(force) is Dampers:
-        _damper_blocks(data, slots, q, v, force.i, force.j, np.asarray(force.damping, float), coefficient_q,
-                       coefficient_v, definite)
-        return True
-    return False
+    if model not in _GROUPS:
+        springs = [f for f in model.forces if type(f) is Springs]
+        dampers = [f for f in model.forces if type(f) is Dampers]
+        groups = []
+        for s in springs:
+            partner = next((d for d in dampers if np.array_equal(d.i, s.i) and np.array_equal(d.j, s.j)), None)
+            if partner is not None:  # by identity: the forces' == compares arrays
+                dampers = [d for d in dampers if d is not partner]
+            groups.append(PairGroup(s, partner))
+        groups.extend(PairGroup(None, d) for d in dampers)
+        _GROUPS[model] = tuple(groups)
+    return _GROUPS[model]

@@ -13,11 +13,11 @@ interrupted run resumes from the stored tasks.
 
 Timing. A study that measures run time (work-precision, broadphase, the contact solver's)
 must not time while other tasks load the machine, nor must a task that does
-(``Study.timed``: the tunnelling study's cost rows). Such tasks, and every study not given
-as tasks, run after every other task has finished, one at a time, in the process that
-started the run, with the workers idle: their numbers mean what they mean in a serial run,
-on the machine the run was started from. (The bench, ``steplab bench``, is a command of
-its own and never runs on a cluster.)
+(``Study.timed``: the tunnelling study's cost rows, the engines study's pit costs). Such
+tasks, and every study not given as tasks, run after every other task has finished, one at
+a time, in the process that started the run, with the workers idle: their numbers mean what
+they mean in a serial run, on the machine the run was started from. (The bench, ``steplab
+bench``, is a command of its own and never runs on a cluster.)
 
 Every worker must run the same steplab source as that process: a task checks the cache key
 it was sent against its own and fails with one line when they differ. Connecting to a

@@ -26,6 +26,7 @@ the same measurements, by the same code, as steplab's integrators:
 from __future__ import annotations
 
 import dataclasses
+import functools
 import hashlib
 import math
 from pathlib import Path
@@ -35,7 +36,7 @@ from steplab.integrators import INTEGRATORS, DivergenceError, Stepper, simulate
 
 from . import plotting, restitution, stability, truncation, tunnelling
 from .problems import oscillator_problem, projectile_problem
-from .runner import Study
+from .runner import Study, run_tasks
 from .stability_limits import measured_limit, oscillator_mode
 from .system import engine_system, steplab_system
 from .tables import Table, format_value, markdown_table
@@ -186,10 +187,10 @@ def order(system, params: dict) -> dict:
     return {"order": truncation.fit_order(points, noise), "points": points}
 
 
-def stability_limits(system, params: dict) -> dict:
-    return {f"{zeta:g}": measured_limit(oscillator_mode(zeta), system, params["long_run_steps"],
-                                        params["stability_rtol"])["omega_dt_max"]
-            for zeta in params["damping_ratios"]}
+def stability_limit(system, zeta: float, params: dict) -> float | None:
+    """The largest stable omega dt on the oscillator at damping ratio ``zeta`` (None: no limit found)."""
+    return measured_limit(oscillator_mode(zeta), system, params["long_run_steps"],
+                          params["stability_rtol"])["omega_dt_max"]
 
 
 def energy(system, params: dict) -> dict:
@@ -227,8 +228,8 @@ def drops(system, params: dict) -> list[dict]:
 #: frame of 1/60 s per step: m, kg, m (the layer they start in), m/s, eps, m^2 of floor per
 #: ball (in the planar pit: of the plane), s
 PIT_RADIUS, PIT_MASS, PIT_LAYER, PIT_SPEED, PIT_RESTITUTION, PIT_AREA, PIT_DT = 0.1, 1.0, 2.0, 2.0, 0.8, 0.2, 1 / 60
-#: balls and steps of the pit run first, so that steplab's event-loop kernels are compiled
-#: before anything is timed (as the bench's warm-up pit)
+#: balls and steps of the pit run before any pit is timed, once in each process that times,
+#: so that steplab's event-loop kernels are compiled by then (as the bench's warm-up pit)
 WARM_UP_PIT = (50, 30)
 
 
@@ -292,36 +293,104 @@ def _measure(fn, *args):
         return {"error": str(err)}
 
 
-def compute(params: dict, progress=None) -> dict:
+# --- the sweep as tasks -----------------------------------------------------------------
+
+#: steplab's own detectors in the tunnelling comparison
+DETECTORS = ("overlap", "swept")
+#: the tasks that time a pit (:func:`timed`)
+TIMED_KINDS = ("cost", "steplab_cost")
+#: the engines that run in the plane z = 0 (their tunnelling lanes side by side in it)
+PLANAR_ENGINES = ("box2d", "chipmunk")
+
+
+def tasks(params: dict) -> list[list]:
+    """The sweep's independent measurements.
+
+    Per setting: its energy run, each stability limit, its drops, order and miss rates; every
+    setting's identification in one task (steplab's trajectories computed once); steplab's own
+    miss rates per detector and its drop; then the timed pit costs, per setting and per steplab
+    system. The longest runs (energy, limits) come first, so a cluster's workers finish together.
+    """
     reason = unavailable()
     if reason:
         raise ValueError(reason)
+    settings = params["settings"]
+    return ([["energy", key] for key in settings]
+            + [["limit", key, zeta] for key in settings for zeta in params["damping_ratios"]]
+            + [[kind, key] for kind in ("drops", "order", "miss_rates") for key in settings]
+            + [["identification"]] + [["steplab_miss_rates", detector] for detector in DETECTORS]
+            + [["steplab_drops"]]
+            + [["cost", key] for key in settings] + [["steplab_cost", name] for name in _steplab_systems(params)])
+
+
+def timed(item: list) -> bool:
+    """The pit costs measure wall time (an engine's, steplab's event loop's and contact solver's)."""
+    return item[0] in TIMED_KINDS
+
+
+def task(params: dict, item: list):
+    """One measurement of :func:`tasks`, as part of the record."""
     from steplab.engines import SETTINGS
 
-    model, world, y0 = falling_balls(WARM_UP_PIT[0], planar=False)  # compiles the event loop's kernels
-    simulate(model, "semi-implicit-euler", y0, 0.0, dt=PIT_DT, n_steps=WARM_UP_PIT[1], collisions=world)
-    pits = {"planar": falling_balls(params["pit_balls"], planar=True),
-            "3-D": falling_balls(params["pit_balls"], planar=False)}
-    problems = identification_problems(params)
+    kind = item[0]
+    if kind == "identification":
+        return {key: _describe_and_identify(SETTINGS[key], params, problems)
+                for problems in [identification_problems(params)] for key in params["settings"]}
+    if kind == "steplab_miss_rates":
+        return _steplab_miss_rates(item[1], params)
+    if kind == "steplab_drops":
+        return drops(_steplab_systems(params)["event loop"], params)
+    if kind == "steplab_cost":
+        return _pit_costs(_steplab_systems(params)[item[1]], params)
+    setting = SETTINGS[item[1]]
+    system = engine_system(setting)
+    if kind == "energy":
+        return _energy_summary(energy(system, params))
+    if kind == "limit":
+        return stability_limit(system, item[2], params)
+    if kind == "drops":
+        return _measure(drops, system, params)
+    if kind == "order":
+        return order(system, params)["order"]
+    if kind == "miss_rates":
+        return _measure(miss_rates, system, setting.engine in PLANAR_ENGINES, params)
+    if kind == "cost":
+        return _pit_costs(system, params)
+    raise ValueError(f"unknown task {item!r} of the engines study")
+
+
+def reduce(params: dict, results: list) -> dict:
+    """The record from the results of :func:`tasks` (in their order): a row per setting, and steplab's own."""
+    measured = {tuple(item): result for item, result in zip(tasks(params), results)}
+    described = measured[("identification",)]
     rows = []
     for key in params["settings"]:
-        setting = SETTINGS[key]
-        system = engine_system(setting)
-        planar = setting.engine in ("box2d", "chipmunk")
-        row = {"setting": key, "label": setting.label, "engine": setting.engine, "continuous": setting.continuous,
-               "precision": system.precision, "settings": system.build(*_probe_scene()).settings,
-               "identification": identify(system, params, problems), "order": order(system, params)["order"],
-               "omega_dt_max": stability_limits(system, params), "energy": _energy_summary(energy(system, params)),
-               "miss_rates": _measure(miss_rates, system, planar, params),
-               "drops": _measure(drops, system, params),
-               "cost": {label: pit_cost(system, scene, params["pit_steps"], params["pit_repeats"])
-                        for label, scene in pits.items()},
-               "deviation": DEVIATIONS.get(key, DEVIATIONS.get(setting.engine))}
-        rows.append(row)
-        if progress is not None:
-            progress()
-    references = _steplab_references(params, pits)
+        about = described[key]
+        rows.append({"setting": key, "label": about["label"], "engine": about["engine"],
+                     "continuous": about["continuous"], "precision": about["precision"],
+                     "settings": about["settings"], "identification": about["identification"],
+                     "order": measured["order", key],
+                     "omega_dt_max": {f"{zeta:g}": measured["limit", key, zeta] for zeta in params["damping_ratios"]},
+                     "energy": measured["energy", key], "miss_rates": measured["miss_rates", key],
+                     "drops": measured["drops", key], "cost": measured["cost", key],
+                     "deviation": DEVIATIONS.get(key, DEVIATIONS.get(about["engine"]))})
+    references = {"miss_rates": {detector: measured["steplab_miss_rates", detector] for detector in DETECTORS},
+                  "drops": measured[("steplab_drops",)],
+                  "cost": {name: measured["steplab_cost", name] for name in _steplab_systems(params)}}
     return {"rows": rows, "steplab": references}
+
+
+def compute(params: dict, progress=None) -> dict:
+    """Every task in turn, then the reduction (a run without a cluster)."""
+    return run_tasks(STUDY, params, progress)
+
+
+def _describe_and_identify(setting, params: dict, problems: dict) -> dict:
+    """What a setting is (its engine, its precision, the engine's settings) and which steplab method it steps."""
+    system = engine_system(setting)
+    return {"label": setting.label, "engine": setting.engine, "continuous": setting.continuous,
+            "precision": system.precision, "settings": system.build(*_probe_scene()).settings,
+            "identification": identify(system, params, problems)}
 
 
 def _probe_scene():
@@ -336,23 +405,45 @@ def _energy_summary(e: dict) -> dict:
                               "final_relative_energy_error", "diverged_at_step")}
 
 
-def _steplab_references(params: dict, pits: dict) -> dict:
-    """steplab's own rows of the comparisons: its detectors' miss rates, its drop, its pit costs."""
-    trials = params["trials"]
-    phases = (np.arange(trials) + 0.5) / trials
-    misses = {}
-    for detector in ("overlap", "swept"):  # each shot its own run: no other shot's impact splits its steps
-        misses[detector] = [{"ratio": ratio, "miss_rate": tunnelling.shoot(
-            ratio, params["wall"], params["tunnelling_dt"], params["radius"], phases, detector)["misses"] / trials}
-            for ratio in params["ratios"]]
-    swept = steplab_system("semi-implicit-euler", "steplab, swept detector")
-    systems = {"event loop": swept}
+def _steplab_systems(params: dict) -> dict:
+    """steplab's own rows of the comparisons: its event loop (the swept detector), and its
+    contact solver where the collision world has one."""
+    systems = {"event loop": steplab_system("semi-implicit-euler", "steplab, swept detector")}
     if params["solver"]:
         systems["contact solver"] = steplab_system("semi-implicit-euler", "steplab, contact solver",
                                                    world_options={"method": "solver"})
-    cost = {name: {label: pit_cost(system, scene, params["pit_steps"], params["pit_repeats"])
-                   for label, scene in pits.items()} for name, system in systems.items()}
-    return {"miss_rates": misses, "drops": drops(swept, params), "cost": cost}
+    return systems
+
+
+def _steplab_miss_rates(detector: str, params: dict) -> list[dict]:
+    """steplab's miss rate with ``detector`` at each ratio, each shot its own run (no other
+    shot's impact splits its steps)."""
+    trials = params["trials"]
+    phases = (np.arange(trials) + 0.5) / trials
+    return [{"ratio": ratio, "miss_rate": tunnelling.shoot(ratio, params["wall"], params["tunnelling_dt"],
+                                                           params["radius"], phases, detector)["misses"] / trials}
+            for ratio in params["ratios"]]
+
+
+def _pit_costs(system, params: dict) -> dict:
+    """The system's cost on the planar and the 3-D pit, timed once steplab's kernels are compiled."""
+    _compile_event_loop()
+    return {label: pit_cost(system, scene, params["pit_steps"], params["pit_repeats"])
+            for label, scene in _pits(params["pit_balls"]).items()}
+
+
+@functools.cache
+def _compile_event_loop() -> None:
+    """Run the warm-up pit once per process, so steplab's event-loop kernels are compiled
+    before anything in it is timed (as the bench's warm-up pit)."""
+    model, world, y0 = falling_balls(WARM_UP_PIT[0], planar=False)
+    simulate(model, "semi-implicit-euler", y0, 0.0, dt=PIT_DT, n_steps=WARM_UP_PIT[1], collisions=world)
+
+
+@functools.cache
+def _pits(balls: int) -> dict:
+    """The planar and the 3-D pit of ``balls`` balls (built once per process, shared by every system's cost)."""
+    return {"planar": falling_balls(balls, planar=True), "3-D": falling_balls(balls, planar=False)}
 
 
 # --- figures ---------------------------------------------------------------------------
@@ -581,4 +672,5 @@ TABLES = (Table("engines_drop", select_drops, drop_table), Table("engines", sele
 
 
 STUDY = Study("engines", "Build or buy: MuJoCo, Bullet, Box2D and Chipmunk measured as steplab's methods",
-              parameters, compute, plot, summary, tables=TABLES, unavailable=unavailable)
+              parameters, compute, plot, summary, tables=TABLES, unavailable=unavailable,
+              tasks=tasks, task=task, reduce=reduce, timed=timed)

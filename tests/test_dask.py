@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import os
 import signal
@@ -47,6 +48,39 @@ def test_distributed_quick_run_writes_the_serial_records(serial, client, tmp_pat
         assert without_provenance(tmp_path / f"{name}.json") == without_provenance(serial / f"{name}.json")
         assert record["provenance"]["cluster"]["workers"] == 2
     assert not (tmp_path / FOLDER).exists()  # the stored tasks go once the records are written
+
+
+#: one setting of each engine: the engines study's quick record, serially and on the cluster
+ENGINE_SETTINGS = ["mujoco-euler", "bullet-default", "box2d-default", "chipmunk"]
+#: what a pit cost measures: wall time, which no two runs share
+TIMINGS = ("per_step_seconds", "per_body_step_seconds", "real_time_factor")
+
+
+def without_timings(path) -> tuple[bytes, list[float]]:
+    """A record's bytes less the provenance and its pit costs' timings; and those timings."""
+    record = json.loads(without_provenance(path))
+    costs = [row["cost"] for row in record["rows"]] + list(record["steplab"]["cost"].values())
+    timings = [pit.pop(name) for cost in costs for pit in cost.values() if "error" not in pit for name in TIMINGS]
+    return json.dumps(record, indent=2, sort_keys=True).encode(), timings
+
+
+def test_engines_study_on_the_cluster_writes_the_serial_record_but_its_timings(client, tmp_path):
+    engines = STUDIES["engines"]
+    if engines.unavailable():
+        pytest.skip(engines.unavailable())
+    # the quick parameters on one setting of each engine, without figures (the workers'
+    # cache key is of the parameters the run sends them, so they run the same tasks)
+    lean = dataclasses.replace(engines, parameters=lambda quick: engines.parameters(True) | {
+        "settings": ENGINE_SETTINGS}, plot=lambda record, out: [])
+    runner.run_study(lean, tmp_path / "serial", quick=True)
+    [record] = distributed.run_studies([lean], tmp_path / "cluster", client, quick=True)
+    serial, serial_timings = without_timings(tmp_path / "serial" / "engines.json")
+    cluster, cluster_timings = without_timings(tmp_path / "cluster" / "engines.json")
+    assert cluster == serial and [row["setting"] for row in record["rows"]] == ENGINE_SETTINGS
+    # every engine timed its planar pit, steplab both pits with each of its systems
+    pits = len(ENGINE_SETTINGS) + 2 * len(record["steplab"]["cost"])
+    assert len(cluster_timings) == len(serial_timings) >= len(TIMINGS) * pits
+    assert min(cluster_timings) > 0
 
 
 def test_a_worker_killed_mid_run_loses_nothing(serial, client, tmp_path):

@@ -92,6 +92,26 @@ def test_newton_matrix_is_the_symmetric_part_and_the_definite_one_is_positive_de
         assert_allclose(compiled.toarray(), generic, rtol=0, atol=1e-14 * np.abs(generic).max())
 
 
+def test_the_compiled_forces_and_blocks_are_the_models():
+    # springs with dampers on the same pairs (one kernel pass), dampers on pairs of their own,
+    # drag and gravity (NumPy), and a pair of coincident bodies (no direction: no force, a
+    # spring block k I)
+    model, y = network()
+    springs = model.forces[1]
+    q = y[0].copy()
+    q[6] = q[5]  # bodies 5 and 6 coincide: the pair (5, 6) has zero length
+    on_springs = Dampers(springs.i, springs.j, np.linspace(0.1, 0.3, springs.i.size))
+    model = Model(model.masses, model.radii, [*model.forces, on_springs], pinned=model.pinned)
+    a, matrix, pattern = sparse_jacobian.newton_system(model, 0.0, q, y[1], 0.1)
+    expected = model.acceleration(0.0, q, y[1])
+    assert_allclose(a, expected, rtol=0, atol=1e-14 * np.abs(expected).max())
+    assert_allclose(sparse_jacobian.acceleration(model, 0.0, q, y[1]), expected, rtol=0,
+                    atol=1e-14 * np.abs(expected).max())
+    generic = newton_matrix(model, 0.0, q, y[1], 0.1, compiled=False)[0].toarray()
+    assert_allclose(matrix.toarray(), generic, rtol=0, atol=1e-14 * np.abs(generic).max())
+    assert_allclose(pattern.kept, np.flatnonzero(~model.pinned))
+
+
 # --- the CG step against the dense step and the equations of implicit Euler ---------------------
 
 
@@ -204,24 +224,71 @@ def spd(n=30, seed=0):
     return csr_array(x @ x.T + n * np.eye(n)), np.random.default_rng(seed + 1).normal(size=n)
 
 
-def test_cg_reports_its_residual_and_iterations():
+def block_parts(a):
+    """D (the 3x3 diagonal blocks) and L (the blocks below them) of a dense matrix."""
+    d = np.zeros_like(a)
+    for r in range(0, a.shape[0], 3):
+        d[r:r + 3, r:r + 3] = a[r:r + 3, r:r + 3]
+    rows, cols = np.indices(a.shape) // 3
+    return d, np.where(rows > cols, a, 0.0)
+
+
+@pytest.mark.parametrize("preconditioner", cg.PRECONDITIONERS)
+def test_cg_reports_its_residual_and_iterations(preconditioner):
     from scipy.sparse.linalg import cg as scipy_cg
 
     a, b = spd()
-    result = cg.solve(a, b, rtol=1e-10)
+    result = cg.solve(a, b, rtol=1e-10, preconditioner=preconditioner)
     assert result.converged and 0 < result.iterations <= 30
     assert result.residual <= 2e-10
     assert_allclose(result.x, np.linalg.solve(a.toarray(), b), rtol=1e-8)
-    # the same iteration as scipy's block-Jacobi preconditioned cg: the same iterates
-    diagonal = np.zeros((30, 30))
-    for r in range(0, 30, 3):
-        diagonal[r:r + 3, r:r + 3] = np.linalg.inv(a.toarray()[r:r + 3, r:r + 3])
+    # the same iteration as scipy's cg preconditioned by block Jacobi, M = D, or by symmetric
+    # Gauss-Seidel, M = (D + L) D^-1 (D + L)^T (run here through Eisenstat's congruent system):
+    # the same iterates
+    d, lower = block_parts(a.toarray())
+    w = d + lower
+    inverse = np.linalg.inv(d) if preconditioner == "block-jacobi" else np.linalg.inv(w @ np.linalg.inv(d) @ w.T)
     for steps in (1, 4):
-        ours = cg.solve(a, b, rtol=1e-300, maxiter=steps)
-        theirs, _ = scipy_cg(a, b, rtol=1e-300, maxiter=steps, M=diagonal)
+        ours = cg.solve(a, b, rtol=1e-300, maxiter=steps, preconditioner=preconditioner)
+        theirs, _ = scipy_cg(a, b, rtol=1e-300, maxiter=steps, M=inverse)
         assert not ours.converged and ours.iterations == steps
-        assert_allclose(ours.x, theirs, rtol=1e-12, atol=1e-15)
-        assert_allclose(ours.residual, np.linalg.norm(b - a @ theirs) / np.linalg.norm(b), rtol=1e-10)
+        assert_allclose(ours.x, theirs, rtol=1e-10, atol=1e-14)
+        assert_allclose(ours.residual, np.linalg.norm(b - a @ theirs) / np.linalg.norm(b), rtol=1e-8)
+
+
+def test_gauss_seidel_cg_solves_a_cloth_newton_system_as_a_direct_solver_does():
+    from scipy.sparse.linalg import spsolve
+
+    mesh = grid(12, 12, 0.1, origin=(0.0, 0.0, 2.0))
+    springs, dampers = connect(mesh.vertices, mesh.edges, stiffness=100.0, damping=0.05)
+    model = Model(np.full(144, 0.01), np.full(144, 0.01), [Gravity(), springs, dampers])
+    q = mesh.vertices + np.random.default_rng(3).normal(0.0, 0.01, mesh.vertices.shape)
+    v = np.random.default_rng(4).normal(0.0, 0.1, q.shape)
+    matrix, _ = newton_matrix(model, 0.0, q, v, 0.02, definite=True)  # h^2 k / m = 4: some springs buckle
+    b = np.random.default_rng(5).normal(size=matrix.shape[0])
+    exact = spsolve(matrix.tobsr().tocsc(), b)
+    iterations = {}
+    for preconditioner in cg.PRECONDITIONERS:
+        result = cg.solve(matrix, b, rtol=1e-10, preconditioner=preconditioner)
+        assert result.converged
+        assert_allclose(result.x, exact, rtol=0, atol=1e-8 * np.abs(exact).max())
+        iterations[preconditioner] = result.iterations
+    assert iterations["gauss-seidel"] < iterations["block-jacobi"]
+
+
+def test_symmetric_block_matrix_is_the_matrix_it_stores():
+    from steplab.physics.symmetric_blocks import SymmetricBlockMatrix
+
+    a, _ = spd()
+    stored = SymmetricBlockMatrix.from_sparse(a)
+    assert stored.pairs.n_pairs == 45  # 10 block rows, all coupled: 10 * 9 / 2 blocks above the diagonal
+    assert_allclose(stored.toarray(), a.toarray(), rtol=0, atol=0)
+    x = np.random.default_rng(2).normal(size=30)
+    assert_allclose(stored @ x, a.toarray() @ x, rtol=1e-13)
+    with pytest.raises(ValueError, match="not symmetric"):
+        SymmetricBlockMatrix.from_sparse(np.triu(a.toarray()))
+    with pytest.raises(ValueError, match="3n rows"):
+        SymmetricBlockMatrix.from_sparse(np.eye(4))
 
 
 def test_cg_refuses_what_it_cannot_solve():
@@ -234,8 +301,11 @@ def test_cg_refuses_what_it_cannot_solve():
         cg.solve(-a, b)
     # positive definite diagonal blocks, an indefinite matrix (eigenvalues 1 - 2 and 1 + 2)
     indefinite = csr_array(np.kron([[1.0, 2.0], [2.0, 1.0]], np.eye(3)))
-    with pytest.raises(cg.NotPositiveDefiniteError, match="p\\^T A p <= 0"):
-        cg.solve(indefinite, np.array([1.0, 0, 0, -1.0, 0, 0]))
+    for preconditioner in cg.PRECONDITIONERS:
+        with pytest.raises(cg.NotPositiveDefiniteError, match="p\\^T A p <= 0"):
+            cg.solve(indefinite, np.array([1.0, 0, 0, -1.0, 0, 0]), preconditioner=preconditioner)
+    with pytest.raises(ValueError, match="preconditioner must be one of block-jacobi, gauss-seidel"):
+        cg.solve(a, b, preconditioner="ilu")
 
 
 def test_a_cg_solve_short_of_its_tolerance_warns_with_the_residual():

@@ -21,6 +21,7 @@ from __future__ import annotations
 import dataclasses
 
 import numpy as np
+from numba import njit
 
 from .pairs import BodyPairs, candidates
 from .shapes import DEFAULT_MATERIAL
@@ -87,20 +88,17 @@ def find_contacts(world, materials: Materials, q, v, a, radii, inverse_masses, d
                         removed, margin)
     parts = []
     for group in groups:
-        contact = group.contact(radii, q)
         i = group.i
-        if isinstance(group, BodyPairs):
-            j, shape = group.j, np.full(len(i), -1)
-            other = j
-            e = materials.restitution[materials.body[i], materials.body[j]]
-            mu = materials.friction[materials.body[i], materials.body[j]]
-            v_other, a_other, w_other = v[j], a[j], inverse_masses[j]
-        else:
-            j, shape = np.full(len(i), -1), np.full(len(i), group.index)
-            other = n + group.index
-            e = materials.restitution[materials.body[i], materials.shape[group.index]]
-            mu = materials.friction[materials.body[i], materials.shape[group.index]]
-            v_other, a_other, w_other = 0.0, 0.0, 0.0
+        if isinstance(group, BodyPairs):  # most contacts of a pile: one compiled pass
+            parts.append(_body_contacts(i, group.j, q, v, a, radii, inverse_masses, materials.body,
+                                        materials.restitution, materials.friction, n + n_shapes))
+            continue
+        contact = group.contact(radii, q)
+        j, shape = np.full(len(i), -1), np.full(len(i), group.index)
+        other = n + group.index
+        e = materials.restitution[materials.body[i], materials.shape[group.index]]
+        mu = materials.friction[materials.body[i], materials.shape[group.index]]
+        v_other, a_other, w_other = 0.0, 0.0, 0.0
         normal = np.atleast_2d(contact.normal)
         parts.append((i, j, shape, i * (n + n_shapes) + other, normal, -contact.penetration_depth,
                       np.sum((v_other - v[i]) * normal, axis=1), np.sum((a[i] - a_other) * normal, axis=1),
@@ -111,3 +109,29 @@ def find_contacts(world, materials: Materials, q, v, a, radii, inverse_masses, d
     contacts = Contacts(*columns)
     order = np.argsort(contacts.key, kind="stable")
     return contacts.subset(order)
+
+
+@njit(cache=True)
+def _body_contacts(i, j, q, v, a, radii, inverse_masses, material, restitution, friction, stride):
+    """The columns of :class:`Contacts` for body pairs (i, j): the sphere-sphere narrow phase
+    (:func:`.narrow_phase.collide_sphere_sphere`, the same numbers) and each pair's properties."""
+    k = len(i)
+    normal = np.empty((k, 3))
+    separation, normal_speed, pressing = np.empty(k), np.empty(k), np.empty(k)
+    mass, e, mu = np.empty(k), np.empty(k), np.empty(k)
+    for p in range(k):
+        b, c = i[p], j[p]
+        d0, d1, d2 = q[c, 0] - q[b, 0], q[c, 1] - q[b, 1], q[c, 2] - q[b, 2]
+        dist = np.sqrt(d0 * d0 + d1 * d1 + d2 * d2)
+        if dist > 0:
+            n0, n1, n2 = d0 / dist, d1 / dist, d2 / dist
+        else:  # concentric: +x by convention
+            n0, n1, n2 = 1.0, 0.0, 0.0
+        normal[p, 0], normal[p, 1], normal[p, 2] = n0, n1, n2
+        separation[p] = -(radii[b] + radii[c] - dist)
+        normal_speed[p] = (v[c, 0] - v[b, 0]) * n0 + (v[c, 1] - v[b, 1]) * n1 + (v[c, 2] - v[b, 2]) * n2
+        pressing[p] = (a[b, 0] - a[c, 0]) * n0 + (a[b, 1] - a[c, 1]) * n1 + (a[b, 2] - a[c, 2]) * n2
+        mass[p] = 1.0 / (inverse_masses[b] + inverse_masses[c])
+        e[p] = restitution[material[b], material[c]]
+        mu[p] = friction[material[b], material[c]]
+    return (i, j, np.full(k, -1), i * stride + j, normal, separation, normal_speed, pressing, mass, e, mu)

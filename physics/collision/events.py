@@ -71,11 +71,51 @@ class Collision:
                 repr(self.restitution), repr(self.bracket[0]), repr(self.bracket[1])]
 
 
+@dataclasses.dataclass(frozen=True)
+class ImpactBlock:
+    """Collisions of one step as columns, made into :class:`Collision` objects only when read.
+
+    The contact solver has hundreds of impacts per step in a big pile; when no prologue or
+    epilogue needs to see them one by one, building a Python object for each (3 us, a
+    fifth of a 10^4-ball step) is deferred until someone reads ``log.events``.
+    """
+
+    t: np.ndarray
+    body: np.ndarray
+    other: np.ndarray  # the other body, or -1 - (index of the static shape)
+    normal: np.ndarray  # (k, 3)
+    impact_speed: np.ndarray
+    restitution: np.ndarray
+    friction: np.ndarray
+    impulse: np.ndarray
+    bracket: tuple[float, float]
+    body_names: tuple  # the model's names
+    shapes: tuple  # the world's static shapes
+
+    def __len__(self) -> int:
+        return len(self.t)
+
+    def collisions(self) -> list[Collision]:
+        events = []
+        for t, body, other, normal, speed, e, mu, impulse in zip(
+                self.t.tolist(), self.body.tolist(), self.other.tolist(), self.normal, self.impact_speed.tolist(),
+                self.restitution.tolist(), self.friction.tolist(), self.impulse.tolist()):
+            shape = self.shapes[-1 - other] if other < 0 else None
+            events.append(Collision(t=t, body=body, other=shape.name if shape else other,
+                                    body_name=self.body_names[body],
+                                    other_name=shape.name if shape else self.body_names[other], normal=normal,
+                                    impact_speed=speed, restitution=e, friction=mu, bracket=self.bracket,
+                                    impulse=impulse, trigger=shape is not None and shape.trigger))
+        return events
+
+
 @dataclasses.dataclass
 class CollisionLog:
     """Everything the collision stage did during one run."""
 
-    events: list[Collision] = dataclasses.field(default_factory=list)
+    _events: list[Collision] = dataclasses.field(default_factory=list, repr=False)
+    #: impacts not yet made into Collision objects, in order, after ``_events``
+    _blocks: list[ImpactBlock] = dataclasses.field(default_factory=list, repr=False)
     #: bodies an epilogue removed from collision detection (they fly on untouched)
     removed: set[int] = dataclasses.field(default_factory=set)
     #: the most impacts resolved in one step
@@ -88,11 +128,25 @@ class CollisionLog:
     #: (None for the event loop, which resolves every impact exactly)
     largest_residual: float | None = None
 
+    @property
+    def events(self) -> list[Collision]:
+        """Every collision of the run, in order (resolved, trigger or cancelled)."""
+        for block in self._blocks:
+            self._events += block.collisions()
+        self._blocks.clear()
+        return self._events
+
+    def add_impacts(self, block: ImpactBlock) -> None:
+        """Append a step's impacts as columns (see :class:`ImpactBlock`)."""
+        if len(block):
+            self._blocks.append(block)
+
     def remove(self, body: int) -> None:
         self.removed.add(int(body))
 
     def count(self, kind: str = "impact") -> int:
-        return sum(1 for e in self.events if e.kind == kind)
+        pending = sum(len(block) for block in self._blocks) if kind == "impact" else 0
+        return pending + sum(1 for e in self._events if e.kind == kind)
 
     def summary(self) -> dict:
         return {"impacts": self.count("impact"), "triggers": self.count("trigger"),

@@ -35,7 +35,7 @@ import dataclasses
 import numpy as np
 
 from .contact_buffer import Contacts, Materials, find_contacts
-from .events import Collision, CollisionLog, cancel_triggers
+from .events import CollisionLog, ImpactBlock, cancel_triggers
 from .sequential_impulses import finish, step_members, step_members_parallel, substep
 from .step import RESTING_STEPS
 
@@ -79,6 +79,8 @@ class SolverStep:
         # the built-in prologue says no to triggers only: asked here without a call per impact
         self._prologues = tuple(p for p in self.world.prologues if p is not cancel_triggers)
         self._triggers_cancel = len(self._prologues) < len(self.world.prologues)
+        # nobody to ask or tell about each impact: the log takes them as columns (ImpactBlock)
+        self._columnar = not (self._prologues or self.world.epilogues or any(s.trigger for s in self.world.shapes))
         self._previous = _NO_CONTACTS  # last step's contacts: keys (sorted), impulses, whether hit
         self._cancelled = set()  # keys of pairs a prologue cancelled, until they are no longer contacts
 
@@ -129,6 +131,10 @@ class SolverStep:
     def conclude(self, start: StepStart, q, v, solved) -> np.ndarray:
         """Events through the prologues (solving again without what they cancel), the epilogues,
         the log, and what the next step warm-starts from; returns the new state (2, N, 3)."""
+        if self._columnar:
+            block, _ = self._impacts(start.t, start.dt, start.contacts, solved)
+            self.log.add_impacts(block)
+            return self._close(start, q, v, solved, len(block))
         asked, said_no = set(), []  # keys the prologues have seen this step, and the events they cancelled
         while True:
             events, cancelled = self._events(start.t, start.dt, start.contacts, solved, asked)
@@ -145,8 +151,11 @@ class SolverStep:
             if event.kind == "impact":
                 for epilogue in self.world.epilogues:
                     epilogue(event, self.log)
-        self.log.most_impacts_in_a_step = max(self.log.most_impacts_in_a_step,
-                                              sum(e.kind == "impact" for e in events))
+        return self._close(start, q, v, solved, sum(e.kind == "impact" for e in events))
+
+    def _close(self, start: StepStart, q, v, solved, impacts: int) -> np.ndarray:
+        """The log's counters, what the next step warm-starts from, and the new state (2, N, 3)."""
+        self.log.most_impacts_in_a_step = max(self.log.most_impacts_in_a_step, impacts)
         self.log.largest_residual = max(self.log.largest_residual, solved.residual)
         self._previous = solved
         if not (np.all(np.isfinite(q)) and np.all(np.isfinite(v))):
@@ -168,33 +177,31 @@ class SolverStep:
             pt[found] = p - np.sum(p * n, axis=1)[:, None] * n
         return pn, pt
 
-    def _events(self, t, dt, contacts: Contacts, solved, asked: set):
-        """Impacts of the step (contacts hit now and not in the last step), through the prologues.
-
-        Returns (events, keys cancelled now); each pair meets the prologues once per step.
-        """
+    def _impacts(self, t, dt, contacts: Contacts, solved) -> tuple[ImpactBlock, np.ndarray]:
+        """Impacts of the step, the contacts hit now (an impulse) and not in the last step, and their keys."""
         hit = solved.total > 0
         old = self._previous
         if len(old.contacts):
             at = np.minimum(np.searchsorted(old.contacts.key, contacts.key), len(old.contacts) - 1)
             hit &= ~((old.contacts.key[at] == contacts.key) & (old.total[at] > 0))
-        events, cancelled = [], set()
-        names, shapes = self.model.names, self.world.shapes
         k = np.flatnonzero(hit)
         c = contacts.subset(k)
         approach = -c.normal_speed
         # the time of touching, had the approach speed stayed what it was; in the bracket (t, t + dt)
         t_touch = t + np.where(approach > 0, np.minimum(np.maximum(c.separation, 0.0) / np.where(
             approach > 0, approach, 1.0), dt), 0.0)
-        bracket = (float(t), float(t + dt))
-        for body, j, shape_index, key, normal, t_k, speed, e, mu, impulse in zip(
-                c.i.tolist(), c.j.tolist(), c.shape.tolist(), c.key.tolist(), c.normal, t_touch.tolist(),
-                approach.tolist(), c.restitution.tolist(), c.friction.tolist(), solved.total[k].tolist()):
-            shape = shapes[shape_index] if j < 0 else None
-            event = Collision(t=t_k, body=body, other=shape.name if shape else j, body_name=names[body],
-                              other_name=shape.name if shape else names[j], normal=normal, impact_speed=speed,
-                              restitution=e, friction=mu, bracket=bracket, impulse=impulse,
-                              trigger=shape is not None and shape.trigger)
+        return ImpactBlock(t_touch, c.i, np.where(c.j >= 0, c.j, -1 - c.shape), c.normal, approach, c.restitution,
+                           c.friction, solved.total[k], (float(t), float(t + dt)), self.model.names,
+                           self.world.shapes), c.key
+
+    def _events(self, t, dt, contacts: Contacts, solved, asked: set):
+        """The step's impacts (:meth:`_impacts`) as collisions, through the prologues.
+
+        Returns (events, keys cancelled now); each pair meets the prologues once per step.
+        """
+        block, keys = self._impacts(t, dt, contacts, solved)
+        events, cancelled = [], set()
+        for event, key in zip(block.collisions(), keys.tolist()):
             if key not in asked:
                 asked.add(key)
                 if ((event.trigger and self._triggers_cancel)
