@@ -67,6 +67,22 @@ class Model:
     def n_bodies(self) -> int:
         return self.masses.shape[0]
 
+    @property
+    def reactive_forces(self) -> tuple:
+        """The forces that need the sum of all the others (ground contact)."""
+        return self._reactive
+
+    @property
+    def varying_forces(self) -> tuple:
+        """The applied forces that depend on the time or the state (not summed into the field)."""
+        return self._varying
+
+    @property
+    def constant_field(self):
+        """The constant forces' acceleration field, summed once ((3,), or (N, 3) with pinned
+        bodies); None without constant forces."""
+        return self._field
+
     def cast(self, xp=None, dtype=None) -> Model:
         """The same model on another backend and/or precision."""
         return Model(np.asarray(self.masses, dtype=float), np.asarray(self.radii, dtype=float),

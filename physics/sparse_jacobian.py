@@ -397,7 +397,7 @@ def acceleration(model, t, q, v):
     from .sparse_kernels import pair_groups
 
     q, v = np.ascontiguousarray(q, dtype=float), np.ascontiguousarray(v, dtype=float)
-    if model._reactive:
+    if model.reactive_forces:
         return np.array(model.acceleration(t, q, v), dtype=float)
     force = np.zeros_like(q)
     for group in pair_groups(model):
@@ -414,12 +414,12 @@ def _acceleration(model, t, q, v, pair_force):
     """
     from .sparse_kernels import has_kernel
 
-    if model._reactive or pair_force is None:
+    if model.reactive_forces or pair_force is None:
         return np.array(model.acceleration(t, q, v), dtype=float)
-    for f in model._varying:
+    for f in model.varying_forces:
         if not has_kernel(f):
             pair_force += f.force(np, q, v, model.masses)
     pair_force *= np.asarray(model.inverse_masses)[:, None]
-    if model._field is not None:
-        pair_force += model._field
+    if model.constant_field is not None:
+        pair_force += model.constant_field
     return pair_force

@@ -432,9 +432,9 @@ def _print_run(s: dict) -> None:
         extra = "".join(f", {c[k]} {label}" for k, label in (("triggers", "trigger entries"),
                                                             ("cancelled", "cancelled")) if c[k])
         if s.get("method") == "solver":
-            solver = s["solver"]
-            print(f"  collisions (contact solver, {_plural(solver['substeps'], 'substep')} x "
-                  f"{_plural(solver['iterations'], 'iteration')}, {solver['correction']} correction): "
+            from steplab.physics.collision.solver_settings import ContactSolver
+
+            print(f"  collisions (contact solver, {ContactSolver(**s['solver']).describe()}): "
                   f"{_plural(c['impacts'], 'impact')}{extra}, at most {c['most_impacts_in_a_step']} in one step, "
                   f"largest residual {c['largest_residual']:.3g} m/s")
         else:

@@ -96,6 +96,14 @@ class ContactSolver:
             if not (math.isfinite(value) and ok):
                 raise ValueError(f"contact solver: {name} must be {allowed}, got {value!r}")
 
+    def describe(self) -> str:
+        """The settings in a few words: ``"4 substeps x 1 iteration, soft correction"``."""
+        def count(n, word):
+            return f"{n} {word}" + ("" if n == 1 else "s")
+
+        return (f"{count(self.substeps, 'substep')} x {count(self.iterations, 'iteration')}, "
+                f"{self.correction} correction")
+
     def softness(self, h: float) -> tuple[float, float, float]:
         """(bias rate 1/s, mass scale, impulse scale) of the correction for a substep of ``h`` s.
 

@@ -107,8 +107,7 @@ def _ball_pit(balls: int, steps: int, config: Config, record: Record) -> None:
                               **log.summary()}}
     solver = finals["steplab_solver"].collisions
     contenders["steplab_solver"] = {
-        "settings": f"steplab, contact solver, {solver_world.solver.substeps} substeps x "
-                    f"{solver_world.solver.iterations} iterations, {solver_world.solver.correction} correction",
+        "settings": f"steplab, contact solver, {solver_world.solver.describe()}",
         **_speed(t["steplab_solver"], steps, dt),
         "balls_inside": balls_inside(finals["steplab_solver"].y[-1][0], side),
         "median_distance_to_steplab": float(np.median(np.linalg.norm(
