@@ -104,15 +104,8 @@ class BlockPattern:
     """
 
     def __init__(self, n_bodies: int, keep, pairs):
-        keep = np.asarray(keep, bool)
-        size = self.size = int(keep.sum())
-        self.index = np.full(n_bodies, -1, np.int64)
-        self.index[keep] = np.arange(size)
-        self.kept = np.flatnonzero(keep)
-        ends = [(self.index[np.asarray(i)], self.index[np.asarray(j)]) for i, j in pairs]
-        keys = [np.minimum(a, b) * size + np.maximum(a, b) for a, b in ends]
-        both = [(a >= 0) & (b >= 0) & (a != b) for a, b in ends]
-        unique = np.unique(np.concatenate([k[w] for k, w in zip(keys, both)] + [np.zeros(0, np.int64)]))
+        size, self.index, self.kept, ends, keys, both, unique = _kept_pairs(n_bodies, keep, pairs)
+        self.size = size
         self.n_pairs = unique.size
         lo, hi = unique // max(size, 1), unique % max(size, 1)
         diagonal = np.arange(size)
@@ -201,15 +194,8 @@ class NewtonPattern:
     def __init__(self, n_bodies: int, keep, pairs):
         from .symmetric_blocks import PairIndex
 
-        keep = np.asarray(keep, bool)
-        size = self.size = int(keep.sum())
-        self.index = np.full(n_bodies, -1, np.int64)
-        self.index[keep] = np.arange(size)
-        self.kept = np.flatnonzero(keep)
-        ends = [(self.index[np.asarray(i)], self.index[np.asarray(j)]) for i, j in pairs]
-        keys = [np.minimum(a, b) * size + np.maximum(a, b) for a, b in ends]
-        both = [(a >= 0) & (b >= 0) & (a != b) for a, b in ends]
-        unique = np.unique(np.concatenate([k[w] for k, w in zip(keys, both)] + [np.zeros(0, np.int64)]))
+        size, self.index, self.kept, ends, keys, both, unique = _kept_pairs(n_bodies, keep, pairs)
+        self.size = size
         # sorted keys lo * size + hi are the pairs sorted by (lo, hi), PairIndex's order
         self.pairs = PairIndex.of(size, unique // max(size, 1), unique % max(size, 1))
         # per pair force, the slots of each pair's stored block, (i, i) and (j, j)
@@ -247,6 +233,24 @@ class NewtonPattern:
                         block = np.asarray(block, dtype=float)[self.kept]
                         data[:self.size] += (0.5 * coefficient) * (block + block.transpose(0, 2, 1))
         return SymmetricBlockMatrix(data, self.pairs)
+
+
+def _kept_pairs(n_bodies: int, keep, pairs):
+    """The numbering of the kept bodies and the pairs between two different ones, for a pattern.
+
+    Returns (size, index: body -> kept number or -1, kept bodies, per pair force its ends
+    renumbered (a, b), their keys min * size + max, whether both are kept and different,
+    the sorted unique keys of those).
+    """
+    keep = np.asarray(keep, bool)
+    size = int(keep.sum())
+    index = np.full(n_bodies, -1, np.int64)
+    index[keep] = np.arange(size)
+    ends = [(index[np.asarray(i)], index[np.asarray(j)]) for i, j in pairs]
+    keys = [np.minimum(a, b) * size + np.maximum(a, b) for a, b in ends]
+    both = [(a >= 0) & (b >= 0) & (a != b) for a, b in ends]
+    unique = np.unique(np.concatenate([k[w] for k, w in zip(keys, both)] + [np.zeros(0, np.int64)]))
+    return size, index, np.flatnonzero(keep), ends, keys, both, unique
 
 
 #: each model's patterns, built on first use (the pairs never change): {model: {key: pattern}}
