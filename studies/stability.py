@@ -47,6 +47,8 @@ def parameters(quick: bool) -> dict:
             "stiffnesses": np.geomspace(10, 1e4, 4).tolist() if quick else np.geomspace(10, 1e5, 5).tolist(),
             "stiffness_steps": 1000 if quick else 5000, "stiffness_rtol": 1e-2 if quick else 1e-4,
             "damping_omega_dts": np.geomspace(1e-3, 100, 6 if quick else 21).tolist(),
+            # a cloth large enough for implicit Euler's sparse Newton solve (above 200 bodies)
+            "scale_side": 15 if quick else 40, "scale_steps": 50 if quick else 200, "scale_seed": 1,
             # the extremes (studies/extremes.py)
             "huge_omega_dts": [3.0, 10.0, 100.0], "huge_max_steps": 1000,
             "precisions": ["float64", "float32"], "far_offsets": 9 if quick else 17,
@@ -137,7 +139,7 @@ def tasks(params: dict) -> list[list]:
     methods, sweep = params["integrators"], params["sweep_integrators"]
     return ([["limit", zeta, m] for zeta in params["damping_ratios"] for m in methods]
             + [["energy", problem, m] for problem in ("oscillator", "kepler") for m in methods]
-            + [["stiffness", k, m] for k in params["stiffnesses"] for m in sweep] + [["damping"]]
+            + [["stiffness", k, m] for k in params["stiffnesses"] for m in sweep] + [["damping"], ["at_scale"]]
             + [["huge_dt"], ["coasting"], ["jitter"]]
             + [["mass_ratio", ratio, m] for ratio in params["mass_ratios"] for m in sweep])
 
@@ -156,6 +158,9 @@ def task(params: dict, item: list):
         return stiffness.stiffness_row(item[1], item[2], params["stiffness_steps"], params["stiffness_rtol"])
     if kind == "damping":
         return stiffness.implicit_euler_damping(params["damping_omega_dts"])
+    if kind == "at_scale":
+        return stiffness.implicit_euler_at_scale(params["scale_side"], stiffness.DAMPING_STIFFNESS,
+                                                 params["scale_steps"], params["scale_seed"])
     if kind == "huge_dt":
         return extremes.huge_dt(params["integrators"], params["huge_omega_dts"], params["huge_max_steps"])
     if kind == "coasting":
@@ -181,6 +186,7 @@ def reduce(params: dict, results: list) -> dict:
     undamped = f"{params['damping_ratios'][0]:g}"
     stiff = stiffness.stiffness_sweep([result for _, result in by_kind["stiffness"]], params["sweep_integrators"])
     stiff["implicit_euler_damping"] = by_kind["damping"][0][1]
+    stiff["implicit_euler_at_scale"] = by_kind["at_scale"][0][1]
     [[_, huge]], [[_, coast]], [[_, jitter]] = by_kind["huge_dt"], by_kind["coasting"], by_kind["jitter"]
     return {
         "growth_tolerance": GROWTH_TOLERANCE,
@@ -307,6 +313,12 @@ def summary(record: dict) -> list[tuple[str, str]]:
                      f"{worst['integrator']} {worst['final_relative_energy_error']:.1e}"))
     slopes = record["stiff_springs"]["slopes"]
     rows.append(("slope of largest stable dt against k", ", ".join(f"{m} {v:.3f}" for m, v in slopes.items())))
+    scale = record["stiff_springs"]["implicit_euler_at_scale"]
+    for run in scale["runs"]:
+        outcome = (f"diverged at step {run['diverged_at_step']}" if run["diverged_at_step"] else
+                   f"largest energy {run['largest_energy']:.3g}, last {run['final_energy']:.2g} of the first")
+        rows.append((f"cloth of {scale['bodies']:,}, {run['integrator']} at {run['dt_over_limit']:g} x 2/omega_max",
+                     outcome))
     far = record["extremes"]["far_from_origin"]
     for speed, offset in far["first_stall"].get("float32", {}).items():
         rows.append((f"float32 body at {speed} m/s stalls from", "never (to 1e7 m)" if offset is None else

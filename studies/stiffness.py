@@ -11,6 +11,11 @@ Implicit Euler is stable at every dt, and pays in amplitude: its growth factor p
 on an undamped mode is |R(i y)| = 1 / sqrt(1 + y^2), y = omega dt, so a period
 (2 pi / y steps) keeps (1 + y^2)^(-pi / y) of the amplitude. That loss is measured on the
 same soft body mode, from the growth per step of the measured N-step map.
+
+At scale: on a cloth of 1,600 particles (:func:`implicit_euler_at_scale`), where implicit
+Euler's Newton steps are solved by conjugate gradients on the sparse Jacobian, semi-implicit
+Euler holds just below 2 / omega_max and blows up just above it, while implicit Euler runs
+at 10 and 100 times that step, its energy never above the start's.
 """
 
 from __future__ import annotations
@@ -28,6 +33,10 @@ CUBE_MASS, PINNED_CORNER = 1.0, 7
 DAMPING_STIFFNESS = 2000.0
 #: the method whose numerical damping is measured: stable at every dt
 DAMPING_METHOD = "implicit-euler"
+#: the at-scale part: particle mass, kg; the random start's displacement, in spacings; the dts,
+#: in units of semi-implicit Euler's limit 2 / omega_max, of the explicit and the implicit runs
+SCALE_MASS, SCALE_DISPLACEMENT = 1e-3, 1e-2
+EXPLICIT_FACTORS, IMPLICIT_FACTORS = (0.9, 1.1), (10.0, 100.0)
 
 
 def soft_cube(stiffness: float) -> tuple[Model, np.ndarray]:
@@ -87,6 +96,56 @@ def implicit_euler_damping(omega_dts) -> dict:
                      "theory": float(method.spectral_radius(y) ** steps_per_period)})
     return {"stiffness": DAMPING_STIFFNESS, "omega_max": mode.omega, "rows": rows,
             "worst_deviation_from_theory": max(abs(r["amplitude_kept_per_period"] / r["theory"] - 1) for r in rows)}
+
+
+def cloth(side: int, stiffness: float) -> tuple[Model, np.ndarray]:
+    """A 1 m square cloth of side x side particles of 1 g, structural and shear springs, two
+    corners pinned, no gravity or dampers (the bench's cloth without them), and its rest positions."""
+    mesh = soft_body.grid(side, side, 1.0 / side)
+    springs, _ = soft_body.connect(mesh.vertices, mesh.edges, stiffness, 0.0)
+    n = side * side
+    pinned = np.zeros(n, bool)
+    pinned[[0, side - 1]] = True
+    return Model(np.full(n, SCALE_MASS), np.full(n, 0.2 / side), [springs], pinned=pinned), mesh.vertices
+
+
+def implicit_euler_at_scale(side: int, stiffness: float, steps: int, seed: int) -> dict:
+    """Explicit and implicit Euler on a cloth large enough for the sparse Newton solve.
+
+    The cloth (:func:`cloth`) starts at rest, every free particle displaced at random by
+    SCALE_DISPLACEMENT of its spacing (seeded), which excites every mode, the stiffest
+    (omega_max, :func:`steplab.physics.modes.stiffest_mode`) included. Semi-implicit Euler
+    runs ``steps`` steps just below and just above its limit 2 / omega_max
+    (EXPLICIT_FACTORS); implicit Euler, its Newton steps solved by conjugate gradients on
+    the sparse Jacobian above DENSE_MAX_BODIES bodies, at IMPLICIT_FACTORS times the limit.
+    Without dampers the exact motion keeps its energy; implicit Euler's must never grow
+    (its numerical damping), and the record keeps the largest and the last energy over
+    the run, relative to the first.
+    """
+    from steplab.integrators import DivergenceError, simulate
+    from steplab.physics.modes import stiffest_mode
+
+    model, rest = cloth(side, stiffness)
+    omega = stiffest_mode(model, rest, derivative="difference").omega
+    limit = 2.0 / omega  # semi-implicit Euler's largest stable dt on the stiffest mode
+    free = ~np.asarray(model.pinned)[:, None]
+    q0 = rest + np.random.default_rng(seed).uniform(-1, 1, rest.shape) * free * SCALE_DISPLACEMENT / side
+    y0 = np.stack([q0, np.zeros_like(q0)])
+    e0 = float(model.energy(y0))
+    runs = []
+    for method, factors in (("semi-implicit-euler", EXPLICIT_FACTORS), (DAMPING_METHOD, IMPLICIT_FACTORS)):
+        for factor in factors:
+            dt = factor * limit
+            try:
+                traj = simulate(model, method, y0, 0.0, dt=dt, n_steps=steps)
+            except DivergenceError as err:
+                runs.append({"integrator": method, "dt_over_limit": factor, "dt": dt, "diverged_at_step": err.step})
+                continue
+            energy = np.array([float(model.energy(y)) for y in traj.y]) / e0
+            runs.append({"integrator": method, "dt_over_limit": factor, "dt": dt, "diverged_at_step": None,
+                         "largest_energy": float(energy.max()), "final_energy": float(energy[-1])})
+    return {"bodies": model.n_bodies, "springs": int(np.asarray(model.forces[0].i).size), "stiffness": stiffness,
+            "omega_max": omega, "explicit_limit_dt": limit, "steps": steps, "runs": runs}
 
 
 def plot(record: dict, out) -> list[str]:

@@ -115,6 +115,23 @@ def test_implicit_euler_pays_the_predicted_amplitude_per_period():
         assert row["amplitude_kept_per_period"] == pytest.approx((1 + y * y) ** (-np.pi / y), rel=1e-6)
 
 
+def test_implicit_euler_at_cloth_scale_is_stable_where_explicit_euler_is_not():
+    # a cloth above DENSE_MAX_BODIES: implicit Euler's Newton steps go through CG on the
+    # sparse Jacobian; semi-implicit Euler holds just below 2 / omega_max and blows up just above
+    from steplab.integrators import get_integrator
+    from steplab.integrators.implicit_euler import DENSE_MAX_BODIES
+    from steplab.studies.stiffness import cloth, implicit_euler_at_scale
+
+    record = implicit_euler_at_scale(15, 2000.0, 40, seed=1)
+    assert record["bodies"] > DENSE_MAX_BODIES and get_integrator("implicit-euler").uses_cg(cloth(15, 2000.0)[0])
+    runs = {(r["integrator"], r["dt_over_limit"]): r for r in record["runs"]}
+    assert runs["semi-implicit-euler", 0.9]["diverged_at_step"] is None
+    assert runs["semi-implicit-euler", 1.1]["diverged_at_step"] is not None
+    for factor in (10.0, 100.0):  # undamped springs: the exact flow keeps E; implicit Euler may only lose it
+        run = runs["implicit-euler", factor]
+        assert run["diverged_at_step"] is None and run["largest_energy"] <= 1 + 1e-12 and run["final_energy"] < 0.5
+
+
 def test_long_run_energy_on_the_kepler_orbit():
     from steplab.studies.problems import kepler_problem
     from steplab.studies.stability import energy_history
