@@ -93,8 +93,10 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--method", choices=("event", "solver"),
                    help="collision handling (event: the lecture's event loop, each impact at its time; "
                    "solver: the engines' contact solver; default: the scene's)")
-    p.add_argument("--iterations", type=_count, metavar="N", help="contact solver: sweeps per substep")
-    p.add_argument("--substeps", type=_count, metavar="N", help="contact solver: substeps per step")
+    p.add_argument("--iterations", type=_count, metavar="N",
+                   help="contact solver: sweeps per substep (default: the scene's, else 1, Box2D v3's)")
+    p.add_argument("--substeps", type=_count, metavar="N",
+                   help="contact solver: substeps per step (default: the scene's, else 4)")
     p.add_argument("--json", action="store_true", help="print the summary as JSON")
 
     p = sub.add_parser("check", help="predict the largest stable dt of each fixed-step integrator on a scene")

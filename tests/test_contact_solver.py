@@ -208,6 +208,13 @@ def test_log_taken_as_columns_equals_the_events_an_epilogue_sees():
     assert [e.as_row() for e in logs[0].events] == [e.as_row() for e in logs[1].events] == seen
     others = {type(e.other) for e in logs[0].events}
     assert others == {int, str}  # body-body and body-wall impacts both went through the columns
+    for e in logs[0].events:  # each column landed in its field
+        assert e.kind == "impact" and e.impulse > 0 and e.bracket[0] <= e.t <= e.bracket[1]
+        assert e.body_name == model.names[e.body] and abs(np.linalg.norm(e.normal) - 1) < 1e-12
+        if isinstance(e.other, int):
+            assert e.other_name == model.names[e.other] and e.body < e.other
+        else:
+            assert e.other_name == e.other == "plane" and not e.trigger
 
 
 @pytest.mark.parametrize("settings_, message", [

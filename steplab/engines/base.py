@@ -265,6 +265,15 @@ class PlanarRun(EngineRun):
     velocity_attribute = "velocity"
     spin_attribute = "angular_velocity"
 
+    def __init__(self, model, collisions, engine: str, y0=None):
+        """The scene's parts an engine in a plane takes (gravity, springs, dampers; planes and
+        boxes), the plane's two axes from the state ``y0`` (default: all at the origin, at rest)."""
+        super().__init__(scene_parts(model, collisions, engine, forces=(Gravity, Springs, Dampers),
+                                     shapes=(Plane, Box, OrientedBox)))
+        y0 = np.zeros((2, self.parts.n, 3)) if y0 is None else np.asarray(y0, float)
+        self.axes = plane_axes(self.parts, y0, engine)
+        self._y = y0.copy()
+
     def set_state(self, y) -> None:
         a, b = self.axes
         self._y = np.array(y, dtype=float)

@@ -25,10 +25,9 @@ import math
 
 import numpy as np
 
-from steplab.physics import Dampers, Gravity, Springs
-from steplab.physics.collision import Box, OrientedBox, Plane
+from steplab.physics.collision import Box, Plane
 
-from .base import PlanarRun, UnsupportedFeatureError, body_indices, plane_axes, require, scene_parts, version
+from .base import PlanarRun, UnsupportedFeatureError, body_indices, require, version
 
 ENGINE = "Box2D"
 #: Box2D's recommended iterations (its testbed's): velocity and position
@@ -85,12 +84,8 @@ class Box2DRun(PlanarRun):
     def __init__(self, model, collisions=None, dt: float = 0.01, continuous: bool = True, bullet: bool = False,
                  y0=None):
         b2 = require("Box2D", ENGINE)
-        super().__init__(scene_parts(model, collisions, ENGINE, forces=(Gravity, Springs, Dampers),
-                                     shapes=(Plane, Box, OrientedBox)))
-        parts = self.parts
-        y0 = np.zeros((2, parts.n, 3)) if y0 is None else np.asarray(y0, float)
-        self.axes = axes = plane_axes(parts, y0, ENGINE)
-        self._y = y0.copy()
+        super().__init__(model, collisions, ENGINE, y0)
+        parts, axes, y0 = self.parts, self.axes, self._y.copy()
         self.world = world = b2.b2World(gravity=tuple(parts.gravity[list(axes)]), doSleep=False)
         world.continuousPhysics = continuous
         contacts = parts.collisions is not None

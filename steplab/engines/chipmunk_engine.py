@@ -19,10 +19,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from steplab.physics import Dampers, Gravity, Springs
-from steplab.physics.collision import Box, OrientedBox, Plane
-
-from .base import PlanarRun, body_indices, plane_axes, require, scene_parts, version
+from .base import PlanarRun, body_indices, require, version
 from .box2d_engine import static_polygons
 
 ENGINE = "Chipmunk"
@@ -36,12 +33,8 @@ class ChipmunkRun(PlanarRun):
 
     def __init__(self, model, collisions=None, dt: float = 0.01, collision_slop: float = COLLISION_SLOP, y0=None):
         pymunk = require("pymunk", ENGINE)
-        super().__init__(scene_parts(model, collisions, ENGINE, forces=(Gravity, Springs, Dampers),
-                                     shapes=(Plane, Box, OrientedBox)))
-        parts = self.parts
-        y0 = np.zeros((2, parts.n, 3)) if y0 is None else np.asarray(y0, float)
-        self.axes = axes = plane_axes(parts, y0, ENGINE)
-        self._y = y0.copy()
+        super().__init__(model, collisions, ENGINE, y0)
+        parts, axes, y0 = self.parts, self.axes, self._y.copy()
         self.space = space = pymunk.Space()
         space.gravity = tuple(float(g) for g in parts.gravity[list(axes)])
         space.collision_slop = collision_slop
