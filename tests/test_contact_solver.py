@@ -296,3 +296,52 @@ def test_ball_on_an_oriented_ramp_slides_by_coulomb(mu):
     expected = max(9.81 * (np.sin(angle) - mu * np.cos(angle)), 0.0) * n * dt
     np.testing.assert_allclose(v @ down, expected, rtol=1e-6, atol=1e-9)
     assert abs(v @ up) < 1e-9  # it stays on the surface
+
+
+def test_contacts_are_the_narrow_phases_in_key_order():
+    # The compiled pass (body pairs and planes) and the shapes' narrow phase, against a brute
+    # force over every swept sphere and the narrow phase's functions, contact by contact.
+    from steplab.physics.collision import OrientedBox, rotation_matrix
+    from steplab.physics.collision.contact_buffer import Materials, find_contacts
+    from steplab.physics.collision.narrow_phase import collide, collide_sphere_sphere
+    from steplab.physics.collision.shapes import Sphere
+
+    rng = np.random.default_rng(11)
+    n, dt, margin = 80, 0.05, 0.02
+    q, v = rng.uniform(-1.0, 1.0, (n, 3)), rng.normal(0.0, 2.0, (n, 3))
+    a = np.tile([0.0, 0.0, -9.81], (n, 1))
+    radii, inverse_masses = rng.uniform(0.05, 0.2, n), rng.uniform(0.5, 2.0, n)
+    inverse_masses[:3] = 0.0  # pinned: pairs of two pinned bodies, and their shape contacts, are left out
+    shapes = (Plane(np.array([0.0, 0.0, 1.0]), -0.9), Box(np.array([-0.3, -0.3, -0.3]), np.array([0.2, 0.3, 0.1])),
+              Plane(np.array([-0.6, 0.0, 0.8]), 0.5),
+              OrientedBox(np.array([0.6, 0.5, 0.0]), np.array([0.3, 0.2, 0.1]), rotation_matrix([1, 1, 0], 30.0)))
+    world = CollisionWorld(shapes=shapes, pair_properties=PairProperties(0.7, 0.3), method="solver")
+    c = find_contacts(world, Materials.of(world, n), q, v, a, radii, inverse_masses, dt, margin=margin)
+
+    q1 = q + dt * (v + dt * a)
+    centre, reach = 0.5 * (q + q1), radii + 0.5 * np.linalg.norm(q1 - q, axis=1) + margin
+    expected = []  # (key, normal, separation, approach speed) in key order
+    stride = n + len(shapes)
+    for i in range(n):
+        for j in range(i + 1, n):
+            if np.linalg.norm(centre[i] - centre[j]) <= reach[i] + reach[j] and inverse_masses[[i, j]].any():
+                hit = collide_sphere_sphere(Sphere(q[i], radii[i]), Sphere(q[j], radii[j]))
+                expected.append((i * stride + j, hit.normal, -hit.penetration_depth, (v[j] - v[i]) @ hit.normal))
+        for k, shape in enumerate(shapes):
+            if inverse_masses[i] == 0:
+                continue
+            if isinstance(shape, Plane):
+                near = centre[i] @ shape.normal - shape.offset <= reach[i]
+            else:  # the swept sphere reaches the shape's bounding box
+                lo, hi = shape.bounds()
+                near = np.linalg.norm(np.clip(centre[i], lo, hi) - centre[i]) <= reach[i]
+            if near:
+                hit = collide(Sphere(q[i], radii[i]), shape)
+                expected.append((i * stride + n + k, hit.normal, -hit.penetration_depth, -v[i] @ hit.normal))
+    assert c.key.tolist() == [e[0] for e in expected]
+    assert {"box", "oriented-box"} <= {shapes[k].kind for k in c.shape[c.shape >= 0]}  # every kind was tested
+    np.testing.assert_allclose(c.normal, [e[1] for e in expected], rtol=0, atol=1e-12)
+    np.testing.assert_allclose(c.separation, [e[2] for e in expected], rtol=0, atol=1e-12)
+    np.testing.assert_allclose(c.normal_speed, [e[3] for e in expected], rtol=0, atol=1e-12)
+    np.testing.assert_array_equal(c.mass, 1.0 / (inverse_masses[c.i] + np.where(c.j >= 0, inverse_masses[c.j], 0.0)))
+    assert np.all(c.restitution == 0.7) and np.all(c.friction == 0.3)

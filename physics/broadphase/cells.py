@@ -37,7 +37,10 @@ from .common import append_pair, no_pairs, padding, radix_argsort, sort_pairs, s
 #: spheres on level 0, and measured times are flat from 1.0 to 1.25
 CELL_FACTOR = 1.01
 #: the dense grid has at most this many level-0 cells per sphere (memory O(n), not O(volume))
-MAX_CELLS_PER_BODY = 4
+MAX_CELLS_PER_BODY = 16
+#: the dense grid uses one level when the widest box is at most this many times the median one
+#: (cells as wide as the widest box); beyond, the hierarchy keeps outliers off the fine cells
+ONE_LEVEL_SPREAD = 2.0
 #: the level-0 cell edge uses the median radius of at most about this many evenly strided spheres
 MEDIAN_SAMPLE = 1024
 #: hash buckets per sphere (rounded up to a power of two)
@@ -71,6 +74,14 @@ def hierarchy_pairs(c: np.ndarray, r: np.ndarray, hashed: bool) -> np.ndarray:
         h0 = max(h0, float(extent.max()) / max_cells)
         while np.prod(np.floor(extent / h0) + 1) > max_cells:
             h0 *= 1.25
+    if not hashed and widest <= ONE_LEVEL_SPREAD * h0 / CELL_FACTOR:
+        # sizes alike: one level with cells as wide as the widest box, searched by columns
+        h = CELL_FACTOR * widest
+        while np.prod(np.floor(extent / h) + 1) > max_cells:
+            h *= 1.25
+        dims = (np.floor(extent / h) + 1).astype(np.int64)
+        pairs, k = _column_kernel(c, r, pad, origin, h, dims)
+        return sort_pairs(pairs, k, n)
     # enough levels that the last one holds everything in one or two cells per axis
     n_levels = 1
     while h0 * 2.0 ** (n_levels - 1) < extent.max() + widest:
@@ -249,4 +260,59 @@ def _hierarchy_kernel(c, r, pad, origin, hs, level, dims, offset, bits):
                                 continue
                             if spheres_overlap(cs, rs, p, q):
                                 pairs, k = append_pair(pairs, k, order[p], order[q])
+    return pairs, k
+
+
+@njit(cache=True)
+def _column_kernel(c, r, pad, origin, h, dims):
+    """The dense grid with one level of cells of edge ``h`` (every box spans at most two per axis).
+
+    Cells are numbered with z fastest, so the cells (x, y, z-1 .. z+1) of a column hold one
+    run of the sorted spheres: a sphere tests the rest of its own cell with the cell above
+    it as one run, and its 12 other forward neighbours as 4 column runs, (x, y+1) and
+    (x+1, y-1 .. y+1), instead of looking up 13 cells one by one (2 to 3 times faster).
+    """
+    n = c.shape[0]
+    nx, ny, nz = dims[0], dims[1], dims[2]
+    n_slots = nx * ny * nz
+    slot = np.empty(n, dtype=np.int64)
+    for i in range(n):
+        slot[i] = ((_cell(_lo(c, r, pad, i, 0), origin[0], h) * ny + _cell(_lo(c, r, pad, i, 1), origin[1], h)) * nz
+                   + _cell(_lo(c, r, pad, i, 2), origin[2], h))
+    order, slots = radix_argsort(slot, n_slots)
+    start = np.empty(n_slots + 1, dtype=np.int64)  # start[s]: the first sorted sphere of cell s
+    s = 0
+    for p in range(n):
+        while s <= slots[p]:
+            start[s] = p
+            s += 1
+    start[s:] = n
+    cs = np.empty((n, 3))
+    rs = np.empty(n)
+    for p in range(n):  # in cell order: spheres near in space are near in memory
+        i = order[p]
+        cs[p, 0], cs[p, 1], cs[p, 2] = c[i, 0], c[i, 1], c[i, 2]
+        rs[p] = r[i]
+    pairs = np.empty((n + 16, 2), dtype=np.int64)
+    k = 0
+    for p in range(n):
+        home = slots[p]
+        z0 = home % nz
+        y0 = (home // nz) % ny
+        x0 = home // (ny * nz)
+        z_low, z_top = max(z0 - 1, 0), min(z0 + 1, nz - 1)
+        for q in range(p + 1, start[home + z_top - z0 + 1]):
+            if spheres_overlap(cs, rs, p, q):
+                pairs, k = append_pair(pairs, k, order[p], order[q])
+        for column in range(4):
+            if column == 0:
+                x, y = x0, y0 + 1
+            else:
+                x, y = x0 + 1, y0 + column - 2
+            if x >= nx or y < 0 or y >= ny:
+                continue
+            base = (x * ny + y) * nz
+            for q in range(start[base + z_low], start[base + z_top + 1]):
+                if spheres_overlap(cs, rs, p, q):
+                    pairs, k = append_pair(pairs, k, order[p], order[q])
     return pairs, k

@@ -23,7 +23,7 @@ import dataclasses
 import numpy as np
 from numba import njit
 
-from .pairs import BodyPairs, candidates
+from .pairs import SweptSpheres, near_shapes
 from .shapes import DEFAULT_MATERIAL
 
 #: the speculative margin added to every swept bound, as a fraction of the median radius: a
@@ -80,58 +80,161 @@ class Contacts:
         return Contacts(**{f.name: getattr(self, f.name)[keep] for f in dataclasses.fields(self)})
 
 
-def find_contacts(world, materials: Materials, q, v, a, radii, inverse_masses, dt: float, removed=()) -> Contacts:
-    """Every contact the bodies (q, v) under accelerations ``a`` may make during a step of ``dt``."""
+def speculative_margin(radii) -> float:
+    """The margin of every swept bound: :data:`MARGIN_OF_RADIUS` of the median radius, m."""
+    return MARGIN_OF_RADIUS * float(np.median(radii)) if len(radii) else 0.0
+
+
+def find_contacts(world, materials: Materials, q, v, a, radii, inverse_masses, dt: float, removed=(),
+                  margin: float | None = None) -> Contacts:
+    """Every contact the bodies (q, v) under accelerations ``a`` may make during a step of ``dt``.
+
+    ``margin``: :func:`speculative_margin` of the radii unless given. Body pairs and planes,
+    the contacts of piles and boxes of planes, go through one compiled pass that writes them
+    in key order; other static shapes through their narrow phase, the whole then sorted by key.
+    """
     n, n_shapes = len(radii), len(world.shapes)
-    margin = MARGIN_OF_RADIUS * float(np.median(radii)) if n else 0.0
-    groups = candidates(world.shapes, q, q + dt * (v + dt * a), radii, inverse_masses, world.broadphase,
-                        removed, margin)
-    parts = []
-    for group in groups:
-        i = group.i
-        if isinstance(group, BodyPairs):  # most contacts of a pile: one compiled pass
-            parts.append(_body_contacts(i, group.j, q, v, a, radii, inverse_masses, materials.body,
-                                        materials.restitution, materials.friction, n + n_shapes))
-            continue
-        contact = group.contact(radii, q)
-        j, shape = np.full(len(i), -1), np.full(len(i), group.index)
-        other = n + group.index
-        e = materials.restitution[materials.body[i], materials.shape[group.index]]
-        mu = materials.friction[materials.body[i], materials.shape[group.index]]
-        v_other, a_other, w_other = 0.0, 0.0, 0.0
-        normal = np.atleast_2d(contact.normal)
-        parts.append((i, j, shape, i * (n + n_shapes) + other, normal, -contact.penetration_depth,
-                      np.sum((v_other - v[i]) * normal, axis=1), np.sum((a[i] - a_other) * normal, axis=1),
-                      1.0 / (inverse_masses[i] + w_other), np.broadcast_to(e, i.shape), np.broadcast_to(mu, i.shape)))
-    if not parts:
-        return Contacts.empty()
-    columns = [np.concatenate(column) for column in zip(*parts)]
-    contacts = Contacts(*columns)
-    order = np.argsort(contacts.key, kind="stable")
-    return contacts.subset(order)
+    margin = speculative_margin(radii) if margin is None else margin
+    swept = SweptSpheres.of(q, _reached(q, v, a, dt), radii, inverse_masses, removed, margin)
+    pairs = swept.body_pairs(world.broadphase)
+    planes = [k for k, shape in enumerate(world.shapes) if shape.kind == "plane"]
+    plane = np.array(planes, dtype=np.int64)
+    normals = np.array([world.shapes[k].normal for k in planes], dtype=float).reshape(-1, 3)
+    offsets = np.array([world.shapes[k].offset for k in planes], dtype=float)
+    columns = _pair_and_plane_contacts(pairs.i, pairs.j, q, v, a, radii, inverse_masses, swept.centers, swept.reach,
+                                       swept.active, plane, normals, offsets, materials.shape[plane],
+                                       materials.body, materials.restitution, materials.friction, n + n_shapes)
+    others = [k for k in range(n_shapes) if k not in set(planes)]
+    parts = [columns] + [_shape_contacts(group, materials, q, v, a, radii, inverse_masses, n + n_shapes)
+                         for group in near_shapes([world.shapes[k] for k in others], swept, others) if len(group)]
+    if len(parts) == 1:  # in key order already
+        return Contacts(*columns)
+    contacts = Contacts(*[np.concatenate(column) for column in zip(*parts)])
+    return contacts.subset(np.argsort(contacts.key, kind="stable"))
+
+
+def _shape_contacts(group, materials: Materials, q, v, a, radii, inverse_masses, stride: int) -> tuple:
+    """The columns of :class:`Contacts` for the bodies of a :class:`.pairs.ShapePairs` (its narrow phase)."""
+    i = group.i
+    contact = group.contact(radii, q)
+    e = materials.restitution[materials.body[i], materials.shape[group.index]]
+    mu = materials.friction[materials.body[i], materials.shape[group.index]]
+    normal = np.atleast_2d(contact.normal)  # the shape is static: no velocity, no acceleration, no mass
+    return (i, np.full(len(i), -1), np.full(len(i), group.index), i * stride + len(radii) + group.index, normal,
+            -contact.penetration_depth, np.sum(-v[i] * normal, axis=1), np.sum(a[i] * normal, axis=1),
+            1.0 / inverse_masses[i], np.broadcast_to(e, i.shape), np.broadcast_to(mu, i.shape))
 
 
 @njit(cache=True)
-def _body_contacts(i, j, q, v, a, radii, inverse_masses, material, restitution, friction, stride):
-    """The columns of :class:`Contacts` for body pairs (i, j): the sphere-sphere narrow phase
-    (:func:`.narrow_phase.collide_sphere_sphere`, the same numbers) and each pair's properties."""
-    k = len(i)
-    normal = np.empty((k, 3))
-    separation, normal_speed, pressing = np.empty(k), np.empty(k), np.empty(k)
-    mass, e, mu = np.empty(k), np.empty(k), np.empty(k)
-    for p in range(k):
-        b, c = i[p], j[p]
-        d0, d1, d2 = q[c, 0] - q[b, 0], q[c, 1] - q[b, 1], q[c, 2] - q[b, 2]
-        dist = np.sqrt(d0 * d0 + d1 * d1 + d2 * d2)
-        if dist > 0:
-            n0, n1, n2 = d0 / dist, d1 / dist, d2 / dist
-        else:  # concentric: +x by convention
-            n0, n1, n2 = 1.0, 0.0, 0.0
-        normal[p, 0], normal[p, 1], normal[p, 2] = n0, n1, n2
-        separation[p] = -(radii[b] + radii[c] - dist)
-        normal_speed[p] = (v[c, 0] - v[b, 0]) * n0 + (v[c, 1] - v[b, 1]) * n1 + (v[c, 2] - v[b, 2]) * n2
-        pressing[p] = (a[b, 0] - a[c, 0]) * n0 + (a[b, 1] - a[c, 1]) * n1 + (a[b, 2] - a[c, 2]) * n2
-        mass[p] = 1.0 / (inverse_masses[b] + inverse_masses[c])
-        e[p] = restitution[material[b], material[c]]
-        mu[p] = friction[material[b], material[c]]
-    return (i, j, np.full(k, -1), i * stride + j, normal, separation, normal_speed, pressing, mass, e, mu)
+def _reached(q, v, a, dt):
+    """Where the forces alone take each body in the step: q + dt (v + dt a) (semi-implicit Euler)."""
+    return q + dt * (v + dt * a)
+
+
+@njit(cache=True, inline="always")
+def _reaches_plane(centers, reach, b, plane_normal, plane_offset, k):
+    """Body b's swept sphere reaches plane k, n . x <= offset: n . c - offset <= reach."""
+    return (centers[b, 0] * plane_normal[k, 0] + centers[b, 1] * plane_normal[k, 1]
+            + centers[b, 2] * plane_normal[k, 2]) - plane_offset[k] <= reach[b]
+
+
+@njit(cache=True)
+def _pair_and_plane_contacts(pi, pj, q, v, a, radii, inverse_masses, centers, reach, active, plane, plane_normal,
+                             plane_offset, plane_material, material, restitution, friction, stride):
+    """The columns of :class:`Contacts` for the body pairs (``pi``, ``pj``; sorted) and the planes,
+    in key order: body i's pairs (j ascending), then its planes (world number ascending).
+
+    A moving body's swept sphere reaches a plane n . x <= offset when n . c - offset <= reach;
+    the contact is then the sphere-plane narrow phase's (:func:`.narrow_phase.collide_sphere_plane`):
+    normal -n, separation n . q - offset - r.
+    """
+    n, n_planes, n_pairs = len(radii), len(plane), len(pi)
+    near = np.zeros((n_planes, n), dtype=np.bool_)
+    count = n_pairs
+    for k in range(n_planes):  # plane by plane: one vectorisable loop over the bodies
+        for b in range(n):
+            near[k, b] = active[b] and inverse_masses[b] > 0 and _reaches_plane(centers, reach, b, plane_normal,
+                                                                                plane_offset, k)
+            count += near[k, b]
+    ci, cj, shape, key = (np.empty(count, np.int64), np.empty(count, np.int64), np.empty(count, np.int64),
+                          np.empty(count, np.int64))
+    normal = np.empty((count, 3))
+    separation, normal_speed, pressing = np.empty(count), np.empty(count), np.empty(count)
+    mass, e, mu = np.empty(count), np.empty(count), np.empty(count)
+    row, p = 0, 0
+    for b in range(n):
+        while p < n_pairs and pi[p] == b:
+            c = pj[p]
+            d0, d1, d2 = q[c, 0] - q[b, 0], q[c, 1] - q[b, 1], q[c, 2] - q[b, 2]
+            dist = np.sqrt(d0 * d0 + d1 * d1 + d2 * d2)
+            if dist > 0:
+                n0, n1, n2 = d0 / dist, d1 / dist, d2 / dist
+            else:  # concentric: +x by convention
+                n0, n1, n2 = 1.0, 0.0, 0.0
+            ci[row], cj[row], shape[row], key[row] = b, c, -1, b * stride + c
+            normal[row, 0], normal[row, 1], normal[row, 2] = n0, n1, n2
+            separation[row] = -(radii[b] + radii[c] - dist)
+            normal_speed[row] = (v[c, 0] - v[b, 0]) * n0 + (v[c, 1] - v[b, 1]) * n1 + (v[c, 2] - v[b, 2]) * n2
+            pressing[row] = (a[b, 0] - a[c, 0]) * n0 + (a[b, 1] - a[c, 1]) * n1 + (a[b, 2] - a[c, 2]) * n2
+            mass[row] = 1.0 / (inverse_masses[b] + inverse_masses[c])
+            e[row] = restitution[material[b], material[c]]
+            mu[row] = friction[material[b], material[c]]
+            row += 1
+            p += 1
+        for k in range(n_planes):
+            if not near[k, b]:
+                continue
+            n0, n1, n2 = -plane_normal[k, 0], -plane_normal[k, 1], -plane_normal[k, 2]
+            height = (q[b, 0] * plane_normal[k, 0] + q[b, 1] * plane_normal[k, 1]
+                      + q[b, 2] * plane_normal[k, 2]) - plane_offset[k]
+            ci[row], cj[row], shape[row], key[row] = b, -1, plane[k], b * stride + n + plane[k]
+            normal[row, 0], normal[row, 1], normal[row, 2] = n0, n1, n2
+            separation[row] = -(radii[b] - height)
+            normal_speed[row] = -(v[b, 0] * n0 + v[b, 1] * n1 + v[b, 2] * n2)
+            pressing[row] = a[b, 0] * n0 + a[b, 1] * n1 + a[b, 2] * n2
+            mass[row] = 1.0 / inverse_masses[b]
+            e[row] = restitution[material[b], plane_material[k]]
+            mu[row] = friction[material[b], plane_material[k]]
+            row += 1
+    return ci, cj, shape, key, normal, separation, normal_speed, pressing, mass, e, mu
+
+
+@njit(cache=True)
+def previous_rows(old_key, key):
+    """Each contact's row in the last step's contacts (same key), or -1: one merge of the sorted keys."""
+    rows = np.full(len(key), -1, dtype=np.int64)
+    p = 0
+    for k in range(len(key)):
+        while p < len(old_key) and old_key[p] < key[k]:
+            p += 1
+        if p < len(old_key) and old_key[p] == key[k]:
+            rows[k] = p
+    return rows
+
+
+@njit(cache=True)
+def warm_start(previous, old_pn, old_pt, normal):
+    """The impulses each contact starts from: its last step's (0 if new), the tangential one kept
+    in the new contact plane (its normal part removed)."""
+    m = len(previous)
+    pn, pt = np.zeros(m), np.zeros((m, 3))
+    for k in range(m):
+        p = previous[k]
+        if p < 0:
+            continue
+        pn[k] = old_pn[p]
+        along = old_pt[p, 0] * normal[k, 0] + old_pt[p, 1] * normal[k, 1] + old_pt[p, 2] * normal[k, 2]
+        for a in range(3):
+            pt[k, a] = old_pt[p, a] - along * normal[k, a]
+    return pn, pt
+
+
+@njit(cache=True)
+def newly_hit(total, previous, old_total):
+    """Contacts given an impulse in this step (``total`` > 0) and none in the last (not a contact
+    then, or one of zero impulse): the step's impacts."""
+    hit = np.empty(len(total), dtype=np.bool_)
+    for k in range(len(total)):
+        p = previous[k]
+        hit[k] = total[k] > 0 and not (p >= 0 and old_total[p] > 0)
+    return hit

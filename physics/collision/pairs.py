@@ -15,6 +15,7 @@ from __future__ import annotations
 import dataclasses
 
 import numpy as np
+from numba import njit
 
 from ..broadphase import find_pairs
 from .narrow_phase import collide, collide_sphere_sphere
@@ -102,18 +103,59 @@ def candidates(shapes, q0, q1, radii, inverse_masses, method: str, removed=(), m
     radius plus half the chord (plus ``margin``), so it holds the body during the whole
     sub-step. Pairs of immovable bodies (both pinned) are dropped: nothing can respond.
     """
-    centers = 0.5 * (q0 + q1)
-    reach = radii + 0.5 * np.sqrt(np.sum((q1 - q0) ** 2, axis=1)) + margin
-    active = np.ones(len(radii), bool)
-    if removed:
-        active[list(removed)] = False
-    index = np.flatnonzero(active)
-    pairs = index[find_pairs(centers[index], reach[index], method)] if len(index) > 1 else np.zeros((0, 2), int)
-    movable = (inverse_masses[pairs[:, 0]] > 0) | (inverse_masses[pairs[:, 1]] > 0)
-    groups = [BodyPairs(pairs[movable, 0], pairs[movable, 1])]
-    moving = index[inverse_masses[index] > 0]
-    groups += _near_shapes(shapes, centers[moving], reach[moving], moving)
+    swept = SweptSpheres.of(q0, q1, radii, inverse_masses, removed, margin)
+    groups = [swept.body_pairs(method)] + near_shapes(shapes, swept)
     return [g for g in groups if len(g)]
+
+
+@dataclasses.dataclass(frozen=True)
+class SweptSpheres:
+    """Each body's bounding sphere over a sub-step (``centers``, ``reach``), and which bodies take part."""
+
+    centers: np.ndarray
+    reach: np.ndarray
+    active: np.ndarray  # (N,) bool: not removed from the run
+    inverse_masses: np.ndarray
+
+    @classmethod
+    def of(cls, q0, q1, radii, inverse_masses, removed=(), margin: float = 0.0) -> SweptSpheres:
+        active = np.ones(len(radii), bool)
+        if removed:
+            active[list(removed)] = False
+        return cls(*_swept(np.ascontiguousarray(q0, dtype=float), np.ascontiguousarray(q1, dtype=float),
+                           np.asarray(radii, dtype=float), float(margin)), active, inverse_masses)
+
+    @property
+    def moving(self) -> np.ndarray:
+        """The active bodies that can move (not pinned), ascending."""
+        return np.flatnonzero(self.active & (self.inverse_masses > 0))
+
+    def body_pairs(self, method: str) -> BodyPairs:
+        """The pairs whose swept spheres overlap, sorted, less pairs of two pinned bodies."""
+        if self.active.all():
+            pairs = find_pairs(self.centers, self.reach, method) if len(self.reach) > 1 else np.zeros((0, 2), int)
+        else:
+            index = np.flatnonzero(self.active)
+            if len(index) < 2:
+                return BodyPairs(np.zeros(0, int), np.zeros(0, int))
+            pairs = index[find_pairs(self.centers[index], self.reach[index], method)]
+        movable = (self.inverse_masses[pairs[:, 0]] > 0) | (self.inverse_masses[pairs[:, 1]] > 0)
+        return BodyPairs(pairs[movable, 0], pairs[movable, 1])
+
+
+@njit(cache=True)
+def _swept(q0, q1, radii, margin):
+    """Centre (the chord's middle) and reach (radius + half the chord + margin) of each swept sphere."""
+    n = len(radii)
+    centers, reach = np.empty((n, 3)), np.empty(n)
+    for b in range(n):
+        d2 = 0.0
+        for k in range(3):
+            centers[b, k] = 0.5 * (q0[b, k] + q1[b, k])
+            d = q1[b, k] - q0[b, k]
+            d2 += d * d
+        reach[b] = radii[b] + 0.5 * np.sqrt(d2) + margin
+    return centers, reach
 
 
 def changed_candidates(shapes, chords, grid, inverse_masses, removed, changed) -> list:
@@ -131,14 +173,22 @@ def changed_candidates(shapes, chords, grid, inverse_masses, removed, changed) -
     pairs = grid.pairs(inverse_masses, active, changed, is_changed)
     groups = [BodyPairs(pairs[:, 0], pairs[:, 1])]
     moving = changed[active[changed] & (inverse_masses[changed] > 0)]
-    groups += _near_shapes(shapes, chords.centers[moving], chords.reach[moving], moving)
+    groups += _near_shapes(enumerate(shapes), chords.centers[moving], chords.reach[moving], moving)
     return [g for g in groups if len(g)]
 
 
-def _near_shapes(shapes, c, r, moving) -> list:
-    """One :class:`ShapePairs` per static shape: the bodies ``moving`` whose swept spheres (c, r) reach it."""
+def near_shapes(shapes, swept: SweptSpheres, numbers=None) -> list:
+    """One :class:`ShapePairs` per static shape of ``shapes`` (world numbers ``numbers``, by
+    default 0, 1, ...): the moving bodies whose swept spheres reach it."""
+    moving = swept.moving
+    numbered = enumerate(shapes) if numbers is None else zip(numbers, shapes)
+    return _near_shapes(numbered, swept.centers[moving], swept.reach[moving], moving)
+
+
+def _near_shapes(numbered, c, r, moving) -> list:
+    """One :class:`ShapePairs` per (number, static shape): the bodies ``moving`` whose swept spheres (c, r) reach it."""
     groups = []
-    for k, shape in enumerate(shapes):
+    for k, shape in numbered:
         bounds = shape.bounds()
         if bounds is None:  # a plane: the sphere reaches down to it
             near = c @ shape.normal - shape.offset <= r

@@ -55,11 +55,12 @@ def _apply(v, i, j, wi, wj, p0, p1, p2):
 
 @njit(cache=True, inline="always")
 def _separation(dq, k, i, j, normal, s0):
-    d0, d1, d2 = -dq[i, 0], -dq[i, 1], -dq[i, 2]
+    # One assignment per branch: written as -dq_i, then += dq_j, the whole sweep measured
+    # 5x slower (Numba 0.68)
     if j >= 0:
-        d0 += dq[j, 0]
-        d1 += dq[j, 1]
-        d2 += dq[j, 2]
+        d0, d1, d2 = dq[j, 0] - dq[i, 0], dq[j, 1] - dq[i, 1], dq[j, 2] - dq[i, 2]
+    else:
+        d0, d1, d2 = -dq[i, 0], -dq[i, 1], -dq[i, 2]
     return s0[k] + d0 * normal[k, 0] + d1 * normal[k, 1] + d2 * normal[k, 2]
 
 

@@ -34,7 +34,7 @@ import dataclasses
 
 import numpy as np
 
-from .contact_buffer import Contacts, Materials, find_contacts
+from .contact_buffer import Contacts, Materials, find_contacts, newly_hit, previous_rows, speculative_margin, warm_start
 from .events import CollisionLog, ImpactBlock, cancel_triggers
 from .sequential_impulses import finish, step_members, step_members_parallel, substep
 from .step import RESTING_STEPS
@@ -75,6 +75,7 @@ class SolverStep:
         field = self.model.constant_acceleration  # (N, 3) when every force is constant, else None
         self.field = None if field is None else np.ascontiguousarray(field, dtype=float)
         self.materials = Materials.of(self.world, len(self.radii))
+        self.margin = speculative_margin(self.radii)
         self.log.largest_residual = 0.0
         # the built-in prologue says no to triggers only: asked here without a call per impact
         self._prologues = tuple(p for p in self.world.prologues if p is not cancel_triggers)
@@ -96,7 +97,7 @@ class SolverStep:
         q0, v0 = np.ascontiguousarray(y[0], dtype=float), np.ascontiguousarray(y[1], dtype=float)
         a = self.field if self.field is not None else np.asarray(self.model.acceleration(t, q0, v0), dtype=float)
         contacts = find_contacts(self.world, self.materials, q0, v0, a, self.radii, self.inverse_masses, dt,
-                                 self.log.removed)
+                                 self.log.removed, self.margin)
         if self._cancelled:
             self._cancelled &= set(contacts.key.tolist())  # pairs no longer in contact are free again
             contacts = contacts.subset(~np.isin(contacts.key, list(self._cancelled)))
@@ -106,7 +107,10 @@ class SolverStep:
         s = self.settings
         h = dt / s.substeps
         threshold = self.world.rest_speed + RESTING_STEPS * np.maximum(contacts.pressing, 0.0) * dt
-        return StepStart(t, dt, h, q0, v0, a, contacts, threshold, s.softness(h), *self._warm_start(contacts))
+        old = self._previous
+        previous = previous_rows(old.contacts.key, contacts.key)
+        pn, pt = warm_start(previous, old.pn, old.pt, contacts.normal)
+        return StepStart(t, dt, h, q0, v0, a, contacts, threshold, s.softness(h), pn, pt, previous)
 
     def solve(self, start: StepStart):
         """The substeps and the restitution pass; returns (q, v, solved contacts)."""
@@ -132,12 +136,12 @@ class SolverStep:
         """Events through the prologues (solving again without what they cancel), the epilogues,
         the log, and what the next step warm-starts from; returns the new state (2, N, 3)."""
         if self._columnar:
-            block, _ = self._impacts(start.t, start.dt, start.contacts, solved)
+            block, _ = self._impacts(start, solved)
             self.log.add_impacts(block)
             return self._close(start, q, v, solved, len(block))
         asked, said_no = set(), []  # keys the prologues have seen this step, and the events they cancelled
         while True:
-            events, cancelled = self._events(start.t, start.dt, start.contacts, solved, asked)
+            events, cancelled = self._events(start, solved, asked)
             said_no += [e for e in events if e.kind != "impact"]
             if not cancelled:
                 break
@@ -163,29 +167,11 @@ class SolverStep:
                                      f"t = {start.t:g} s (largest residual {self.log.largest_residual:.3g} m/s)")
         return np.stack([q, v])
 
-    def _warm_start(self, contacts: Contacts):
-        """Each contact's impulses from the last step where the pair was a contact too (else 0)."""
-        pn, pt = np.zeros(len(contacts)), np.zeros((len(contacts), 3))
-        old = self._previous
-        if len(old.contacts) and len(contacts):
-            at = np.minimum(np.searchsorted(old.contacts.key, contacts.key), len(old.contacts) - 1)
-            found = old.contacts.key[at] == contacts.key
-            pn[found] = old.pn[at[found]]
-            # the tangential impulse, kept in the new contact plane
-            n = contacts.normal[found]
-            p = old.pt[at[found]]
-            pt[found] = p - np.sum(p * n, axis=1)[:, None] * n
-        return pn, pt
-
-    def _impacts(self, t, dt, contacts: Contacts, solved) -> tuple[ImpactBlock, np.ndarray]:
+    def _impacts(self, start: StepStart, solved) -> tuple[ImpactBlock, np.ndarray]:
         """Impacts of the step, the contacts hit now (an impulse) and not in the last step, and their keys."""
-        hit = solved.total > 0
-        old = self._previous
-        if len(old.contacts):
-            at = np.minimum(np.searchsorted(old.contacts.key, contacts.key), len(old.contacts) - 1)
-            hit &= ~((old.contacts.key[at] == contacts.key) & (old.total[at] > 0))
-        k = np.flatnonzero(hit)
-        c = contacts.subset(k)
+        t, dt = start.t, start.dt
+        k = np.flatnonzero(newly_hit(solved.total, start.previous, self._previous.total))
+        c = start.contacts.subset(k)
         approach = -c.normal_speed
         # the time of touching, had the approach speed stayed what it was; in the bracket (t, t + dt)
         t_touch = t + np.where(approach > 0, np.minimum(np.maximum(c.separation, 0.0) / np.where(
@@ -194,12 +180,12 @@ class SolverStep:
                            c.friction, solved.total[k], (float(t), float(t + dt)), self.model.names,
                            self.world.shapes), c.key
 
-    def _events(self, t, dt, contacts: Contacts, solved, asked: set):
+    def _events(self, start: StepStart, solved, asked: set):
         """The step's impacts (:meth:`_impacts`) as collisions, through the prologues.
 
         Returns (events, keys cancelled now); each pair meets the prologues once per step.
         """
-        block, keys = self._impacts(t, dt, contacts, solved)
+        block, keys = self._impacts(start, solved)
         events, cancelled = [], set()
         for event, key in zip(block.collisions(), keys.tolist()):
             if key not in asked:
@@ -268,6 +254,7 @@ class StepStart:
     softness: tuple  # (bias rate, mass scale, impulse scale) of the correction
     pn: np.ndarray
     pt: np.ndarray
+    previous: np.ndarray  # each contact's row in the last step's contacts, -1 if it was none
 
 
 @dataclasses.dataclass(frozen=True)
