@@ -180,6 +180,8 @@ def changed_candidates(shapes, chords, grid, inverse_masses, removed, changed) -
 def near_shapes(shapes, swept: SweptSpheres, numbers=None) -> list:
     """One :class:`ShapePairs` per static shape of ``shapes`` (world numbers ``numbers``, by
     default 0, 1, ...): the moving bodies whose swept spheres reach it."""
+    if not len(shapes):
+        return []
     moving = swept.moving
     numbered = enumerate(shapes) if numbers is None else zip(numbers, shapes)
     return _near_shapes(numbered, swept.centers[moving], swept.reach[moving], moving)
