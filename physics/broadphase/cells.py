@@ -24,6 +24,13 @@ b_j <= a_j + 1 because j is small on its own level.
 ``bits < 0`` indexes cells densely (the grid: one counter per cell of the bounding box,
 level by level); ``bits >= 0`` hashes (level, x, y, z) into 2^bits buckets (the spatial
 hash), where entries of other cells in the same bucket are skipped by comparing cells.
+
+One level, by columns: when the dense grid's spheres are alike (the widest box at most
+:data:`ONE_LEVEL_SPREAD` times the median), there is a single level of cells as wide as the
+widest box, numbered with z fastest. The cells (x, y, z-1 .. z+1) of a column are then one
+run of the sorted spheres, and the 13 forward neighbours with the own cell are 5 runs: the
+own column from the sphere on, (x, y+1), and (x+1, y-1 .. y+1), each over z-1 .. z+1. The
+same pairs, each once; 2 to 3 times faster than 14 cell lookups on a ball pit of 10^4.
 """
 
 from __future__ import annotations
@@ -279,15 +286,9 @@ def _near(x, y, z, radius, cs, rs, q):
 
 @njit(cache=True)
 def _column_kernel(c, r, pad, origin, h, dims, capacity):
-    """The dense grid with one level of cells of edge ``h`` (every box spans at most two per axis).
-
-    Cells are numbered with z fastest, so the cells (x, y, z-1 .. z+1) of a column hold one
-    run of the sorted spheres: a sphere tests the rest of its own cell with the cell above
-    it as one run, and its 12 other forward neighbours as 4 column runs, (x, y+1) and
-    (x+1, y-1 .. y+1), instead of looking up 13 cells one by one (2 to 3 times faster).
-    Returns (pairs, k): the first ``min(k, capacity)`` rows hold pairs, ``k`` were found
-    (a buffer that could grow inside the loop measured 25% slower).
-    """
+    """The dense grid with one level of cells of edge ``h`` >= every box's width, by columns
+    (the module docstring). Returns (pairs, k): the first ``min(k, capacity)`` rows hold
+    pairs, ``k`` were found (a buffer grown inside the loop measured 25% slower)."""
     n = c.shape[0]
     nx, ny, nz = dims[0], dims[1], dims[2]
     n_slots = nx * ny * nz
@@ -296,7 +297,7 @@ def _column_kernel(c, r, pad, origin, h, dims, capacity):
         slot[i] = ((_cell(_lo(c, r, pad, i, 0), origin[0], h) * ny + _cell(_lo(c, r, pad, i, 1), origin[1], h)) * nz
                    + _cell(_lo(c, r, pad, i, 2), origin[2], h))
     order, slots = radix_argsort(slot, n_slots)
-    start = np.empty(n_slots + 1, dtype=np.int64)  # start[s]: the first sorted sphere of cell s
+    start = np.empty(n_slots + 1, dtype=np.int32)  # start[s]: the first sorted sphere of cell s (n < 2^31)
     s = 0
     for p in range(n):
         while s <= slots[p]:

@@ -8,7 +8,9 @@ every overlapping pair sits in the same or adjacent cells.
 
 Spheres larger than a cell live on coarser grids of 2, 4, 8... times the edge (the
 hierarchy is in :mod:`.cells`): a sphere spanning many cells is neither entered in all
-of them nor forces the whole grid to its size.
+of them nor forces the whole grid to its size. Spheres all alike (the widest at most twice
+the median) share one level of cells as wide as the widest, searched a column of three
+cells at a time.
 
 A dense grid needs a bounded world: when the bounding box would hold more than
 :data:`~.cells.MAX_CELLS_PER_BODY` cells per sphere (a far outlier, or tiny spheres
