@@ -181,6 +181,20 @@ def _slot(lev, x, y, z, dims, offset, bits):
 
 
 @njit(cache=True)
+def _starts(slots, n_slots):
+    """start[s]: the first of the sorted ``slots`` in slot s, start[s + 1] the end (one sequential
+    sweep); int32, half the memory of a dense grid's counters (n < 2^31)."""
+    start = np.empty(n_slots + 1, dtype=np.int32)
+    s = 0
+    for p in range(len(slots)):
+        while s <= slots[p]:
+            start[s] = p
+            s += 1
+    start[s:] = len(slots)
+    return start
+
+
+@njit(cache=True)
 def _hierarchy_kernel(c, r, pad, origin, hs, level, dims, offset, bits):
     n = c.shape[0]
     hashed = bits >= 0
@@ -192,14 +206,7 @@ def _hierarchy_kernel(c, r, pad, origin, hs, level, dims, offset, bits):
         slot[i] = _slot(level[i], _cell(_lo(c, r, pad, i, 0), origin[0], h), _cell(_lo(c, r, pad, i, 1), origin[1], h),
                         _cell(_lo(c, r, pad, i, 2), origin[2], h), dims, offset, bits)
     order, slots = radix_argsort(slot, n_slots)
-    # start[s]: the first sorted sphere of slot s (one sequential sweep)
-    start = np.empty(n_slots + 1, dtype=np.int64)
-    s = 0
-    for p in range(n):
-        while s <= slots[p]:
-            start[s] = p
-            s += 1
-    start[s:] = n
+    start = _starts(slots, n_slots)
     # everything in slot order: spheres near in space are near in memory
     cs = np.empty((n, 3))
     rs = np.empty(n)
@@ -297,13 +304,7 @@ def _column_kernel(c, r, pad, origin, h, dims, capacity):
         slot[i] = ((_cell(_lo(c, r, pad, i, 0), origin[0], h) * ny + _cell(_lo(c, r, pad, i, 1), origin[1], h)) * nz
                    + _cell(_lo(c, r, pad, i, 2), origin[2], h))
     order, slots = radix_argsort(slot, n_slots)
-    start = np.empty(n_slots + 1, dtype=np.int32)  # start[s]: the first sorted sphere of cell s (n < 2^31)
-    s = 0
-    for p in range(n):
-        while s <= slots[p]:
-            start[s] = p
-            s += 1
-    start[s:] = n
+    start = _starts(slots, n_slots)
     cs = np.empty((n, 3))
     rs = np.empty(n)
     for p in range(n):  # in cell order: spheres near in space are near in memory
