@@ -27,6 +27,18 @@ for the rows just before it, so a sweep takes about 0.8 products' time.
 from __future__ import annotations
 
 from numba import njit
+from steplab.physics.symmetric_blocks import times, transposed_times
+
+
+@njit(cache=True, inline="always")
+def _scatter_row(blocks, above_ptr, hi, n, k, x0, x1, x2, out, sign):  # pragma: no cover - compiled
+    """out_hi += sign C^T x for each pair (k, hi) of row k: row k's part in the rows after it."""
+    for u in range(above_ptr[k], above_ptr[k + 1]):
+        b = 3 * hi[u]
+        c0, c1, c2 = transposed_times(blocks, n + u, x0, x1, x2)
+        out[b] += sign * c0  # sign is +-1: exact, so a - c and a + (-1) c round alike
+        out[b + 1] += sign * c1
+        out[b + 2] += sign * c2
 
 
 @njit(cache=True)
@@ -40,17 +52,10 @@ def forward_sweep(blocks, above_ptr, hi, inverse, r, z, work):  # pragma: no cov
     rz = 0.0
     for k in range(n):
         a = 3 * k
-        w0, w1, w2 = work[a], work[a + 1], work[a + 2]
-        t0 = inverse[k, 0, 0] * w0 + inverse[k, 0, 1] * w1 + inverse[k, 0, 2] * w2
-        t1 = inverse[k, 1, 0] * w0 + inverse[k, 1, 1] * w1 + inverse[k, 1, 2] * w2
-        t2 = inverse[k, 2, 0] * w0 + inverse[k, 2, 1] * w1 + inverse[k, 2, 2] * w2
+        t0, t1, t2 = times(inverse, k, work[a], work[a + 1], work[a + 2])
         z[a], z[a + 1], z[a + 2] = t0, t1, t2
         rz += r[a] * t0 + r[a + 1] * t1 + r[a + 2] * t2
-        for u in range(above_ptr[k], above_ptr[k + 1]):
-            b, m = 3 * hi[u], n + u
-            work[b] -= blocks[m, 0, 0] * t0 + blocks[m, 1, 0] * t1 + blocks[m, 2, 0] * t2
-            work[b + 1] -= blocks[m, 0, 1] * t0 + blocks[m, 1, 1] * t1 + blocks[m, 2, 1] * t2
-            work[b + 2] -= blocks[m, 0, 2] * t0 + blocks[m, 1, 2] * t1 + blocks[m, 2, 2] * t2
+        _scatter_row(blocks, above_ptr, hi, n, k, t0, t1, t2, work, -1.0)
     return rz
 
 
@@ -62,13 +67,10 @@ def backward_sweep(blocks, above_ptr, hi, inverse, r, z):  # pragma: no cover - 
         a = 3 * k
         s0, s1, s2 = r[a], r[a + 1], r[a + 2]
         for u in range(above_ptr[k], above_ptr[k + 1]):
-            b, m = 3 * hi[u], n + u
-            z0, z1, z2 = z[b], z[b + 1], z[b + 2]
-            s0 -= blocks[m, 0, 0] * z0 + blocks[m, 0, 1] * z1 + blocks[m, 0, 2] * z2
-            s1 -= blocks[m, 1, 0] * z0 + blocks[m, 1, 1] * z1 + blocks[m, 1, 2] * z2
-            s2 -= blocks[m, 2, 0] * z0 + blocks[m, 2, 1] * z1 + blocks[m, 2, 2] * z2
-        for i in range(3):
-            z[a + i] = inverse[k, i, 0] * s0 + inverse[k, i, 1] * s1 + inverse[k, i, 2] * s2
+            b = 3 * hi[u]
+            c0, c1, c2 = times(blocks, n + u, z[b], z[b + 1], z[b + 2])
+            s0, s1, s2 = s0 - c0, s1 - c1, s2 - c2
+        z[a], z[a + 1], z[a + 2] = times(inverse, k, s0, s1, s2)
 
 
 @njit(cache=True)
@@ -83,22 +85,14 @@ def transformed_product(blocks, above_ptr, hi, inverse, p, q, t, work):  # pragm
     rest = work
     for k in range(n):
         a = 3 * k
-        t0, t1, t2 = t[a], t[a + 1], t[a + 2]
-        for i in range(3):
-            rest[a + i] = p[a + i] - (blocks[k, i, 0] * t0 + blocks[k, i, 1] * t1 + blocks[k, i, 2] * t2)
+        d0, d1, d2 = times(blocks, k, t[a], t[a + 1], t[a + 2])
+        rest[a], rest[a + 1], rest[a + 2] = p[a] - d0, p[a + 1] - d1, p[a + 2] - d2
     # the forward sweep of rest, each row's result plus t into q
     curvature = 0.0
     for k in range(n):
         a = 3 * k
-        w0, w1, w2 = rest[a], rest[a + 1], rest[a + 2]
-        s0 = inverse[k, 0, 0] * w0 + inverse[k, 0, 1] * w1 + inverse[k, 0, 2] * w2
-        s1 = inverse[k, 1, 0] * w0 + inverse[k, 1, 1] * w1 + inverse[k, 1, 2] * w2
-        s2 = inverse[k, 2, 0] * w0 + inverse[k, 2, 1] * w1 + inverse[k, 2, 2] * w2
-        for u in range(above_ptr[k], above_ptr[k + 1]):
-            b, m = 3 * hi[u], n + u
-            rest[b] -= blocks[m, 0, 0] * s0 + blocks[m, 1, 0] * s1 + blocks[m, 2, 0] * s2
-            rest[b + 1] -= blocks[m, 0, 1] * s0 + blocks[m, 1, 1] * s1 + blocks[m, 2, 1] * s2
-            rest[b + 2] -= blocks[m, 0, 2] * s0 + blocks[m, 1, 2] * s1 + blocks[m, 2, 2] * s2
+        s0, s1, s2 = times(inverse, k, rest[a], rest[a + 1], rest[a + 2])
+        _scatter_row(blocks, above_ptr, hi, n, k, s0, s1, s2, rest, -1.0)
         q[a], q[a + 1], q[a + 2] = s0 + t[a], s1 + t[a + 1], s2 + t[a + 2]
         curvature += p[a] * q[a] + p[a + 1] * q[a + 1] + p[a + 2] * q[a + 2]
     return curvature
@@ -111,12 +105,7 @@ def residual_norm(blocks, above_ptr, hi, r, dr, work):  # pragma: no cover - com
     work[:] = dr
     for k in range(n):
         a = 3 * k
-        r0, r1, r2 = r[a], r[a + 1], r[a + 2]
-        for u in range(above_ptr[k], above_ptr[k + 1]):
-            b, m = 3 * hi[u], n + u
-            work[b] += blocks[m, 0, 0] * r0 + blocks[m, 1, 0] * r1 + blocks[m, 2, 0] * r2
-            work[b + 1] += blocks[m, 0, 1] * r0 + blocks[m, 1, 1] * r1 + blocks[m, 2, 1] * r2
-            work[b + 2] += blocks[m, 0, 2] * r0 + blocks[m, 1, 2] * r1 + blocks[m, 2, 2] * r2
+        _scatter_row(blocks, above_ptr, hi, n, k, r[a], r[a + 1], r[a + 2], work, 1.0)
     total = 0.0
     for i in range(work.size):
         total += work[i] * work[i]

@@ -145,6 +145,22 @@ class SymmetricBlockMatrix:
         return cls(np.concatenate([blocks, bsr.data[upper][order]]), pairs)
 
 
+@njit(cache=True, inline="always")
+def times(blocks, m, x0, x1, x2):  # pragma: no cover - compiled
+    """blocks[m] x, for x = (x0, x1, x2): the 3x3 product every sweep and product is made of."""
+    return (blocks[m, 0, 0] * x0 + blocks[m, 0, 1] * x1 + blocks[m, 0, 2] * x2,
+            blocks[m, 1, 0] * x0 + blocks[m, 1, 1] * x1 + blocks[m, 1, 2] * x2,
+            blocks[m, 2, 0] * x0 + blocks[m, 2, 1] * x1 + blocks[m, 2, 2] * x2)
+
+
+@njit(cache=True, inline="always")
+def transposed_times(blocks, m, x0, x1, x2):  # pragma: no cover - compiled
+    """blocks[m]^T x: a stored block above the diagonal acting as its mirror below it."""
+    return (blocks[m, 0, 0] * x0 + blocks[m, 1, 0] * x1 + blocks[m, 2, 0] * x2,
+            blocks[m, 0, 1] * x0 + blocks[m, 1, 1] * x1 + blocks[m, 2, 1] * x2,
+            blocks[m, 0, 2] * x0 + blocks[m, 1, 2] * x1 + blocks[m, 2, 2] * x2)
+
+
 @njit(cache=True)
 def product(blocks, above_ptr, hi, x, out):  # pragma: no cover - compiled
     """out = A x, row by row: row r's diagonal block and its pairs (r, hi) above the diagonal.
@@ -160,21 +176,15 @@ def product(blocks, above_ptr, hi, x, out):  # pragma: no cover - compiled
     for r in range(n):
         a = 3 * r
         x0, x1, x2 = x[a], x[a + 1], x[a + 2]
-        y0 = blocks[r, 0, 0] * x0 + blocks[r, 0, 1] * x1 + blocks[r, 0, 2] * x2
-        y1 = blocks[r, 1, 0] * x0 + blocks[r, 1, 1] * x1 + blocks[r, 1, 2] * x2
-        y2 = blocks[r, 2, 0] * x0 + blocks[r, 2, 1] * x1 + blocks[r, 2, 2] * x2
+        y0, y1, y2 = times(blocks, r, x0, x1, x2)
         for u in range(above_ptr[r], above_ptr[r + 1]):
             b, k = 3 * hi[u], n + u
-            c00, c01, c02 = blocks[k, 0, 0], blocks[k, 0, 1], blocks[k, 0, 2]
-            c10, c11, c12 = blocks[k, 1, 0], blocks[k, 1, 1], blocks[k, 1, 2]
-            c20, c21, c22 = blocks[k, 2, 0], blocks[k, 2, 1], blocks[k, 2, 2]
-            xb0, xb1, xb2 = x[b], x[b + 1], x[b + 2]
-            y0 += c00 * xb0 + c01 * xb1 + c02 * xb2
-            y1 += c10 * xb0 + c11 * xb1 + c12 * xb2
-            y2 += c20 * xb0 + c21 * xb1 + c22 * xb2
-            out[b] += c00 * x0 + c10 * x1 + c20 * x2
-            out[b + 1] += c01 * x0 + c11 * x1 + c21 * x2
-            out[b + 2] += c02 * x0 + c12 * x1 + c22 * x2
+            c0, c1, c2 = times(blocks, k, x[b], x[b + 1], x[b + 2])
+            y0, y1, y2 = y0 + c0, y1 + c1, y2 + c2
+            t0, t1, t2 = transposed_times(blocks, k, x0, x1, x2)
+            out[b] += t0
+            out[b + 1] += t1
+            out[b + 2] += t2
         out[a] += y0
         out[a + 1] += y1
         out[a + 2] += y2
