@@ -63,8 +63,25 @@ class Chords:
 
 
 def swept_bounds(q0, q1, radii, margin):
-    """Spheres holding the bodies along their chords ``q0 -> q1``: centre, reach (:func:`.pairs.candidates`)."""
-    return 0.5 * (q0 + q1), radii + 0.5 * np.sqrt(np.sum((q1 - q0) ** 2, axis=1)) + margin
+    """Spheres holding the bodies along their chords ``q0 -> q1``: centre (the chord's middle),
+    reach (radius + half the chord + margin) (:func:`.pairs.candidates`)."""
+    return _swept_bounds(np.ascontiguousarray(q0, dtype=float), np.ascontiguousarray(q1, dtype=float),
+                         np.asarray(radii, dtype=float), float(margin))
+
+
+@njit(cache=True)
+def _swept_bounds(q0, q1, radii, margin):
+    """:func:`swept_bounds` compiled: NumPy's expressions element by element (the same numbers)."""
+    n = len(radii)
+    centers, reach = np.empty((n, 3)), np.empty(n)
+    for b in range(n):
+        total = 0.0
+        for k in range(3):
+            centers[b, k] = 0.5 * (q0[b, k] + q1[b, k])
+            dk = q1[b, k] - q0[b, k]
+            total += dk * dk
+        reach[b] = radii[b] + 0.5 * np.sqrt(total) + margin
+    return centers, reach
 
 
 @njit(cache=True)

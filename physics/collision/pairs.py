@@ -15,9 +15,9 @@ from __future__ import annotations
 import dataclasses
 
 import numpy as np
-from numba import njit
 
 from ..broadphase import find_pairs
+from .chords import swept_bounds
 from .narrow_phase import collide, collide_sphere_sphere
 from .shapes import Shape, Sphere
 from .time_of_impact import sphere_sphere, time_of_impact
@@ -122,8 +122,7 @@ class SweptSpheres:
         active = np.ones(len(radii), bool)
         if removed:
             active[list(removed)] = False
-        return cls(*_swept(np.ascontiguousarray(q0, dtype=float), np.ascontiguousarray(q1, dtype=float),
-                           np.asarray(radii, dtype=float), float(margin)), active, inverse_masses)
+        return cls(*swept_bounds(q0, q1, radii, margin), active, inverse_masses)
 
     @property
     def moving(self) -> np.ndarray:
@@ -141,21 +140,6 @@ class SweptSpheres:
             pairs = index[find_pairs(self.centers[index], self.reach[index], method)]
         movable = (self.inverse_masses[pairs[:, 0]] > 0) | (self.inverse_masses[pairs[:, 1]] > 0)
         return BodyPairs(pairs[movable, 0], pairs[movable, 1])
-
-
-@njit(cache=True)
-def _swept(q0, q1, radii, margin):
-    """Centre (the chord's middle) and reach (radius + half the chord + margin) of each swept sphere."""
-    n = len(radii)
-    centers, reach = np.empty((n, 3)), np.empty(n)
-    for b in range(n):
-        d2 = 0.0
-        for k in range(3):
-            centers[b, k] = 0.5 * (q0[b, k] + q1[b, k])
-            d = q1[b, k] - q0[b, k]
-            d2 += d * d
-        reach[b] = radii[b] + 0.5 * np.sqrt(d2) + margin
-    return centers, reach
 
 
 def changed_candidates(shapes, chords, grid, inverse_masses, removed, changed) -> list:
