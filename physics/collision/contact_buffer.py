@@ -104,7 +104,7 @@ def find_contacts(world, materials: Materials, q, v, a, radii, inverse_masses, d
     columns = _pair_and_plane_contacts(pairs.i, pairs.j, q, v, a, radii, inverse_masses, swept.centers, swept.reach,
                                        swept.active, plane, normals, offsets, materials.shape[plane],
                                        materials.body, materials.restitution, materials.friction, n + n_shapes)
-    others = [k for k in range(n_shapes) if k not in set(planes)]
+    others = [k for k, shape in enumerate(world.shapes) if shape.kind != "plane"]
     parts = [columns] + [_shape_contacts(group, materials, q, v, a, radii, inverse_masses, n + n_shapes)
                          for group in near_shapes([world.shapes[k] for k in others], swept, others) if len(group)]
     if len(parts) == 1:  # in key order already
