@@ -11,6 +11,12 @@ at run time, and :func:`get_integrator` also imports ``"package.module:Name"``.
 
 from __future__ import annotations
 
+# Only the installed name: run from the repository root, ``import integrators`` would find this
+# folder too, and a Numba kernel cached under that foreign name fails to load elsewhere.
+if __name__ != "steplab.integrators":
+    raise ImportError(f"{__name__} is steplab's integrators/ folder imported under the wrong name: "
+                      "import steplab.integrators instead")
+
 from steplab.physics.plugins import PluginError as PluginError
 from steplab.physics.plugins import Registry, import_object
 

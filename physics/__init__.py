@@ -6,6 +6,12 @@ default everywhere, float32 is asked for explicitly.
 
 from __future__ import annotations
 
+# Only the installed name: run from the repository root, ``import physics`` would find this
+# folder too, and a Numba kernel cached under that foreign name fails to load elsewhere.
+if __name__ != "steplab.physics":
+    raise ImportError(f"{__name__} is steplab's physics/ folder imported under the wrong name: "
+                      "import steplab.physics instead")
+
 import jax
 
 jax.config.update("jax_enable_x64", True)

@@ -6,6 +6,12 @@ Each study module defines ``STUDY`` (a :class:`studies.runner.Study`) and is lis
 
 from __future__ import annotations
 
+# Only the installed name: run from the repository root, ``import studies`` would find this
+# folder too, and a Numba kernel cached under that foreign name fails to load elsewhere.
+if __name__ != "steplab.studies":
+    raise ImportError(f"{__name__} is steplab's studies/ folder imported under the wrong name: "
+                      "import steplab.studies instead")
+
 from steplab.physics.plugins import BUILTIN, PluginError, Registry
 
 from . import (

@@ -68,3 +68,10 @@ def damped_oscillator():
 def lecture_projectile():
     """The lecture's projectile: m = 2.5 kg, p = (10, 0, 2), V = (7.68, 0, 29), t0 = 5 s."""
     return helpers.lecture_projectile()
+
+
+def pytest_terminal_summary(terminalreporter):
+    """One line, not a buried skip reason, when the browser tests could not run."""
+    skipped = terminalreporter.stats.get("skipped", [])
+    if any(helpers.BROWSER_SKIP in str(report.longrepr) for report in skipped):
+        terminalreporter.write_line(f"browser tests skipped: {helpers.BROWSER_SKIP}")

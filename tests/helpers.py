@@ -211,3 +211,20 @@ radius = 0.1
 position = [0.0, 0.0, 0.0]
 """
 TWO_BODY_SCENE = ONE_BODY_SCENE + '[[bodies]]\nname = "b"\nmass = 1.0\nradius = 0.1\nposition = [1.0, 0.0, 0.0]\n'
+
+
+#: why a browser test skips, in one line that says how to enable it
+BROWSER_SKIP = ("headless Chromium not found: `apt-get install chromium chromium-driver` runs the browser tests "
+                "(CI=true requires them)")
+
+
+def browser_missing():
+    """Called by a browser test that finds no Chromium: a skip on a fresh machine (the README's
+    test command must pass there), a failure in CI, which installs Debian's ``chromium``."""
+    import os
+
+    import pytest
+
+    if os.environ.get("CI", "").lower() == "true":
+        pytest.fail("CI=true requires the browser tests, and no Chromium was found (.ci/run installs it)")
+    pytest.skip(BROWSER_SKIP)

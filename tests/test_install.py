@@ -49,3 +49,27 @@ def test_the_command_is_not_shadowed_by_a_steplab_folder_in_the_working_director
     script = Path(sys.executable).parent / "steplab"
     out = subprocess.run([str(script), "--version"], cwd=tmp_path, capture_output=True, text=True)
     assert out.returncode == 0 and out.stdout.startswith("steplab"), out.stderr
+
+
+def test_the_folders_refuse_a_foreign_name_so_no_kernel_is_cached_under_it(tmp_path):
+    """Issue 24's reproduction: from the repository root ``from physics.broadphase import
+    find_pairs`` used to compile and cache a Numba kernel under the name ``physics``, which then
+    failed to load from every other folder. Now the import fails, naming the right one, and the
+    installed name works from anywhere afterwards."""
+    env = {k: v for k, v in os.environ.items() if k != "PYTHONPATH"}
+    for folder in ("physics", "integrators", "studies"):
+        wrong = subprocess.run([sys.executable, "-c", f"import {folder}"], cwd=ROOT, env=env,
+                               capture_output=True, text=True)
+        assert wrong.returncode != 0
+        assert wrong.stderr.strip().splitlines()[-1] == (
+            f"ImportError: {folder} is steplab's {folder}/ folder imported under the wrong name: "
+            f"import steplab.{folder} instead")
+    code = ("import numpy as np; from {0} import find_pairs;"
+            "print(len(find_pairs(np.random.default_rng(1).random((200, 3)), 0.05)))")
+    first = subprocess.run([sys.executable, "-c", code.format("physics.broadphase")], cwd=ROOT, env=env,
+                           capture_output=True, text=True)
+    assert first.returncode != 0 and "import steplab.physics instead" in first.stderr
+    second = subprocess.run([sys.executable, "-c", code.format("steplab.physics")], cwd=tmp_path, env=env,
+                            capture_output=True, text=True)
+    assert second.returncode == 0, second.stderr
+    assert int(second.stdout) > 0
