@@ -157,7 +157,7 @@ def simulate(model, integrator, y0, t_start: float, t_end: float | None = None, 
     DivergenceError
         When the state becomes non-finite or absurdly large.
     """
-    from . import get_integrator
+    from .registry import get_integrator
 
     integrator = get_integrator(integrator)
     if backend not in ("numpy", "jax"):
@@ -311,7 +311,7 @@ def final_state_function(model, integrator, check: bool = True):
 
 
 def _stepper(integrator):
-    from . import get_integrator
+    from .registry import get_integrator
 
     integrator = get_integrator(integrator)
     if not isinstance(integrator, Stepper):

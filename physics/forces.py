@@ -22,6 +22,8 @@ from __future__ import annotations
 
 import re
 
+from steplab.core.registry import PluginError, Registry
+
 from .central_gravity import CentralGravity
 from .constant_force import ConstantForce
 from .dampers import Dampers
@@ -29,7 +31,6 @@ from .drag import Drag
 from .force import Force
 from .friction import Friction
 from .gravity import Gravity
-from .plugins import PluginError, Registry
 from .springs import Springs
 
 #: a scene key must be a bare TOML key, so that ``[forces.<name>]`` needs no quotes
@@ -51,7 +52,7 @@ def _as_force(obj) -> tuple[str, type[Force]]:
 
 
 #: every force a scene file can declare, by scene key: steplab's own, then those of installed
-#: plugins (the "steplab.forces" entry points, loaded on first use; see steplab.physics.plugins)
+#: plugins (the "steplab.forces" entry points, loaded on first use; see steplab.core.registry)
 FORCES: Registry = Registry("steplab.forces", "force", [(cls.name, cls) for cls in (
     Gravity, CentralGravity, Springs, Dampers, Drag, Friction, ConstantForce,
 )], _as_force)
@@ -63,7 +64,7 @@ def register_force(cls: type[Force]) -> type[Force]:
 
     Raises
     ------
-    steplab.physics.plugins.PluginError
+    steplab.core.registry.PluginError
         Not a Force subclass with a scene key and a ``from_scene``, or the key is taken by
         another class ("force name 'gravity' is taken (by steplab); choose another name").
     """

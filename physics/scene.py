@@ -18,10 +18,11 @@ from pathlib import Path
 
 import numpy as np
 
+from steplab.core.registry import BUILTIN
+
 from . import soft_body
 from .forces import FORCES
 from .model import Model
-from .plugins import BUILTIN
 from .scene_library import SCENES
 from .scene_toml import MAX_BODIES as MAX_BODIES
 from .scene_toml import MAX_PAIRS as MAX_PAIRS

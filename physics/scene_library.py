@@ -19,7 +19,7 @@ import types
 from importlib import resources
 from pathlib import Path
 
-from .plugins import PluginError, Registry
+from steplab.core.registry import PluginError, Registry
 
 SUFFIX = ".toml"
 
@@ -47,6 +47,6 @@ def _as_scenes(obj) -> list[tuple[str, object]]:
 
 
 #: every named scene, name -> its TOML file: steplab's own, then those of installed plugins
-#: (the "steplab.scenes" entry points, loaded on first use; see steplab.physics.plugins)
+#: (the "steplab.scenes" entry points, loaded on first use; see steplab.core.registry)
 SCENES: Registry = Registry("steplab.scenes", "scene", _toml_files(resources.files("steplab.physics") / "scenes"),
                             _as_scenes)

@@ -76,8 +76,8 @@ def animate(runs: list[tuple[str, object]], model, out: str | Path, fps: int = 3
     from matplotlib.collections import LineCollection, PatchCollection
     from matplotlib.patches import Circle
 
+    from steplab.core.records import write_with
     from steplab.physics import CentralGravity, Springs
-    from steplab.studies.records import write_with
 
     out = Path(out)
     check_format(out)

@@ -184,7 +184,7 @@ def main(argv=None) -> int:
         command = args.command
         import numpy as np
 
-        from steplab.physics.plugins import PluginWarning
+        from steplab.core.registry import PluginWarning
 
         # runs detect non-finite states themselves: no floating-point warnings on stderr;
         # a skipped plugin is one warning line, not a warning with its source line
@@ -231,7 +231,7 @@ def _run_command(args) -> int:
 
 def _show_warning(message, category, filename, lineno, file=None, line=None):
     """A plugin warning as one line on stderr; any other warning as Python prints it."""
-    from steplab.physics.plugins import PluginWarning
+    from steplab.core.registry import PluginWarning
 
     if issubclass(category, PluginWarning):
         print(f"steplab: warning: {message}", file=sys.stderr)
@@ -363,7 +363,7 @@ def cmd_run(args) -> int:
             "collisions")})
         summary["out"] = str(args.out)
         if traj.collisions is not None:
-            from steplab.studies.records import write_atomic
+            from steplab.core.records import write_atomic
 
             path = args.out.with_name(args.out.stem + ".collisions.csv")
             write_atomic(path, traj.collisions.to_csv().encode())
@@ -744,9 +744,9 @@ MUJOCO_EQUIVALENTS = {"semi-implicit-euler": "Euler", "rk4": "RK4", "implicit-da
 
 
 def cmd_export(args) -> int:
+    from steplab.core.records import write_atomic
     from steplab.engines.mjcf import mjcf
     from steplab.physics.scene import load_scene
-    from steplab.studies.records import write_atomic
 
     scene = load_scene(args.scene)
     integrator = args.integrator or MUJOCO_EQUIVALENTS.get(scene.integrator, "Euler")

@@ -1,6 +1,6 @@
 """``steplab run``'s output: a trajectory as NPZ or CSV, written atomically.
 
-The files go through :func:`steplab.studies.records.write_atomic`, the one writer of
+The files go through :func:`steplab.core.records.write_atomic`, the one writer of
 every result file, so a reader never sees a half-written trajectory.
 """
 
@@ -13,7 +13,7 @@ from pathlib import Path
 
 import numpy as np
 
-from steplab.studies.records import write_atomic
+from steplab.core.records import write_atomic
 
 TRAJECTORY_FORMATS = (".npz", ".csv")
 

@@ -23,8 +23,8 @@ import re
 import sys
 from pathlib import Path
 
+from steplab.core.records import write_atomic
 from steplab.paper import CODE_BLOCK
-from steplab.studies.records import write_atomic
 
 SECTION = re.compile(r"^## (\d+)\. ", re.M)
 SETUP_MARK = "<!-- setup -->"

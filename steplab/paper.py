@@ -17,8 +17,8 @@ import json
 import re
 from pathlib import Path
 
+from steplab.core.records import write_atomic
 from steplab.studies import STUDIES
-from steplab.studies.records import write_atomic
 from steplab.studies.tables import Table, format_value, markdown_table
 
 PLACEHOLDER = re.compile(r"\{\{\s*([^{}]+?)\s*\}\}")

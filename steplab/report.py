@@ -20,9 +20,9 @@ from pathlib import Path
 
 from steplab import report_figures
 from steplab.bench.report import collision_markdown
+from steplab.core.records import write_atomic
 from steplab.paper import BENCH_TABLE, PLACEHOLDER, PaperError, load_records, lookup, to_html
 from steplab.studies import STUDIES
-from steplab.studies.records import write_atomic
 from steplab.studies.tables import format_value, markdown_table
 
 #: the tables that list the lecture's errors (truncation: its misprinted formulas;

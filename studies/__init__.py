@@ -12,7 +12,7 @@ if __name__ != "steplab.studies":
     raise ImportError(f"{__name__} is steplab's studies/ folder imported under the wrong name: "
                       "import steplab.studies instead")
 
-from steplab.physics.plugins import BUILTIN, PluginError, Registry
+from steplab.core.registry import BUILTIN, PluginError, Registry
 
 from . import (
     broadphase,

@@ -34,7 +34,8 @@ from pathlib import Path
 
 import numpy as np
 
-from .records import remove_temporary_files
+from steplab.core.records import remove_temporary_files
+
 from .runner import Study, cache_key, finish, is_cached, run_study
 from .task_cache import TaskCache, as_json, item_key
 

@@ -14,7 +14,7 @@ matplotlib.rcParams["svg.hashsalt"] = "steplab"
 import matplotlib.pyplot as plt  # noqa: E402
 from steplab.integrators import UnknownIntegratorError, get_integrator  # noqa: E402
 
-from .records import write_atomic  # noqa: E402
+from steplab.core.records import write_atomic  # noqa: E402
 
 #: colours and markers for a method that states no ``style`` (a plugin, a test stepper):
 #: the ones steplab's own methods leave free, picked by a stable checksum of the name

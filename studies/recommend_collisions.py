@@ -32,8 +32,9 @@ from steplab.integrators.simulate import DivergenceError
 from steplab.physics.broadphase import find_pairs
 from steplab.physics.collision import ImpactCapError, Sphere, collide
 
+from steplab.core.timing import median_time
+
 from .recommend import NoFixedStepError
-from .timing import median_time
 
 #: the reference's first dt is at most the finer of the scene's dt and --dt-max divided by
 #: this (then halved, and checked): a fixed-step method's error falls at least as dt, so

@@ -5,7 +5,7 @@ A :class:`Study` is three plain functions: ``parameters(quick)`` gives the param
 and ``plot(record, out)`` draws figures from the record alone; its ``tables`` are the
 tables ``steplab paper`` prints from the record (studies/tables.py). The runner adds
 provenance, writes the figures and then the JSON (each atomically, through
-studies/records.py, JSON last), and skips a study whose JSON carries the same cache
+steplab/core/records.py, JSON last), and skips a study whose JSON carries the same cache
 key: a hash of its parameters and of the source code it runs (physics, integrators and the study modules it uses). So an
 interrupted ``steplab reproduce`` resumes where it stopped, and a change to the code or
 the parameters re-runs what it affects.
@@ -30,7 +30,8 @@ from collections.abc import Callable, Iterable
 from pathlib import Path
 from typing import Any
 
-from .records import remove_temporary_files, write_json
+from steplab.core.records import remove_temporary_files, write_json
+
 from .tables import Table
 from .task_cache import TaskCache, as_json
 

@@ -21,7 +21,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .records import remove_temporary_files, write_atomic
+from steplab.core.records import remove_temporary_files, write_atomic
 
 #: the folder under a results folder that holds the tasks of studies not yet complete
 FOLDER = ".tasks"

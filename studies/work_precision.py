@@ -18,10 +18,11 @@ from steplab.integrators import INTEGRATORS, Stepper, get_integrator
 from steplab.integrators.references import ReferenceFailedError, solve_adaptive
 from steplab.integrators.simulate import final_state_function
 
+from steplab.core.timing import first_call_seconds, median_time
+
 from . import plotting
 from .problems import Problem, oscillator_problem, scene_problem, true_final
 from .runner import Study
-from .timing import first_call_seconds, median_time
 
 TIMING_REPEATS = 5
 #: timed solves of a scipy point (a Python loop: slower, and steadier, than compiled code)

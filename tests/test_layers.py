@@ -1,7 +1,8 @@
-"""Layers point down only: physics <- integrators <- engines <- studies <- steplab's commands.
+"""Layers point down only: core <- physics <- integrators <- engines <- studies <- steplab's
+commands; and no module imports itself back through others (no import cycle).
 
 Read from the source with ``ast`` (every import, also those inside functions), so an
-upward import fails here even where no test happens to execute it.
+upward import or a cycle fails here even where no test happens to execute it.
 """
 
 from __future__ import annotations
@@ -13,14 +14,17 @@ import pytest
 
 ROOT = Path(__file__).resolve().parent.parent
 #: each layer's folder and installed name, lowest first; the commands (cli, io, paper,
-#: bench, animate, peers) sit above them all. The engine adapters (steplab/engines) build on
-#: the model and the integrators' trajectories, and the studies measure them
-LAYERS = (("physics", "steplab.physics"), ("integrators", "steplab.integrators"),
+#: bench, animate, peers) sit above them all. The foundations (steplab/core: registries,
+#: records, timing) import nothing else of steplab; the engine adapters (steplab/engines)
+#: build on the model and the integrators' trajectories, and the studies measure them
+LAYERS = (("steplab/core", "steplab.core"), ("physics", "steplab.physics"), ("integrators", "steplab.integrators"),
           ("steplab/engines", "steplab.engines"), ("studies", "steplab.studies"))
+#: every folder of steplab's modules and its installed name, for the cycle check
+PACKAGES = (*LAYERS, ("steplab", "steplab"))
 
 
 def layer_of(module: str) -> int:
-    """The rank of a ``steplab.*`` module: 0 physics, 1 integrators, 2 engines, 3 studies, 4 the commands."""
+    """The rank of a ``steplab.*`` module: 0 core, 1 physics, 2 integrators, 3 engines, 4 studies, 5 the commands."""
     for rank, (_, package) in enumerate(LAYERS):
         if module == package or module.startswith(package + "."):
             return rank
@@ -28,7 +32,8 @@ def layer_of(module: str) -> int:
 
 
 def imported_modules(path: Path, package: str) -> list[tuple[int, str]]:
-    """(line, absolute module name) of every steplab import in ``path``, a module of ``package``."""
+    """(line, absolute name) of every steplab import in ``path``, a module of ``package``: the
+    module, or for ``from m import name`` the module and the name (``steplab.io.write_atomic``)."""
     tree = ast.parse(path.read_text(), filename=str(path))
     here = package.split(".")
     found = []
@@ -40,8 +45,8 @@ def imported_modules(path: Path, package: str) -> list[tuple[int, str]]:
                 base = ".".join(here[:len(here) - node.level + 1] + ([node.module] if node.module else []))
             else:
                 base = node.module
-            # `from steplab import cli` imports the module steplab.cli
-            found += [(node.lineno, f"{base}.{alias.name}" if base == "steplab" else base) for alias in node.names]
+            # `from steplab import cli` imports the module steplab.cli; `from m import f`, m.f
+            found += [(node.lineno, f"{base}.{alias.name}") for alias in node.names]
     return [(line, name) for line, name in found if name == "steplab" or name.startswith("steplab.")]
 
 
@@ -65,5 +70,87 @@ def test_the_check_sees_an_upward_import(tmp_path):
     module.write_text("from steplab.io import write_atomic\nfrom .. import integrators\n"
                       "def f():\n    from steplab import paper\n    import steplab.bench as b\n")
     names = [name for _, name in imported_modules(module, "steplab.studies")]
-    assert names == ["steplab.io", "steplab.integrators", "steplab.paper", "steplab.bench"]
-    assert [layer_of(n) for n in names] == [4, 1, 4, 4]
+    assert names == ["steplab.io.write_atomic", "steplab.integrators", "steplab.paper", "steplab.bench"]
+    assert [layer_of(n) for n in names] == [5, 2, 5, 5]
+
+
+# --- no import cycles ---------------------------------------------------------------------
+
+#: the cycle another branch removes (springs/dampers, sparse_jacobian and sparse_kernels, issue 24);
+#: the lead deletes this entry when merging it
+KNOWN_CYCLES = ({"steplab.physics.dampers", "steplab.physics.sparse_jacobian", "steplab.physics.sparse_kernels",
+                 "steplab.physics.springs"},)
+
+
+def modules() -> dict[str, Path]:
+    """Every steplab module by its installed name (a package by its own name, not ``.__init__``)."""
+    found = {}
+    for folder, package in PACKAGES:
+        for path in (ROOT / folder).rglob("*.py"):
+            parts = path.relative_to(ROOT / folder).with_suffix("").parts
+            found[".".join([package, *parts]).removesuffix(".__init__")] = path
+    return found
+
+
+def import_graph(found: dict[str, Path]) -> dict[str, set[str]]:
+    """Module -> the steplab modules it imports (``from package import module`` names the module)."""
+    graph = {}
+    for name, path in found.items():
+        package = name if path.name == "__init__.py" else name.rpartition(".")[0]
+        targets = set()
+        for _, imported in imported_modules(path, package):
+            while imported and imported not in found:  # `from m import f`: the module m
+                imported = imported.rpartition(".")[0]
+            targets.add(imported)
+        graph[name] = targets - {name, ""}
+    return graph
+
+
+def cycles(graph: dict[str, set[str]]) -> list[set[str]]:
+    """The strongly connected components of more than one module (Tarjan's algorithm, iterative)."""
+    index, low, stack, on_stack, found = {}, {}, [], set(), []
+    for root in sorted(graph):
+        if root in index:
+            continue
+        work = [(root, iter(sorted(graph[root])))]
+        index[root] = low[root] = len(index)
+        stack.append(root)
+        on_stack.add(root)
+        while work:
+            node, successors = work[-1]
+            for successor in successors:
+                if successor not in index:
+                    index[successor] = low[successor] = len(index)
+                    stack.append(successor)
+                    on_stack.add(successor)
+                    work.append((successor, iter(sorted(graph[successor]))))
+                    break
+                if successor in on_stack:
+                    low[node] = min(low[node], index[successor])
+            else:
+                work.pop()
+                if work:
+                    low[work[-1][0]] = min(low[work[-1][0]], low[node])
+                if low[node] == index[node]:
+                    component = set()
+                    while True:
+                        member = stack.pop()
+                        on_stack.discard(member)
+                        component.add(member)
+                        if member == node:
+                            break
+                    if len(component) > 1:
+                        found.append(component)
+    return found
+
+
+def test_no_import_cycle_among_steplab_modules():
+    found = [c for c in cycles(import_graph(modules())) if c not in KNOWN_CYCLES]
+    assert not found, [sorted(c) for c in found]
+
+
+def test_the_cycle_check_sees_a_cycle():
+    """Three modules in a ring, one of them importing inside a function, and one outside it."""
+    graph = {"a": {"b"}, "b": {"c"}, "c": {"a", "d"}, "d": set()}
+    assert cycles(graph) == [{"a", "b", "c"}]
+    assert cycles({"a": {"b"}, "b": set()}) == []

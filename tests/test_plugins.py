@@ -15,14 +15,14 @@ import numpy as np
 import pytest
 from steplab.integrators import INTEGRATORS, UnknownIntegratorError, get_integrator
 from steplab.physics.forces import FORCES
-from steplab.physics.plugins import PluginError
 from steplab.physics.scene_library import SCENES
 from steplab.studies import STUDIES
 
 from steplab.cli import main
+from steplab.core.registry import PluginError
 
 #: the broken entry point below warns wherever a registry is first read outside the command line
-pytestmark = pytest.mark.filterwarnings("ignore::steplab.physics.plugins.PluginWarning")
+pytestmark = pytest.mark.filterwarnings("ignore::steplab.core.registry.PluginWarning")
 
 #: the plugin module: Ralston's 2nd order method (a_21 = 2/3, b = (1/4, 3/4)) and a study
 PLUGIN_MODULE = '''

@@ -9,7 +9,8 @@ import matplotlib.pyplot as plt  # noqa: E402
 import pytest  # noqa: E402
 from matplotlib import animation  # noqa: E402
 from PIL import Image  # noqa: E402
-from steplab.studies.records import remove_temporary_files, write_atomic, write_with  # noqa: E402
+
+from steplab.core.records import remove_temporary_files, write_atomic, write_with  # noqa: E402
 
 
 def test_a_writer_that_fails_leaves_the_old_file_and_no_temporary(tmp_path):

@@ -18,10 +18,10 @@ from steplab.physics import ConstantForce, Force, Gravity, Model
 from steplab.physics.collision import CollisionWorld
 from steplab.physics.collision.detectors import DETECTOR_NAMES, DETECTORS
 from steplab.physics.forces import FORCES, register_force
-from steplab.physics.plugins import PluginError
 from steplab.physics.scene import SceneError, parse_scene
 
 from steplab.cli import build_parser
+from steplab.core.registry import PluginError
 
 G = np.array([0.0, 0.0, -9.81])
 WIND = np.array([0.5, 0.0, 0.0])  # N

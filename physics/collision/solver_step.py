@@ -38,7 +38,6 @@ from .contact_buffer import Contacts, Materials, find_contacts, newly_hit, previ
 from .events import CollisionLog, ImpactBlock, cancel_triggers
 from .sequential_impulses import finish, step_members, step_members_parallel, substep
 from .step import RESTING_STEPS
-from .world import CollisionWorld
 
 #: the semi-implicit Euler the solver's substeps are
 INTEGRATOR = "semi-implicit-euler"
@@ -50,7 +49,7 @@ class SolverStep:
 
     Attributes
     ----------
-    world : CollisionWorld
+    world : physics.collision.CollisionWorld
         With ``method = "solver"``; ``world.solver`` holds the settings.
     model : physics.Model
     integrator : Stepper
@@ -85,7 +84,7 @@ class SolverStep:
         self._columnar = not (self._prologues or self.world.epilogues or any(s.trigger for s in self.world.shapes))
         self._previous = _NO_CONTACTS  # last step's contacts: keys (sorted), impulses, whether hit
         self._cancelled = set()  # keys of pairs a prologue cancelled, until they are no longer contacts
-        load_kernels(self.world.broadphase, self.field is not None, self.integrator)
+        load_kernels(self.world, self.field is not None, self.integrator)
 
     def __call__(self, t, y, dt, carry):
         """Advance ``y`` (2, N, 3) from ``t`` by ``dt``; returns ``(y, carry)``."""
@@ -203,11 +202,13 @@ class SolverStep:
 _LOADED = set()  # (broadphase, constant forces) whose solver kernels this process has loaded
 
 
-def load_kernels(broadphase: str, constant_forces: bool, integrator) -> None:
+def load_kernels(world, constant_forces: bool, integrator) -> None:
     """Step two touching balls on a floor, under gravity (constant forces: the one-call kernel)
-    or gravity and drag (the per-substep kernels), so that every compiled kernel of that step
-    is loaded (Numba reads each from its disk cache on first use, about 40 ms apiece) before a
-    run starts, and a run's wall time is its steps'."""
+    or gravity and drag (the per-substep kernels), with ``world``'s broadphase, so that every
+    compiled kernel of that step is loaded (Numba reads each from its disk cache on first use,
+    about 40 ms apiece) before a run starts, and a run's wall time is its steps'. The floor's
+    world is made by ``type(world)``: this module does not import the world, which imports it."""
+    broadphase = world.broadphase
     if (broadphase, constant_forces) in _LOADED:
         return
     _LOADED.add((broadphase, constant_forces))
@@ -218,7 +219,7 @@ def load_kernels(broadphase: str, constant_forces: bool, integrator) -> None:
 
     model = Model(np.ones(2), np.full(2, 0.1), [Gravity()] + ([] if constant_forces else [Drag(np.full(2, 0.01))]))
     floor = Plane(np.array([0.0, 0.0, 1.0]))
-    world = dataclasses.replace(CollisionWorld(shapes=(floor,), method="solver"), broadphase=broadphase)
+    world = type(world)(shapes=(floor,), method="solver", broadphase=broadphase)
     y = np.array([[[0.0, 0.0, 0.1], [0.19, 0.0, 0.1]], [[0.0, 0.0, -1.0], [-1.0, 0.0, -1.0]]])
     step = SolverStep(world, model, integrator)
     step(0.0, step(0.0, y, 0.01, None)[0], 0.01, None)  # twice: the warm start's merge too

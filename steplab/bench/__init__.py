@@ -16,7 +16,7 @@ sections), :mod:`.systems` (the large models), :mod:`.profile` (loop kernels fro
 compiled text), :mod:`.record` and :mod:`.report` (the JSON record and its tables);
 :mod:`.collisions` (the ball pits, issue 13) with :mod:`.ball_pit_scene` (the scene) and
 :mod:`.engines` (MuJoCo and pybullet, when installed); the timer is the studies'
-(:mod:`steplab.studies.timing`).
+(:mod:`steplab.core.timing`).
 """
 
 from __future__ import annotations
@@ -27,10 +27,10 @@ import sys
 import time
 from collections.abc import Callable
 
-from steplab.studies.timing import Times as Times
-from steplab.studies.timing import interleaved_medians as interleaved_medians
-from steplab.studies.timing import interleaved_samples as interleaved_samples
-from steplab.studies.timing import interleaved_times as interleaved_times
+from steplab.core.timing import Times as Times
+from steplab.core.timing import interleaved_medians as interleaved_medians
+from steplab.core.timing import interleaved_samples as interleaved_samples
+from steplab.core.timing import interleaved_times as interleaved_times
 
 from .ball_pit_scene import ball_pit as ball_pit
 from .ball_pit_scene import ball_pit_toml as ball_pit_toml
@@ -96,7 +96,7 @@ def command(args) -> int:
         log = (lambda message: print(f"[bench] {message}", file=sys.stderr, flush=True))
         record = run_bench(config, quick=args.quick, progress=log)
         if args.json is not None:
-            from steplab.studies.records import write_json
+            from steplab.core.records import write_json
 
             write_json(args.json, record)
     print(format_markdown(record) if args.markdown else format_table(record))

@@ -22,7 +22,7 @@ import time
 
 import numpy as np
 
-from steplab.studies.timing import interleaved_times
+from steplab.core.timing import interleaved_times
 
 from .ball_pit_scene import ball_pit, box_side
 from .config import REAL_TIME_TARGETS, SOLVER_ENGINE_TARGETS, SOLVER_REAL_TIME_TARGETS, Config

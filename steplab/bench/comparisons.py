@@ -16,9 +16,9 @@ import time
 
 import numpy as np
 
+from steplab.core.timing import Times, interleaved_samples, interleaved_times, ready
 from steplab.integrators.references import solve_adaptive
 from steplab.integrators.simulate import final_state_function
-from steplab.studies.timing import Times, interleaved_samples, interleaved_times, ready
 
 from .collisions import ball_pits
 from .config import COMPILE_TARGET_SECONDS, SEED, Config

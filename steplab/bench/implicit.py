@@ -24,8 +24,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from steplab.core.timing import Times, interleaved_samples, ready
 from steplab.integrators.simulate import final_state_function
-from steplab.studies.timing import Times, interleaved_samples, ready
 
 from .config import Config
 from .record import Record

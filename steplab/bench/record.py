@@ -6,7 +6,7 @@ import dataclasses
 
 import numpy as np
 
-from steplab.studies.timing import Times
+from steplab.core.timing import Times
 
 from .config import TARGETS, Config
 
