@@ -333,35 +333,22 @@ class _SceneBuilder:
         """The [collisions] table: detector, materials and static geometry (a CollisionWorld)."""
         from .broadphase import METHODS
         from .collision import world as collision_world
-        from .collision.detectors import DETECTOR_NAMES
+        from .collision.detectors import DETECTORS
+        from .collision.methods import COLLISION_METHODS
         from .collision.pairs import DEFAULT_BROADPHASE
         from .collision.response import PairProperties
         from .collision.shapes import Box, OrientedBox, Plane, rotation_matrix
-        from .collision.solver_settings import CORRECTIONS, ContactSolver
-        from .collision.solver_settings import METHODS as COLLISION_METHODS
 
+        # each collision method reads its own settings table, [collisions.<method>]
         c.allow("detector", "restitution", "friction", "bisection_iterations", "max_impacts_per_step",
-                "broadphase", "rest_speed", "materials", "planes", "boxes", "method", "solver")
-        detector = c.string("detector", "swept", choices=DETECTOR_NAMES)
-        method = c.string("method", "event", choices=COLLISION_METHODS)
-        solver = ContactSolver()
-        if (st := c.table("solver")) is not None:
-            if method != "solver":
-                st.fail('sets the contact solver, but the method is not "solver" (add method = "solver")')
-            d = ContactSolver()
-            st.allow(*(f.name for f in dataclasses.fields(ContactSolver)))
-            baumgarte = st.number("baumgarte", d.baumgarte, positive=True)
-            if baumgarte > 1:
-                st.fail(f"must be in (0, 1] (the fraction of the penetration undone per substep), got {baumgarte:g}",
-                        "baumgarte")
-            solver = ContactSolver(
-                iterations=st.integer("iterations", d.iterations, 1, 10**6),
-                substeps=st.integer("substeps", d.substeps, 1, 10**6),
-                correction=st.string("correction", d.correction, choices=CORRECTIONS),
-                contact_hertz=st.number("contact_hertz", d.contact_hertz, positive=True),
-                damping_ratio=st.number("damping_ratio", d.damping_ratio, nonnegative=True),
-                baumgarte=baumgarte, slop=st.number("slop", d.slop, nonnegative=True),
-                push_speed=st.number("push_speed", d.push_speed, positive=True))
+                "broadphase", "rest_speed", "materials", "planes", "boxes", "method", *COLLISION_METHODS)
+        detector = c.string("detector", "swept", choices=tuple(DETECTORS))
+        method = c.string("method", "event", choices=tuple(COLLISION_METHODS))
+        for other in COLLISION_METHODS:
+            if other != method and other in c.data:
+                c.table(other).fail(f'sets the collision method {other!r}, but the method is not "{other}" '
+                                    f'(add method = "{other}")')
+        method_fields = COLLISION_METHODS[method].from_scene(c.table(method))
         restitution = self._restitution(c, "restitution", 1.0)
         friction = c.number("friction", 0.0, nonnegative=True)
         iterations = c.integer("bisection_iterations", collision_world.DEFAULT_BISECTION_ITERATIONS, 0, 60)
@@ -414,7 +401,7 @@ class _SceneBuilder:
             detector=detector, shapes=tuple(shape for _, shape in shapes), materials=materials,
             pair_properties=PairProperties(restitution, friction, table), bisection_iterations=iterations,
             max_impacts_per_step=max_impacts, broadphase=broadphase, rest_speed=rest_speed, method=method,
-            solver=solver)
+            **method_fields)
 
     @staticmethod
     def _restitution(t: Table, key: str, default):

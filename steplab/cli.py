@@ -58,6 +58,7 @@ def _count(text: str) -> int:
 
 def build_parser() -> argparse.ArgumentParser:
     from steplab.physics.collision.detectors import DETECTOR_NAMES
+    from steplab.physics.collision.methods import COLLISION_METHODS
 
     parser = _Parser(prog="steplab", description="How wrong, how unstable and how slow is a "
                      "game-physics step? Integrators, scenes and studies.")
@@ -90,7 +91,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--detector", choices=DETECTOR_NAMES,
                    help="collision detection (overlap: overlap testing with bisection; swept: intersection "
                    "testing; default: the scene's [collisions], else none)")
-    p.add_argument("--method", choices=("event", "solver"),
+    p.add_argument("--method", choices=tuple(COLLISION_METHODS),
                    help="collision handling (event: the lecture's event loop, each impact at its time; "
                    "solver: the engines' contact solver; default: the scene's)")
     p.add_argument("--iterations", type=_count, metavar="N",

@@ -25,6 +25,7 @@ import tracemalloc
 
 import numpy as np
 from scipy.spatial import cKDTree
+from steplab.physics.broadphase import METHODS as BROADPHASE_METHODS
 from steplab.physics.broadphase import BoundingVolumeHierarchy, CoherentSortAndSweep, find_pairs
 from steplab.physics.broadphase.common import as_spheres, bounds, padding
 from steplab.physics.broadphase.sweep_and_prune import sweep_axis
@@ -34,9 +35,15 @@ from .runner import Study
 from .tables import Table, markdown_table
 
 DISTRIBUTIONS = ("uniform", "clustered", "one-cell", "layer", "mixed")
-#: the methods timed against n ("sap-coherent" is timed in the coherence experiment,
-#: where it has frames to be coherent across; a single call is a plain sort and sweep)
-METHODS = ("brute", "grid", "hash", "sap", "bvh")
+
+
+def timed_methods() -> list[str]:
+    """The methods timed against n: every registered one but those that say they are
+    ``frame_coherent`` ("sap-coherent", timed in the coherence experiment, where it has frames
+    to be coherent across; a single call is a plain sort and sweep)."""
+    return [name for name, pairs in BROADPHASE_METHODS.items() if not getattr(pairs, "frame_coherent", False)]
+
+
 #: the peer, with the same output (filtered to the exact test, sorted), and its raw query alone
 PEERS = ("ckdtree", "ckdtree-query")
 #: how many per-axis standard deviations of a Gaussian blob lie between blob centres
@@ -54,7 +61,7 @@ def parameters(quick: bool) -> dict:
     if not quick:
         sizes += [10_000, 30_000, 100_000, 300_000, 1_000_000]
     return {
-        "distributions": list(DISTRIBUTIONS), "methods": list(METHODS), "peers": list(PEERS),
+        "distributions": list(DISTRIBUTIONS), "methods": timed_methods(), "peers": list(PEERS),
         "sizes": sizes,
         "repeats": 3 if quick else 5,  # the median of this many calls...
         "point_budget_s": 0.5 if quick else 2.0,  # ...unless they already took this long (then at least one)

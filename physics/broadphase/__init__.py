@@ -22,9 +22,9 @@ Methods (the lecture's "Reduced Collision Tests"):
 
 from __future__ import annotations
 
-from collections.abc import Callable
-
 import numpy as np
+
+from steplab.core.registry import PluginError, Registry
 
 from .brute import brute_force_pairs as brute_force_pairs
 from .bvh import BoundingVolumeHierarchy as BoundingVolumeHierarchy
@@ -35,15 +35,30 @@ from .spatial_hash import hash_pairs as hash_pairs
 from .sweep_and_prune import CoherentSortAndSweep as CoherentSortAndSweep
 from .sweep_and_prune import sap_pairs as sap_pairs
 
-#: every broadphase method, by name: a function of checked centres (n, 3) and radii (n,)
-METHODS: dict[str, Callable[[np.ndarray, np.ndarray], np.ndarray]] = {
-    "brute": brute_force_pairs,
-    "grid": grid_pairs,
-    "hash": hash_pairs,
-    "sap": sap_pairs,
-    "sap-coherent": lambda c, r: CoherentSortAndSweep().update(c, r),
-    "bvh": bvh_pairs,
-}
+
+def coherent_sap_pairs(c, r):
+    """A first frame of :class:`CoherentSortAndSweep` (a full sort)."""
+    return CoherentSortAndSweep().update(c, r)
+
+
+#: a method that repairs last frame's answer: the broadphase study times it across frames
+#: (its coherence experiment), not as a single call against n
+coherent_sap_pairs.frame_coherent = True
+
+
+def _as_method(obj):
+    """A registry entry from what a plugin names: a function ``pairs(centers, radii)`` of checked
+    centres (n, 3) and radii (n,) returning the pairs as :func:`find_pairs` does."""
+    if not callable(obj):
+        raise PluginError(f"{obj!r} is not a function pairs(centers, radii)")
+    return getattr(obj, "name", None), obj
+
+
+#: every broadphase method, by name: a function of checked centres (n, 3) and radii (n,); then
+#: registered ones (``METHODS.register(f, name="...")``) and the "steplab.broadphase" entry points
+METHODS: Registry = Registry("steplab.broadphase", "broadphase method", [
+    ("brute", brute_force_pairs), ("grid", grid_pairs), ("hash", hash_pairs), ("sap", sap_pairs),
+    ("sap-coherent", coherent_sap_pairs), ("bvh", bvh_pairs)], _as_method)
 
 #: the method find_pairs uses when none is named
 DEFAULT_METHOD = "grid"
@@ -60,7 +75,7 @@ def find_pairs(centers, radii, method: str = DEFAULT_METHOD) -> np.ndarray:
         Radii, finite and >= 0.
     method : str
         One of :data:`METHODS`: ``brute``, ``grid`` (default), ``hash``, ``sap``,
-        ``sap-coherent``, ``bvh``.
+        ``sap-coherent``, ``bvh``, or a registered one.
 
     Returns
     -------
@@ -71,9 +86,9 @@ def find_pairs(centers, radii, method: str = DEFAULT_METHOD) -> np.ndarray:
     Raises
     ------
     ValueError
-        Unknown method, wrong shapes, non-finite centres, negative or non-finite radii.
+        Unknown method (:class:`steplab.core.registry.UnknownNameError`), wrong shapes,
+        non-finite centres, negative or non-finite radii.
     """
-    if not isinstance(method, str) or method not in METHODS:
-        raise ValueError(f"unknown broadphase method {method!r}; valid: {', '.join(METHODS)}")
+    pairs = METHODS.lookup(method)
     c, r = as_spheres(centers, radii)
-    return METHODS[method](c, r)
+    return pairs(c, r)

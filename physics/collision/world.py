@@ -7,13 +7,14 @@ from collections.abc import Callable
 
 import numpy as np
 
-from .detectors import DETECTOR_NAMES as DETECTOR_NAMES
+from .detectors import DETECTORS
 from .events import cancel_triggers
 from .impact_cap import default_cap
+from .methods import COLLISION_METHODS
 from .pairs import DEFAULT_BROADPHASE
 from .response import PairProperties
 from .shapes import DEFAULT_MATERIAL, Shape
-from .solver_settings import METHODS, ContactSolver
+from .solver_settings import ContactSolver
 
 #: bisection iterations of overlap testing (the lecture: "usually 5 iterations is pretty close")
 DEFAULT_BISECTION_ITERATIONS = 5
@@ -36,7 +37,7 @@ class CollisionWorld:
     Parameters
     ----------
     detector : str
-        One of :data:`.detectors.DETECTOR_NAMES`: "none", "overlap" or "swept".
+        One of :data:`.detectors.DETECTORS`: "none", "overlap" or "swept" (or a registered one).
     shapes : tuple of Shape
         Static geometry: planes, boxes, oriented boxes (triggers among them).
     materials : tuple of str
@@ -59,12 +60,13 @@ class CollisionWorld:
         full loop's results to round-off, else ``"full"``), ``"incremental"`` or ``"full"``,
         the reference that re-tests everything after every impact (see :mod:`.step`).
     method : str
-        One of :data:`.solver_settings.METHODS`: ``"event"`` (default), the lecture's event
+        One of :data:`.methods.COLLISION_METHODS`: ``"event"`` (default), the lecture's event
         loop, exact, every impact at its time (:mod:`.step`); ``"solver"``, the engines' way,
-        every contact of the step solved together by sequential impulses (:mod:`.solver_step`).
-        The solver finds its own (speculative) contacts: of the detectors it only heeds "none".
+        every contact of the step solved together by sequential impulses (:mod:`.solver_step`);
+        or a registered one. The solver finds its own (speculative) contacts: of the detectors
+        it only heeds "none".
     solver : ContactSolver
-        The solver's settings (iterations, substeps, position correction).
+        The contact solver's settings (iterations, substeps, position correction).
     """
 
     detector: str = "swept"
@@ -82,8 +84,7 @@ class CollisionWorld:
     solver: ContactSolver = dataclasses.field(default_factory=ContactSolver)
 
     def __post_init__(self):
-        if self.detector not in DETECTOR_NAMES:
-            raise ValueError(f"unknown collision detector {self.detector!r}; valid: {', '.join(DETECTOR_NAMES)}")
+        DETECTORS.lookup(self.detector)
         if self.bisection_iterations < 0:
             raise ValueError(f"bisection_iterations must be >= 0, got {self.bisection_iterations}")
         if not self.rest_speed >= 0:
@@ -92,8 +93,7 @@ class CollisionWorld:
             raise ValueError(f"max_impacts_per_step must be >= 1, got {self.max_impacts_per_step}")
         if self.event_loop not in EVENT_LOOPS:
             raise ValueError(f"unknown event loop {self.event_loop!r}; valid: {', '.join(EVENT_LOOPS)}")
-        if self.method not in METHODS:
-            raise ValueError(f"unknown collision method {self.method!r}; valid: {', '.join(METHODS)}")
+        COLLISION_METHODS.lookup(self.method)
 
     def impact_cap(self, n_bodies: int) -> int:
         """Impacts resolved per step at most, for a scene of ``n_bodies``."""
@@ -128,10 +128,4 @@ class CollisionWorld:
             backend = model.xp.__name__.split(".")[0]
             raise ValueError(f"collision detection runs on the NumPy backend only, not {backend!r} "
                              "(use backend 'numpy', or the detector 'none')")
-        if self.method == "solver":
-            from .solver_step import SolverStep
-
-            return SolverStep(self, model, integrator)
-        from .step import CollisionStep
-
-        return CollisionStep(self, model, integrator)
+        return COLLISION_METHODS[self.method].step(self, model, integrator)
