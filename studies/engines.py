@@ -17,7 +17,8 @@ the same measurements, by the same code, as steplab's integrators:
   (:func:`.tunnelling.shoot`), with continuous detection off and on where the engine
   has the switch;
 - the lecture's drop test: the first bounce h / H against eps^2 for the nine balls
-  (:func:`.restitution.drop`), and what makes an engine deviate (:data:`DEVIATIONS`);
+  (:func:`.restitution.drop`), and what makes an engine deviate (each setting's
+  ``deviation``, declared by its adapter);
 - cost per body-step on a collision-heavy scene: spheres falling into a box, a planar
   pit every engine can run and the bench's 3-D pit (:func:`falling_balls`), against steplab's event loop (and
   its contact solver, where the collision world has one).
@@ -45,27 +46,6 @@ from .tables import Table, format_value, markdown_table
 #: precision, is that method (round-off of 100 steps; the nearest other method differs
 #: by 1e-3 or more at omega dt = 0.1)
 SAME_METHOD = {"float64": 1e-12, "float32": 1e-5}
-#: why a setting's bounce is not the lecture's eps^2 (the drop test's explanations, from the
-#: engines' documented rules and the measurements beside them)
-DEVIATIONS = {
-    "mujoco-euler": "soft contact: eps becomes the damping ratio of a spring-damper contact of natural frequency "
-                    "1 / (2 dt), the stiffest MuJoCo integrates; its impedance (solimp) softens it a little",
-    "mujoco-rk4": "the same contact bounces higher under RK4: what a spring-damper contact returns depends on how "
-                  "the step integrates it, and the mapping eps -> damping ratio is the continuous one's",
-    "mujoco-discrete": "the contact spring is integrated by backward Euler as well, whose numerical damping takes "
-                       "a large part of the bounce",
-    "bullet-default": "restitution is the product of the two bodies' (the floor gets 1); the penetration recovery "
-                      "(ERP) pushes the ball out of the floor with added speed, so h/H is above eps^2",
-    "bullet-no-position-correction": "without the penetration recovery the bounce is eps^2 (the product rule "
-                                     "still makes two balls bounce with eps_a eps_b)",
-    "box2d": "restitution is the larger of the two fixtures'; the floor's polygon skin (1 cm) less the linear slop "
-             "(5 mm) turns the ball about 5 mm above the floor; approaches below 1 m/s do not bounce; float32",
-    "chipmunk": "elasticity is the product of the two shapes'; with the collision slop at 5 mm the bounce is eps^2",
-}
-DEVIATIONS["mujoco-implicit"] = DEVIATIONS["mujoco-implicitfast"] = DEVIATIONS["mujoco-euler"]
-DEVIATIONS["bullet-ccd"] = DEVIATIONS["bullet-default"]
-
-
 def _settings() -> list[str]:
     from steplab.engines import SETTINGS
 
@@ -101,12 +81,14 @@ def unavailable() -> str | None:
 
 
 def parameters(quick: bool) -> dict:
+    from steplab.engines import ENGINES
     from steplab.engines.base import version
 
     periods = 10 if quick else 10_000
     return {
         "settings": _settings(),
-        "engine_versions": {d: version(d) for d in ("mujoco", "pybullet", "Box2D", "pymunk")},
+        "engine_versions": {cls.distribution: version(cls.distribution) for cls in ENGINES.values()
+                            if cls.distribution is not None},
         "adapter_source": _adapter_source_hash(),
         "integrators": [name for name, m in INTEGRATORS.items() if isinstance(m, Stepper)],
         # identification: free fall (the lecture projectile) and the oscillator at omega dt = 0.1
@@ -299,8 +281,6 @@ def _measure(fn, *args):
 DETECTORS = ("overlap", "swept")
 #: the tasks that time a pit (:func:`timed`)
 TIMED_KINDS = ("cost", "steplab_cost")
-#: the engines that run in the plane z = 0 (their tunnelling lanes side by side in it)
-PLANAR_ENGINES = ("box2d", "chipmunk")
 
 
 def tasks(params: dict) -> list[list]:
@@ -353,7 +333,8 @@ def task(params: dict, item: list):
     if kind == "order":
         return order(system, params)["order"]
     if kind == "miss_rates":
-        return _measure(miss_rates, system, setting.engine in PLANAR_ENGINES, params)
+        # a planar engine runs in the plane z = 0, its tunnelling lanes side by side in it
+        return _measure(miss_rates, system, setting.adapter.planar, params)
     if kind == "cost":
         return _pit_costs(system, params)
     raise ValueError(f"unknown task {item!r} of the engines study")
@@ -373,7 +354,7 @@ def reduce(params: dict, results: list) -> dict:
                      "omega_dt_max": {f"{zeta:g}": measured["limit", key, zeta] for zeta in params["damping_ratios"]},
                      "energy": measured["energy", key], "miss_rates": measured["miss_rates", key],
                      "drops": measured["drops", key], "cost": measured["cost", key],
-                     "deviation": DEVIATIONS.get(key, DEVIATIONS.get(about["engine"]))})
+                     "deviation": about["deviation"]})
     references = {"miss_rates": {detector: measured["steplab_miss_rates", detector] for detector in DETECTORS},
                   "drops": measured[("steplab_drops",)],
                   "cost": {name: measured["steplab_cost", name] for name in _steplab_systems(params)}}
@@ -390,7 +371,7 @@ def _describe_and_identify(setting, params: dict, problems: dict) -> dict:
     system = engine_system(setting)
     return {"label": setting.label, "engine": setting.engine, "continuous": setting.continuous,
             "precision": system.precision, "settings": system.build(*_probe_scene()).settings,
-            "identification": identify(system, params, problems)}
+            "identification": identify(system, params, problems), "deviation": setting.deviation}
 
 
 def _probe_scene():
@@ -448,10 +429,7 @@ def _pits(balls: int) -> dict:
 
 # --- figures ---------------------------------------------------------------------------
 
-#: one colour per engine, one line style per setting within it
-ENGINE_COLOURS = {"mujoco": "tab:blue", "bullet": "tab:orange", "box2d": "tab:green", "chipmunk": "tab:purple"}
-ENGINE_NAMES = {"mujoco": "MuJoCo", "bullet": "Bullet (pybullet)", "box2d": "Box2D (2-D, float32)",
-                "chipmunk": "Chipmunk2D (pymunk, 2-D)"}
+#: one colour per engine (its adapter's), one line style per setting within it
 LINE_STYLES = ("-", "--", ":", "-.", (0, (5, 1, 1, 1)))
 MARKERS = ("o", "s", "^", "D", "v")
 
@@ -462,8 +440,19 @@ def _styles(rows) -> dict[str, dict]:
     for r in rows:
         k = seen.get(r["engine"], 0)
         seen[r["engine"]] = k + 1
-        out[r["setting"]] = {"color": ENGINE_COLOURS[r["engine"]], "ls": LINE_STYLES[k % 5], "marker": MARKERS[k % 5]}
+        out[r["setting"]] = {"color": _adapter_fact(r["engine"], "colour"), "ls": LINE_STYLES[k % 5],
+                             "marker": MARKERS[k % 5]}
     return out
+
+
+def _adapter_fact(engine: str, fact: str):
+    """What the adapter of ``engine`` declares (its ``colour``, its ``display_name``); for a record
+    of an engine no longer registered, grey and the key."""
+    from steplab.engines import ENGINES
+
+    if engine in ENGINES:
+        return getattr(ENGINES[engine], fact)
+    return {"colour": "tab:gray"}.get(fact, engine)
 
 
 def plot(record: dict, out) -> list[str]:
@@ -495,7 +484,7 @@ def plot(record: dict, out) -> list[str]:
         ax.set_xticks(ticks, [f"{x:g}" for x in ticks])
         ax.minorticks_off()
         ax.set_ylim(-0.04, 1.04)
-        ax.set_title(ENGINE_NAMES[engine], fontsize=10)
+        ax.set_title(_adapter_fact(engine, "display_name"), fontsize=10)
         ax.grid(True, which="major", alpha=0.3)
         handles, labels = ax.get_legend_handles_labels()
         ax.legend(handles[4:], labels[4:], fontsize=7, loc="lower right", framealpha=0.95)
@@ -520,7 +509,7 @@ def plot(record: dict, out) -> list[str]:
             s = styles[r["setting"]]
             ax.plot([p["eps_squared"] for p in r["drops"]], [p["h_over_H"] - p["eps_squared"] for p in r["drops"]],
                     color=s["color"], ls=s["ls"], lw=0.8, marker=s["marker"], mfc="none", ms=6, label=r["label"])
-        ax.set_title(ENGINE_NAMES[engine], fontsize=10)
+        ax.set_title(_adapter_fact(engine, "display_name"), fontsize=10)
         ax.grid(True, alpha=0.3)
         ax.legend(fontsize=7, loc="best")
     for ax in axes[1]:
@@ -554,7 +543,7 @@ def plot(record: dict, out) -> list[str]:
     own = sorted(ref["cost"], key=lambda k: k != "event loop")
     names = [r["label"] for r in rows] + [f"steplab, {k}" for k in own]
     costs = [r["cost"] for r in rows] + [ref["cost"][k] for k in own]
-    colours = [ENGINE_COLOURS[r["engine"]] for r in rows] + ["k"] * len(own)
+    colours = [_adapter_fact(r["engine"], "colour") for r in rows] + ["k"] * len(own)
     y = np.arange(len(names))
     for label, marker, filled in (("planar", "o", True), ("3-D", "s", False)):
         values = np.array([c[label].get("per_body_step_seconds", np.nan) * 1e6 for c in costs])

@@ -91,6 +91,6 @@ def steplab_system(integrator: str, label: str | None = None, world_options: dic
 
 
 def engine_system(setting) -> SystemUnderTest:
-    """An engine setting (:data:`steplab.engines.SETTINGS`) as a system under test."""
-    precision = {"box2d": "float32"}.get(setting.engine, "float64")  # Box2D computes in float32
-    return SystemUnderTest(setting.label, setting.build, precision, setting.continuous)
+    """An engine setting (:data:`steplab.engines.SETTINGS`) as a system under test, in its
+    adapter's precision (Box2D computes in float32)."""
+    return SystemUnderTest(setting.label, setting.build, setting.adapter.precision, setting.continuous)

@@ -24,19 +24,16 @@ ROUND_OFF = {"float64": 1e-12, "float32": 2e-6}
 FREE_FALL_LEAD = {"mujoco-euler": 1, "mujoco-rk4": 0, "mujoco-implicit": 1, "mujoco-implicitfast": 1,
                   "mujoco-discrete": 1, "bullet-default": 1, "bullet-no-position-correction": 1, "bullet-ccd": 1,
                   "box2d-continuous-off": 1, "box2d-default": 1, "box2d-bullet": 1, "chipmunk": -1}
-#: the steplab method each setting steps (the engines study's finding)
-EQUALS = {"mujoco-euler": "semi-implicit-euler", "mujoco-rk4": "rk4", "mujoco-implicit": "implicit-damping-euler",
-          "mujoco-implicitfast": "implicit-damping-euler", "mujoco-discrete": "implicit-euler",
-          "bullet-default": "semi-implicit-euler", "box2d-default": "implicit-euler",
-          "chipmunk": "exponential-damping-euler"}
+#: the settings that declare the steplab method they step (their adapter's ``equals``)
+DECLARED = [key for key, setting in SETTINGS.items() if setting.equals is not None]
 
 
 def needs(engine: str):
-    return pytest.importorskip(ENGINES[engine][1])
+    return pytest.importorskip(ENGINES[engine].package)
 
 
 def precision(setting) -> str:
-    return "float32" if setting.engine == "box2d" else "float64"
+    return setting.adapter.precision
 
 
 @pytest.mark.parametrize("key", list(SETTINGS))
@@ -85,7 +82,16 @@ def identification():
     return params, identification_problems(params)
 
 
-@pytest.mark.parametrize("key", list(EQUALS))
+def test_each_engine_declares_the_methods_its_settings_step():
+    """Every engine has a setting that declares its steplab method, and each declared name is one
+    of steplab's fixed-step methods (the identification below checks it against the engine)."""
+    from steplab.integrators import INTEGRATORS, Stepper
+
+    assert {SETTINGS[key].engine for key in DECLARED} == set(ENGINES)
+    assert all(isinstance(INTEGRATORS[SETTINGS[key].equals], Stepper) for key in DECLARED)
+
+
+@pytest.mark.parametrize("key", DECLARED)
 def test_identification_names_the_method_each_engine_steps(key, identification):
     from steplab.studies.engines import identify
     from steplab.studies.system import engine_system
@@ -94,7 +100,7 @@ def test_identification_names_the_method_each_engine_steps(key, identification):
     needs(setting.engine)
     params, problems = identification
     result = identify(engine_system(setting), params, problems)
-    assert result["nearest"] == EQUALS[key] and EQUALS[key] in result["equals"]
+    assert result["nearest"] == setting.equals and setting.equals in result["equals"]
     assert result["difference"] <= {"float64": 1e-12, "float32": 1e-5}[precision(setting)]
     others = [max(d.values()) for m, d in result["differences"].items() if m not in result["equals"]]
     assert min(others) > 1e-4  # every other method is measurably different

@@ -26,7 +26,7 @@ from steplab.core.timing import interleaved_times
 
 from .ball_pit_scene import ball_pit, box_side
 from .config import REAL_TIME_TARGETS, SOLVER_ENGINE_TARGETS, SOLVER_REAL_TIME_TARGETS, Config
-from .engines import ENGINES, engine_runs
+from .engines import engine_runs, peer_names
 from .record import Record, size_label
 
 #: the pit run first, to compile every kernel of the event loop: (balls, steps); Numba
@@ -91,7 +91,7 @@ def _ball_pit(balls: int, steps: int, config: Config, record: Record) -> None:
     else:
         engines = []
         not_compared = {name: f"{name}: not set up above {config.collision_peer_max_balls:,} balls "
-                              "(collision_peer_max_balls)" for name in ENGINES}
+                              "(collision_peer_max_balls)" for name in peer_names()}
     calls = {"steplab": lambda: steplab(steps),
              "steplab_solver": lambda: steplab(steps, "steplab_solver", solver_world)}
     for engine in engines:

@@ -16,64 +16,55 @@ bodies back at the start and takes ``steps`` steps: the timed work is the steppi
 
 from __future__ import annotations
 
-import importlib.metadata
 from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
 
-#: the engines the bench knows, in the order it runs them
-ENGINES = ("mujoco", "pybullet")
+#: the engines the bench compares with, by key of :data:`steplab.engines.ENGINES`, in the order it
+#: runs them: the adapter's options, and the record's line on them ({version}: the engine's)
+PEERS = {
+    "mujoco": ({"integrator": "Euler", "solver": "PGS", "iterations": 10, "jacobian": "sparse"},
+               "MuJoCo {version}, PGS, sparse Jacobian, 10 iterations"),
+    "bullet": ({}, "pybullet {version}, default solver"),
+}
 
 
 @dataclass(frozen=True)
-class EngineRun:
-    """One engine set up on one scene: ``run(steps)`` steps it from the scene's start."""
+class Peer:
+    """One engine set up on one scene: ``run(steps)`` steps it from the scene's start and
+    returns the centres; ``name`` is the record's, the engine's distribution ("pybullet")."""
 
     name: str
     settings: str
     run: Callable[[int], np.ndarray]
 
 
-def engine_runs(scene, engines=ENGINES) -> tuple[list[EngineRun], dict[str, str]]:
+def peer_names(engines=tuple(PEERS)) -> list[str]:
+    """The record's names of ``engines``: their distributions."""
+    from steplab.engines import ENGINES
+
+    return [ENGINES[key].distribution for key in engines]
+
+
+def engine_runs(scene, engines=tuple(PEERS)) -> tuple[list[Peer], dict[str, str]]:
     """The engines of ``engines`` set up on ``scene``, and a note for each one not installed."""
+    from steplab.engines import ENGINES, build_scene
+    from steplab.engines.base import version
+
     runs, missing = [], {}
-    for name in engines:
-        try:
-            version = importlib.metadata.version(name)
-        except importlib.metadata.PackageNotFoundError:
+    for key in engines:
+        name = ENGINES[key].distribution
+        if not ENGINES[key].available():
             missing[name] = f"{name} is not installed (pip install {name}): not compared"
             continue
-        runs.append(BUILDERS[name](scene, version))
+        options, settings = PEERS[key]
+        engine = build_scene(key, scene, **options)
+
+        def run(steps: int, engine=engine) -> np.ndarray:
+            engine.set_state(scene.y0)
+            engine.run(steps)
+            return engine.state()[0]
+
+        runs.append(Peer(name, settings.format(version=version(name)), run))
     return runs, missing
-
-
-def mujoco_run(scene, version: str) -> EngineRun:
-    """MuJoCo on the scene's MJCF (:func:`.ball_pit_scene.mujoco_model`): ``run`` returns the centres."""
-    from steplab.engines import build_scene
-
-    engine = build_scene("mujoco", scene, integrator="Euler", solver="PGS", iterations=10, jacobian="sparse")
-
-    def run(steps: int) -> np.ndarray:
-        engine.set_state(scene.y0)
-        engine.run(steps)
-        return engine.state()[0]
-
-    return EngineRun("mujoco", f"MuJoCo {version}, PGS, sparse Jacobian, 10 iterations", run)
-
-
-def pybullet_run(scene, version: str) -> EngineRun:
-    """pybullet (DIRECT, no GUI) with its default solver: rigid spheres and five static planes."""
-    from steplab.engines import build_scene
-
-    engine = build_scene("bullet", scene)
-
-    def run(steps: int) -> np.ndarray:
-        engine.set_state(scene.y0)
-        engine.run(steps)
-        return engine.state()[0]
-
-    return EngineRun("pybullet", f"pybullet {version}, default solver", run)
-
-
-BUILDERS = {"mujoco": mujoco_run, "pybullet": pybullet_run}

@@ -3,9 +3,14 @@
 Each adapter (one module per engine) builds the engine's bodies, forces and shapes from a
 steplab scene and steps it at the scene's dt; ``advance(y0, dt, n_steps)`` returns a
 steplab :class:`~steplab.integrators.Trajectory` with the engine's contacts as a collision
-log, so the studies measure an engine by the same code as steplab's own integrators. None
-of the engines is a dependency of steplab: they are the optional extra
-``pip install -e ".[engines]"`` and are imported only when an adapter is built.
+log, so the studies measure an engine by the same code as steplab's own integrators. An
+adapter declares its engine's facts (display name, colour, planar or 3-D, precision, its
+package, and the settings the engines study measures with the steplab method each is
+expected to step and why its bounce deviates): see :class:`.base.EngineRun`. The registry
+:data:`ENGINES` holds the adapters by key; another engine is its adapter module plus
+``ENGINES.register(MyRun)`` (or a ``steplab.engines`` entry point). None of the engines is
+a dependency of steplab: they are the optional extra ``pip install -e ".[engines]"`` and
+are imported only when an adapter is built.
 
 >>> from steplab.engines import SETTINGS
 >>> SETTINGS["mujoco-euler"].engine
@@ -14,72 +19,67 @@ of the engines is a dependency of steplab: they are the optional extra
 
 from __future__ import annotations
 
-import dataclasses
-import importlib
-import importlib.util
+from collections.abc import Iterator, Mapping
+
+from steplab.core.registry import PluginError, Registry
 
 from .base import EngineNotInstalledError as EngineNotInstalledError
 from .base import EngineRun as EngineRun
+from .base import Setting as Setting
 from .base import UnsupportedFeatureError as UnsupportedFeatureError
+from .base import build_adapter
+from .box2d_engine import Box2DRun
+from .bullet_engine import BulletRun
+from .chipmunk_engine import ChipmunkRun
+from .mujoco_engine import MujocoRun
 
-#: engine -> (adapter class "module:Class", the Python package it needs, its distribution on PyPI)
-ENGINES = {
-    "mujoco": ("mujoco_engine:MujocoRun", "mujoco", "mujoco"),
-    "bullet": ("bullet_engine:BulletRun", "pybullet", "pybullet"),
-    "box2d": ("box2d_engine:Box2DRun", "Box2D", "Box2D"),
-    "chipmunk": ("chipmunk_engine:ChipmunkRun", "pymunk", "pymunk"),
-}
 INSTALL_HINT = 'pip install -e ".[engines]"'
 
 
-@dataclasses.dataclass(frozen=True)
-class Setting:
-    """One engine in one configuration, as the engines study measures it.
-
-    ``continuous`` says whether the setting detects collisions continuously (None: the
-    engine has no such switch); ``options`` are the adapter's keyword arguments.
-    """
-
-    key: str
-    engine: str
-    label: str
-    options: dict = dataclasses.field(default_factory=dict)
-    continuous: bool | None = None
-
-    def build(self, model, collisions=None, dt: float = 0.01, y0=None) -> EngineRun:
-        return build(self.engine, model, collisions, dt, y0, **self.options)
-
-    @property
-    def available(self) -> bool:
-        return available(self.engine)
+def _as_engine(obj) -> tuple[str, type[EngineRun]]:
+    """A registry entry from what a plugin names: an EngineRun subclass that declares its facts."""
+    if not (isinstance(obj, type) and issubclass(obj, EngineRun)):
+        raise PluginError(f"{obj!r} is not a subclass of steplab.engines.EngineRun")
+    if obj.engine == EngineRun.engine or not obj.display_name or not obj.study_settings:
+        raise PluginError(f"engine adapter {obj.__qualname__} needs class attributes engine (its key), "
+                          "display_name and study_settings (a tuple of steplab.engines.Setting)")
+    return obj.engine, obj
 
 
-#: the settings of the engines study, in its order
-SETTINGS = {s.key: s for s in (
-    Setting("mujoco-euler", "mujoco", "MuJoCo Euler", {"integrator": "Euler"}, False),
-    Setting("mujoco-rk4", "mujoco", "MuJoCo RK4", {"integrator": "RK4"}, False),
-    Setting("mujoco-implicit", "mujoco", "MuJoCo implicit", {"integrator": "implicit"}, False),
-    Setting("mujoco-implicitfast", "mujoco", "MuJoCo implicitfast", {"integrator": "implicitfast"}, False),
-    Setting("mujoco-discrete", "mujoco", "MuJoCo discrete", {"integrator": "discrete"}, False),
-    Setting("bullet-default", "bullet", "Bullet default", {}, False),
-    Setting("bullet-no-position-correction", "bullet", "Bullet, position correction off",
-            {"position_correction": False}, False),
-    Setting("bullet-ccd", "bullet", "Bullet, CCD on", {"ccd": True}, True),
-    Setting("box2d-continuous-off", "box2d", "Box2D, continuous off", {"continuous": False}, False),
-    Setting("box2d-default", "box2d", "Box2D default", {}, True),
-    Setting("box2d-bullet", "box2d", "Box2D, bullets", {"bullet": True}, True),
-    Setting("chipmunk", "chipmunk", "Chipmunk", {}, False),
-)}
+#: every engine adapter, by key: steplab's four, then registered ones and those of the
+#: "steplab.engines" entry points (loaded on first use)
+ENGINES: Registry = Registry("steplab.engines", "engine", [(cls.engine, cls) for cls in (
+    MujocoRun, BulletRun, Box2DRun, ChipmunkRun)], _as_engine)
+
+
+class _Settings(Mapping):
+    """Setting key -> :class:`Setting`, read from the registered adapters each time (in their order)."""
+
+    def _all(self) -> dict[str, Setting]:
+        return {s.key: s for cls in ENGINES.values() for s in cls.study_settings}
+
+    def __getitem__(self, key: str) -> Setting:
+        return self._all()[key]
+
+    def __iter__(self) -> Iterator[str]:
+        return iter(self._all())
+
+    def __len__(self) -> int:
+        return len(self._all())
+
+
+#: the settings of the engines study, in its order: each adapter's ``study_settings``
+SETTINGS: Mapping[str, Setting] = _Settings()
 
 
 def available(engine: str) -> bool:
     """Whether ``engine``'s Python package is installed (without importing it)."""
-    return importlib.util.find_spec(_entry(engine)[1]) is not None
+    return ENGINES.lookup(engine).available()
 
 
 def missing() -> list[str]:
     """The distributions of the engines that are not installed."""
-    return [ENGINES[name][2] for name in ENGINES if not available(name)]
+    return [cls.distribution for cls in ENGINES.values() if not cls.available()]
 
 
 def build(engine: str, model, collisions=None, dt: float = 0.01, y0=None, **options) -> EngineRun:
@@ -92,20 +92,9 @@ def build(engine: str, model, collisions=None, dt: float = 0.01, y0=None, **opti
     EngineNotInstalledError
         The engine's package is not installed.
     ValueError
-        An unknown engine or option.
+        An unknown engine (:class:`steplab.core.registry.UnknownNameError`) or option.
     """
-    path = _entry(engine)[0]
-    module, name = path.split(":")
-    cls = getattr(importlib.import_module(f"{__name__}.{module}"), name)
-    try:
-        run = cls(model, collisions, dt, y0=y0, **options)
-    except TypeError as err:
-        if "unexpected keyword" in str(err):
-            raise ValueError(f"{engine}: {err}") from None
-        raise
-    # after a divergence the run sets itself up again this way: NaN can stay in an engine's caches
-    run.rebuild = lambda self: cls.__init__(self, model, collisions, dt, y0=y0, **options)
-    return run
+    return build_adapter(ENGINES.lookup(engine), model, collisions, dt, y0, **options)
 
 
 def build_scene(engine: str, scene, **options) -> EngineRun:
@@ -120,10 +109,3 @@ def run_scene(engine: str, scene, n_steps: int | None = None, save_every: int = 
     run = build_scene(engine, scene, **options)
     n = n_steps if n_steps is not None else step_count(scene.t_start, scene.t_end, scene.dt)
     return run.advance(scene.y0, scene.dt, n, t_start=scene.t_start, save_every=save_every)
-
-
-def _entry(engine: str):
-    try:
-        return ENGINES[engine]
-    except KeyError:
-        raise ValueError(f"unknown engine {engine!r}; valid: {', '.join(ENGINES)}") from None

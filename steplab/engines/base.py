@@ -15,8 +15,11 @@ one line naming the feature and the engine, before anything is built.
 from __future__ import annotations
 
 import dataclasses
+import importlib
 import importlib.metadata
+import importlib.util
 import time
+from typing import ClassVar
 
 import numpy as np
 
@@ -38,8 +41,6 @@ class EngineNotInstalledError(ImportError):
 
 def require(package: str, engine: str):
     """Import ``package`` for ``engine``, or EngineNotInstalledError saying how to install it."""
-    import importlib
-
     try:
         return importlib.import_module(package)
     except ImportError:
@@ -157,18 +158,68 @@ def plane_axes(parts: SceneParts, y0, engine: str) -> tuple[int, int]:
     return axes
 
 
+@dataclasses.dataclass(frozen=True)
+class Setting:
+    """One engine in one configuration, as the engines study measures it.
+
+    ``options`` are the adapter's keyword arguments; ``continuous`` whether the setting
+    detects collisions continuously (None: the engine has no such switch); ``equals`` the
+    steplab method it is expected to step (the identification's finding, which
+    tests/test_engines.py checks; None: not declared); ``deviation`` why its bounce in the
+    drop test is not the lecture's eps^2. ``engine`` and ``adapter`` are filled in by the
+    adapter class that lists the setting.
+    """
+
+    key: str
+    label: str
+    options: dict = dataclasses.field(default_factory=dict)
+    continuous: bool | None = None
+    equals: str | None = None
+    deviation: str | None = None
+    engine: str = ""
+    adapter: type | None = None
+
+    def build(self, model, collisions=None, dt: float = 0.01, y0=None) -> EngineRun:
+        return build_adapter(self.adapter, model, collisions, dt, y0, **self.options)
+
+    @property
+    def available(self) -> bool:
+        return self.adapter.available()
+
+
 class EngineRun:
     """One engine set up on one scene: a system under test.
 
-    Subclasses set ``engine`` (the engine's name), ``settings`` (a line saying how it is
-    set up), ``precision`` (the engine's float type, "float64" or "float32") and implement
-    ``set_state(y)``, ``step(dt)``, ``state() -> y`` and, where the engine reports contacts,
-    ``touching() -> {(body, other): normal}`` (``other`` a body index or a shape's name).
+    An adapter declares its engine's facts as class data: ``engine`` (its registry key),
+    ``display_name`` (for figures), ``colour`` (its figures' colour), ``planar`` (a 2-D
+    engine, bodies in a plane), ``precision`` (its float type, "float64" or "float32"),
+    ``package`` and ``distribution`` (the Python package it imports and its name on PyPI;
+    None: it needs none) and ``study_settings`` (the :class:`Setting` tuple the engines
+    study measures). Instances set ``settings`` (a line saying how the run is set up) and
+    implement ``set_state(y)``, ``step(dt)``, ``state() -> y`` and, where the engine reports
+    contacts, ``touching() -> {(body, other): normal}`` (``other`` a body index or a shape's name).
     """
 
-    engine: str = "engine"
+    engine: ClassVar[str] = "engine"
+    display_name: ClassVar[str] = ""
+    colour: ClassVar[str] = "tab:gray"
+    planar: ClassVar[bool] = False
+    precision: ClassVar[str] = "float64"
+    package: ClassVar[str | None] = None
+    distribution: ClassVar[str | None] = None
+    study_settings: ClassVar[tuple[Setting, ...]] = ()
     settings: str = ""
-    precision: str = "float64"
+
+    def __init_subclass__(cls, **kwargs):
+        super().__init_subclass__(**kwargs)
+        # each setting names its adapter: one table of facts per engine, kept in its adapter
+        cls.study_settings = tuple(dataclasses.replace(s, engine=cls.engine, adapter=cls)
+                                   for s in cls.__dict__.get("study_settings", ()))
+
+    @classmethod
+    def available(cls) -> bool:
+        """Whether the engine's Python package is installed (without importing it)."""
+        return cls.package is None or importlib.util.find_spec(cls.package) is not None
 
     def __init__(self, parts: SceneParts):
         self.parts = parts
@@ -261,6 +312,7 @@ class PlanarRun(EngineRun):
     Subclasses set ``self.bodies`` and ``self.moving`` and name the engine's body attributes.
     """
 
+    planar = True
     #: the engine's names of a body's linear velocity and of its spin
     velocity_attribute = "velocity"
     spin_attribute = "angular_velocity"
@@ -311,3 +363,16 @@ def _shape(parts: SceneParts, name: str):
 def body_indices(parts: SceneParts) -> np.ndarray:
     """The bodies that move (the engine's dynamic bodies), in scene order."""
     return np.flatnonzero(~parts.pinned)
+
+
+def build_adapter(cls: type[EngineRun], model, collisions=None, dt: float = 0.01, y0=None, **options) -> EngineRun:
+    """The adapter ``cls`` built on a model and its collisions (see :func:`steplab.engines.build`)."""
+    try:
+        run = cls(model, collisions, dt, y0=y0, **options)
+    except TypeError as err:
+        if "unexpected keyword" in str(err):
+            raise ValueError(f"{cls.engine}: {err}") from None
+        raise
+    # after a divergence the run sets itself up again this way: NaN can stay in an engine's caches
+    run.rebuild = lambda self: cls.__init__(self, model, collisions, dt, y0=y0, **options)
+    return run

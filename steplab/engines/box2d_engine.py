@@ -27,7 +27,7 @@ import numpy as np
 
 from steplab.physics.collision import Box, Plane
 
-from .base import PlanarRun, UnsupportedFeatureError, body_indices, require, version
+from .base import PlanarRun, Setting, UnsupportedFeatureError, body_indices, require, version
 
 ENGINE = "Box2D"
 #: Box2D's recommended iterations (its testbed's): velocity and position
@@ -75,9 +75,22 @@ def spring_frequency(k: float, c: float, m_eff: float) -> tuple[float, float]:
     return omega / (2 * math.pi), c / (2 * m_eff * omega)
 
 
+#: why Box2D's bounce is not eps^2 (the drop test's explanation, from Box2D's documented rules)
+BOX2D_BOUNCE = ("restitution is the larger of the two fixtures'; the floor's polygon skin (1 cm) less the linear "
+                "slop (5 mm) turns the ball about 5 mm above the floor; approaches below 1 m/s do not bounce; float32")
+
+
 class Box2DRun(PlanarRun):
     engine = "box2d"
+    display_name = "Box2D (2-D, float32)"
+    colour = "tab:green"
     precision = "float32"
+    package = distribution = "Box2D"
+    study_settings = (
+        Setting("box2d-continuous-off", "Box2D, continuous off", {"continuous": False}, False, None, BOX2D_BOUNCE),
+        Setting("box2d-default", "Box2D default", {}, True, "implicit-euler", BOX2D_BOUNCE),
+        Setting("box2d-bullet", "Box2D, bullets", {"bullet": True}, True, None, BOX2D_BOUNCE),
+    )
     velocity_attribute = "linearVelocity"
     spin_attribute = "angularVelocity"
 

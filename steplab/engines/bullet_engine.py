@@ -23,14 +23,27 @@ import numpy as np
 from steplab.physics import Dampers, Gravity, Springs
 from steplab.physics.collision import Box, OrientedBox, Plane
 
-from .base import EngineRun, body_indices, require, scene_parts, version
+from .base import EngineRun, Setting, body_indices, require, scene_parts, version
 
 ENGINE = "Bullet"
+#: why Bullet's bounce is above eps^2 (the drop test's explanation, from Bullet's documented rules)
+PENETRATION_RECOVERY = ("restitution is the product of the two bodies' (the floor gets 1); the penetration "
+                        "recovery (ERP) pushes the ball out of the floor with added speed, so h/H is above eps^2")
 
 
 class BulletRun(EngineRun):
     engine = "bullet"
+    display_name = "Bullet (pybullet)"
+    colour = "tab:orange"
     precision = "float64"
+    package = distribution = "pybullet"
+    study_settings = (
+        Setting("bullet-default", "Bullet default", {}, False, "semi-implicit-euler", PENETRATION_RECOVERY),
+        Setting("bullet-no-position-correction", "Bullet, position correction off", {"position_correction": False},
+                False, None, "without the penetration recovery the bounce is eps^2 (the product rule still makes "
+                "two balls bounce with eps_a eps_b)"),
+        Setting("bullet-ccd", "Bullet, CCD on", {"ccd": True}, True, None, PENETRATION_RECOVERY),
+    )
 
     def __init__(self, model, collisions=None, dt: float = 0.01, position_correction: bool = True,
                  ccd: bool = False, y0=None):

@@ -19,7 +19,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .base import PlanarRun, body_indices, require, version
+from .base import PlanarRun, Setting, body_indices, require, version
 from .box2d_engine import static_polygons
 
 ENGINE = "Chipmunk"
@@ -29,7 +29,14 @@ COLLISION_SLOP = 0.005
 
 class ChipmunkRun(PlanarRun):
     engine = "chipmunk"
+    display_name = "Chipmunk2D (pymunk, 2-D)"
+    colour = "tab:purple"
     precision = "float64"
+    package = distribution = "pymunk"
+    study_settings = (
+        Setting("chipmunk", "Chipmunk", {}, False, "exponential-damping-euler",
+                "elasticity is the product of the two shapes'; with the collision slop at 5 mm the bounce is eps^2"),
+    )
 
     def __init__(self, model, collisions=None, dt: float = 0.01, collision_slop: float = COLLISION_SLOP, y0=None):
         pymunk = require("pymunk", ENGINE)
