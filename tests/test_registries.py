@@ -1,5 +1,5 @@
 """The registries: forces by scene key (each class parsing its own table), the one list of
-detectors, and the constant forces that ``exact`` solves in closed form."""
+detectors, every collision method, and the constant forces that ``exact`` solves in closed form."""
 
 from __future__ import annotations
 
@@ -17,6 +17,7 @@ from steplab.integrators import simulate
 from steplab.physics import ConstantForce, Force, Gravity, Model
 from steplab.physics.collision import CollisionWorld
 from steplab.physics.collision.detectors import DETECTOR_NAMES, DETECTORS
+from steplab.physics.collision.methods import COLLISION_METHODS
 from steplab.physics.forces import FORCES, register_force
 from steplab.physics.scene import SceneError, parse_scene
 
@@ -227,3 +228,52 @@ def test_world_and_scene_accept_exactly_the_detector_names(detector):
         CollisionWorld(detector)
     with pytest.raises(SceneError, match=f"collisions.detector: must be one of {', '.join(DETECTOR_NAMES)}, got"):
         parse_scene(scene, "s.toml")
+
+
+# --- every collision method, as registered --------------------------------------------------
+
+#: a ball of radius 0.1 m dropped from rest 1 m above a floor (z = 0), restitution 0, for 1.5 s:
+#: it lands at t = sqrt(2 * 0.9 / g) = 0.43 s and must then rest on the floor
+DROP_ON_FLOOR = """
+[simulation]
+integrator = "semi-implicit-euler"
+dt = 0.01
+t_end = 1.5
+[[bodies]]
+name = "ball"
+mass = 1.0
+radius = 0.1
+position = [0.0, 0.0, 1.0]
+[forces.gravity]
+[collisions]
+method = "{method}"
+restitution = 0.0
+[[collisions.planes]]
+normal = [0.0, 0.0, 1.0]
+"""
+
+
+@pytest.mark.parametrize("method", list(COLLISION_METHODS))
+def test_every_collision_method_stops_a_ball_dropped_on_the_floor(method):
+    """Free fall to the floor within a first-order method's error of the parabola, |z - (1 - g t^2 / 2)|
+    <= g dt t / 2 (semi-implicit Euler's, in steps or substeps), then at rest on it: the centre
+    one radius above the floor, within 1 mm at every step."""
+    scene = parse_scene(DROP_ON_FLOOR.format(method=method))
+    assert scene.collisions.method == method
+    traj = simulate(scene.model, scene.integrator, scene.y0, scene.t_start, scene.t_end, scene.dt,
+                    collisions=scene.collisions)
+    t, z, vz = traj.t, traj.positions[:, 0, 2], traj.velocities[:, 0, 2]
+    before = t < 0.35  # well above the floor
+    assert np.all(np.abs(z - (1.0 - 0.5 * 9.81 * t**2))[before] <= 0.5 * 9.81 * scene.dt * t[before] * (1 + 1e-9))
+    assert np.all(z >= 0.1 - 1e-3)
+    assert abs(z[-1] - 0.1) <= 1e-3 and abs(vz[-1]) <= 0.1
+
+
+def test_an_unknown_collision_method_is_one_line_naming_the_known_ones():
+    with pytest.raises(SceneError, match=r"^s.toml: collisions.method: must be one of event, solver, got"):
+        parse_scene(DROP_ON_FLOOR.format(method="magic"), "s.toml")
+    with pytest.raises(ValueError, match=r"^unknown collision method 'magic'; valid: event, solver$"):
+        CollisionWorld(method="magic")
+    with pytest.raises(SceneError, match=r"collisions.solver: sets the collision method 'solver', but the method "
+                                         r'is not "solver" \(add method = "solver"\)$'):
+        parse_scene(DROP_ON_FLOOR.format(method="event") + "[collisions.solver]\nsubsteps = 2\n", "s.toml")
