@@ -1,6 +1,7 @@
-"""Plugins: an installed distribution's entry points reach the registries and the command line.
+"""Plugins: an installed distribution's entry points reach the registries and the command line;
+and CONTRIBUTING.md's one-file contributions, each registered, are picked up where it says.
 
-Each test installs a fake distribution in ``tmp_path`` (a ``.dist-info`` folder with
+Each plugin test installs a fake distribution in ``tmp_path`` (a ``.dist-info`` folder with
 METADATA and entry_points.txt beside its module) on sys.path, exactly what ``pip
 install`` leaves in site-packages, and resets the registries' lazy load.
 """
@@ -8,18 +9,26 @@ install`` leaves in site-packages, and resets the registries' lazy load.
 from __future__ import annotations
 
 import json
+import re
 import sys
 import textwrap
+import types
+from pathlib import Path
 
 import numpy as np
 import pytest
+from helpers import TWO_BODY_SCENE
 from steplab.integrators import INTEGRATORS, UnknownIntegratorError, get_integrator
+from steplab.physics.broadphase import METHODS as BROADPHASE_METHODS
+from steplab.physics.collision.methods import COLLISION_METHODS
 from steplab.physics.forces import FORCES
+from steplab.physics.scene import parse_scene
 from steplab.physics.scene_library import SCENES
 from steplab.studies import STUDIES
 
 from steplab.cli import main
 from steplab.core.registry import PluginError
+from steplab.engines import ENGINES
 
 #: the broken entry point below warns wherever a registry is first read outside the command line
 pytestmark = pytest.mark.filterwarnings("ignore::steplab.core.registry.PluginWarning")
@@ -227,3 +236,110 @@ def test_a_module_in_the_working_directory_is_found_from_the_command_line(tmp_pa
         assert status == 0 and "ralston" in capsys.readouterr().out
     finally:
         sys.modules.pop("my_steplab_method", None)
+
+
+# --- CONTRIBUTING.md: each snippet is one file, registered, and steplab picks it up ------------
+
+CONTRIBUTING = Path(__file__).resolve().parent.parent / "CONTRIBUTING.md"
+
+
+def contributing_snippets() -> dict[str, str]:
+    """The file each ```python block of CONTRIBUTING.md is (its first line, ``# path``) -> its code."""
+    blocks = re.findall(r"```python\n(.*?)```", CONTRIBUTING.read_text(), flags=re.S)
+    return {block.splitlines()[0].removeprefix("# "): block for block in blocks}
+
+
+@pytest.fixture
+def contributed(monkeypatch):
+    """Each snippet run as a module of its own; every registry put back as it was afterwards."""
+    registries = (INTEGRATORS, FORCES, COLLISION_METHODS, BROADPHASE_METHODS, ENGINES, STUDIES)
+    before = [dict(registry) for registry in registries]
+    modules = {}
+    try:
+        for path, code in contributing_snippets().items():
+            module = types.ModuleType(f"contributing_{Path(path).stem}")
+            monkeypatch.setitem(sys.modules, module.__name__, module)  # dataclasses read the module
+            exec(compile(code, f"CONTRIBUTING.md ({path})", "exec"), module.__dict__)
+            modules[path] = module
+        yield modules
+    finally:
+        for registry, entries in zip(registries, before):
+            registry.clear()
+            registry.update(entries)  # in the same order
+
+
+def test_contributing_walks_through_one_file_of_each_kind():
+    assert list(contributing_snippets()) == [
+        "integrators/kutta3.py", "physics/buoyancy.py", "physics/collision/projection.py",
+        "physics/broadphase/x_sweep.py", "steplab/engines/toy_engine.py", "studies/euler_free_fall.py"]
+
+
+def test_contributed_integrator_has_its_order_and_runs(contributed, capsys):
+    from test_integrators import damped, oscillator, test_convergence_order_matches_declared_order
+
+    assert get_integrator("kutta3").order == 3
+    for problem in (oscillator, damped):  # the parametrised test, on the new method
+        test_convergence_order_matches_declared_order("kutta3", problem)
+    assert main(["run", "projectile", "--integrator", "kutta3"]) == 0
+    assert "kutta3" in capsys.readouterr().out
+
+
+def test_contributed_force_is_declared_in_a_scene(contributed):
+    """Gravity and buoyancy in water are one constant acceleration: a = g (rho_w V / m - 1)."""
+    scene = parse_scene(TWO_BODY_SCENE + "[forces.gravity]\n[forces.buoyancy]\ndensity = 1000.0\n")
+    (_, buoyancy) = scene.model.forces
+    assert buoyancy.name == "buoyancy"
+    volume, g = 4 / 3 * np.pi * 0.1**3, 9.81
+    q, v = scene.y0
+    a = scene.model.acceleration(0.0, q, v)
+    np.testing.assert_allclose(a[:, 2], g * (1000.0 * volume / np.array([1.0, 1.0]) - 1.0), rtol=1e-14)
+    np.testing.assert_array_equal(a[:, :2], 0.0)
+
+
+def test_contributed_collision_method_runs_from_the_command_line(contributed, tmp_path, capsys):
+    """steplab run drop --method projection: the golf ball (eps = 0.858 under the event loop) ends
+    at rest on the floor, its centre one radius above the plane at -r, so at z = 0, every step at
+    or above it."""
+    from test_registries import test_every_collision_method_stops_a_ball_dropped_on_the_floor
+
+    test_every_collision_method_stops_a_ball_dropped_on_the_floor("projection")
+    out = tmp_path / "drop.npz"
+    assert main(["run", "drop", "--method", "projection", "--out", str(out)]) == 0
+    saved = np.load(out)
+    z, vz = saved["positions"][:, 0, 2], saved["velocities"][:, 0, 2]
+    assert z.min() >= -1e-15 and abs(z[-1]) <= 1e-15 and vz[-1] == 0.0
+
+
+def test_contributed_broadphase_method_agrees_and_joins_the_study(contributed):
+    from steplab.studies.broadphase import parameters
+    from test_broadphase import test_boundary_cases, test_every_method_equals_brute_force
+
+    test_boundary_cases("x-sweep")
+    test_every_method_equals_brute_force(method="x-sweep")  # hypothesis draws the scenes
+    assert "x-sweep" in parameters(quick=True)["methods"]
+
+
+def test_contributed_engine_appears_in_the_engines_study(contributed, tmp_path, capsys):
+    """The study, on the toy engine alone: its row identifies it as the semi-implicit Euler it is,
+    and what it cannot run (contacts) is one line in the record."""
+    toy = ENGINES["toy"]
+    ENGINES.clear()  # the fixture puts the others back
+    ENGINES.register(toy)
+    assert main(["study", "engines", "--quick", "--out", str(tmp_path)]) == 0
+    record = json.loads((tmp_path / "engines.json").read_text())
+    (row,) = record["rows"]
+    assert (row["setting"], row["engine"], row["label"]) == ("toy", "toy", "Toy engine")
+    assert row["identification"]["equals"] == ["semi-implicit-euler"]
+    assert row["identification"]["difference"] <= 1e-12
+    assert row["order"] == pytest.approx(1.0, abs=0.1)
+    assert row["drops"] == {"error": "collisions: the toy engine has no contacts"}
+    assert row["deviation"] == "no contacts: the ball falls through the floor"
+
+
+def test_contributed_study_runs_by_name(contributed, tmp_path):
+    """Explicit Euler's free fall lags the parabola by exactly g dt t / 2 (the sum of the kicks)."""
+    assert main(["study", "euler-free-fall", "--quick", "--out", str(tmp_path)]) == 0
+    record = json.loads((tmp_path / "euler-free-fall.json").read_text())
+    dts = np.array(record["parameters"]["dts"])
+    np.testing.assert_allclose(record["errors"], 0.5 * 9.81 * dts * 1.0, rtol=1e-12)
+    assert (tmp_path / "euler_free_fall.png").exists()
