@@ -35,15 +35,6 @@ from .runner import Study
 from .tables import Table, markdown_table
 
 DISTRIBUTIONS = ("uniform", "clustered", "one-cell", "layer", "mixed")
-
-
-def timed_methods() -> list[str]:
-    """The methods timed against n: every registered one but those that say they are
-    ``frame_coherent`` ("sap-coherent", timed in the coherence experiment, where it has frames
-    to be coherent across; a single call is a plain sort and sweep)."""
-    return [name for name, pairs in BROADPHASE_METHODS.items() if not getattr(pairs, "frame_coherent", False)]
-
-
 #: the peer, with the same output (filtered to the exact test, sorted), and its raw query alone
 PEERS = ("ckdtree", "ckdtree-query")
 #: how many per-axis standard deviations of a Gaussian blob lie between blob centres
@@ -54,6 +45,13 @@ LAYER_THICKNESS = 0.2
 COLOURS = {"brute": ("tab:gray", "x"), "grid": ("tab:blue", "o"), "hash": ("tab:cyan", "s"),
            "sap": ("tab:orange", "^"), "sap-coherent": ("tab:red", "v"), "bvh": ("tab:green", "D"),
            "bvh-refit": ("tab:olive", "d"), "ckdtree": ("black", "*"), "ckdtree-query": ("black", "+")}
+
+
+def timed_methods() -> list[str]:
+    """The methods timed against n: every registered one but those that say they are
+    ``frame_coherent`` ("sap-coherent", timed in the coherence experiment, where it has frames
+    to be coherent across; a single call is a plain sort and sweep)."""
+    return [name for name, pairs in BROADPHASE_METHODS.items() if not getattr(pairs, "frame_coherent", False)]
 
 
 def parameters(quick: bool) -> dict:
