@@ -739,20 +739,18 @@ def _print_summary(records, out: Path) -> None:
 
 # --- export -------------------------------------------------------------------------
 
-#: MuJoCo's integrator that steps as the scene's integrator does (the engines study's identification)
-MUJOCO_EQUIVALENTS = {"semi-implicit-euler": "Euler", "rk4": "RK4", "implicit-damping-euler": "implicitfast",
-                      "implicit-euler": "discrete"}
-
-
 def cmd_export(args) -> int:
     from steplab.core.records import write_atomic
     from steplab.engines.mjcf import mjcf
+    from steplab.engines.mujoco_engine import MujocoRun
     from steplab.physics.scene import load_scene
 
     scene = load_scene(args.scene)
-    integrator = args.integrator or MUJOCO_EQUIVALENTS.get(scene.integrator, "Euler")
+    # MuJoCo's integrator that steps as the scene's integrator does (the engines study's identification)
+    equivalent = MujocoRun.integrator_stepping_as(scene.integrator)
+    integrator = args.integrator or equivalent or "Euler"
     text = mjcf(scene.model, scene.y0, scene.dt, scene.collisions, integrator, name=scene.name)
-    if args.integrator is None and scene.integrator not in MUJOCO_EQUIVALENTS:
+    if args.integrator is None and equivalent is None:
         print(f"steplab export: note: MuJoCo has no integrator that steps as {scene.integrator!r} does; "
               "writing Euler (semi-implicit Euler; choose with --integrator)", file=sys.stderr)
     if args.out is None:

@@ -42,6 +42,12 @@ class MujocoRun(EngineRun):
                 "a large part of the bounce"),
     )
 
+    @classmethod
+    def integrator_stepping_as(cls, method: str) -> str | None:
+        """MuJoCo's integrator that steps as steplab's ``method`` does (what its settings declare;
+        of two, the later: implicitfast), or None."""
+        return {s.equals: s.options["integrator"] for s in cls.study_settings if s.equals}.get(method)
+
     def __init__(self, model, collisions=None, dt: float = 0.01, integrator: str = "Euler",
                  solver: str | None = None, iterations: int | None = None, jacobian: str | None = None,
                  y0=None):
