@@ -322,6 +322,9 @@ def test_contributed_broadphase_method_agrees_and_joins_the_study(contributed):
 def test_contributed_engine_appears_in_the_engines_study(contributed, tmp_path, capsys):
     """The study, on the toy engine alone: its row identifies it as the semi-implicit Euler it is,
     and what it cannot run (contacts) is one line in the record."""
+    from test_engines import test_free_fall_is_the_parabola_plus_the_methods_known_lead
+
+    test_free_fall_is_the_parabola_plus_the_methods_known_lead("toy")
     toy = ENGINES["toy"]
     ENGINES.clear()  # the fixture puts the others back
     ENGINES.register(toy)

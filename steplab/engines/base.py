@@ -165,7 +165,7 @@ class Setting:
     ``options`` are the adapter's keyword arguments; ``continuous`` whether the setting
     detects collisions continuously (None: the engine has no such switch); ``equals`` the
     steplab method it is expected to step (the identification's finding, which
-    tests/test_engines.py checks; None: not declared); ``deviation`` why its bounce in the
+    tests/test_engines.py checks, and by which it knows the free-fall lead); ``deviation`` why its bounce in the
     drop test is not the lecture's eps^2. ``engine`` and ``adapter`` are filled in by the
     adapter class that lists the setting.
     """

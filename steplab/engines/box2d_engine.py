@@ -87,9 +87,10 @@ class Box2DRun(PlanarRun):
     precision = "float32"
     package = distribution = "Box2D"
     study_settings = (
-        Setting("box2d-continuous-off", "Box2D, continuous off", {"continuous": False}, False, None, BOX2D_BOUNCE),
+        Setting("box2d-continuous-off", "Box2D, continuous off", {"continuous": False}, False, "implicit-euler",
+                BOX2D_BOUNCE),
         Setting("box2d-default", "Box2D default", {}, True, "implicit-euler", BOX2D_BOUNCE),
-        Setting("box2d-bullet", "Box2D, bullets", {"bullet": True}, True, None, BOX2D_BOUNCE),
+        Setting("box2d-bullet", "Box2D, bullets", {"bullet": True}, True, "implicit-euler", BOX2D_BOUNCE),
     )
     velocity_attribute = "linearVelocity"
     spin_attribute = "angularVelocity"

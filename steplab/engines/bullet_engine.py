@@ -40,9 +40,9 @@ class BulletRun(EngineRun):
     study_settings = (
         Setting("bullet-default", "Bullet default", {}, False, "semi-implicit-euler", PENETRATION_RECOVERY),
         Setting("bullet-no-position-correction", "Bullet, position correction off", {"position_correction": False},
-                False, None, "without the penetration recovery the bounce is eps^2 (the product rule still makes "
-                "two balls bounce with eps_a eps_b)"),
-        Setting("bullet-ccd", "Bullet, CCD on", {"ccd": True}, True, None, PENETRATION_RECOVERY),
+                False, "semi-implicit-euler", "without the penetration recovery the bounce is eps^2 (the product "
+                "rule still makes two balls bounce with eps_a eps_b)"),
+        Setting("bullet-ccd", "Bullet, CCD on", {"ccd": True}, True, "semi-implicit-euler", PENETRATION_RECOVERY),
     )
 
     def __init__(self, model, collisions=None, dt: float = 0.01, position_correction: bool = True,
