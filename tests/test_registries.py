@@ -277,3 +277,53 @@ def test_an_unknown_collision_method_is_one_line_naming_the_known_ones():
     with pytest.raises(SceneError, match=r"collisions.solver: sets the collision method 'solver', but the method "
                                          r'is not "solver" \(add method = "solver"\)$'):
         parse_scene(DROP_ON_FLOOR.format(method="event") + "[collisions.solver]\nsubsteps = 2\n", "s.toml")
+
+
+# --- one kind of registry ---------------------------------------------------------------------
+
+
+def _registries():
+    from steplab.integrators import INTEGRATORS
+    from steplab.physics.broadphase import METHODS
+    from steplab.physics.scene_library import SCENES
+    from steplab.studies import STUDIES
+
+    from steplab.engines import ENGINES
+
+    return {"integrator": INTEGRATORS, "force": FORCES, "collision detector": DETECTORS,
+            "collision method": COLLISION_METHODS, "broadphase method": METHODS, "engine": ENGINES,
+            "scene": SCENES, "study": STUDIES}
+
+
+@pytest.mark.parametrize("what", list(_registries()))
+def test_every_registry_is_one_kind_with_its_group_and_one_lookup_error(what):
+    from steplab.core.registry import GROUPS, Registry, UnknownNameError
+
+    registry = _registries()[what]
+    assert isinstance(registry, Registry) and registry.what == what and registry.group in GROUPS
+    with pytest.raises(UnknownNameError) as err:
+        registry.lookup("nope")
+    assert str(err.value) == f"unknown {what} 'nope'; valid: {', '.join(registry)}"
+    assert isinstance(err.value, KeyError) and isinstance(err.value, ValueError)
+
+
+def test_a_function_registry_takes_a_name_and_serves_as_a_decorator():
+    from steplab.physics.broadphase import METHODS, brute_force_pairs, find_pairs
+
+    with pytest.raises(PluginError, match=r"has no name: register it with name="):
+        METHODS.register(lambda c, r: brute_force_pairs(c, r))
+    with pytest.raises(PluginError, match=r"^3 is not a function pairs\(centers, radii\)$"):
+        METHODS.register(3, name="three")
+    with pytest.raises(PluginError, match=r"broadphase method name 'grid' is taken \(by steplab\)"):
+        METHODS.register(brute_force_pairs, name="grid")
+
+    @METHODS.register(name="brute-again")
+    def brute_again(c, r):
+        return brute_force_pairs(c, r)
+
+    try:
+        assert METHODS["brute-again"] is brute_again
+        c = np.random.default_rng(3).uniform(0, 2, (40, 3))
+        assert_array_equal(find_pairs(c, 0.3, "brute-again"), find_pairs(c, 0.3, "brute"))
+    finally:
+        del METHODS["brute-again"]

@@ -24,7 +24,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from steplab.core.registry import PluginError, Registry
+from steplab.core.registry import Registry, function_entry
 
 from .brute import brute_force_pairs as brute_force_pairs
 from .bvh import BoundingVolumeHierarchy as BoundingVolumeHierarchy
@@ -46,19 +46,12 @@ def coherent_sap_pairs(c, r):
 coherent_sap_pairs.frame_coherent = True
 
 
-def _as_method(obj):
-    """A registry entry from what a plugin names: a function ``pairs(centers, radii)`` of checked
-    centres (n, 3) and radii (n,) returning the pairs as :func:`find_pairs` does."""
-    if not callable(obj):
-        raise PluginError(f"{obj!r} is not a function pairs(centers, radii)")
-    return getattr(obj, "name", None), obj
-
-
-#: every broadphase method, by name: a function of checked centres (n, 3) and radii (n,); then
-#: registered ones (``METHODS.register(f, name="...")``) and the "steplab.broadphase" entry points
+#: every broadphase method, by name: a function of checked centres (n, 3) and radii (n,) returning
+#: the pairs as :func:`find_pairs` does; then registered ones (``METHODS.register(f, name="...")``)
+#: and the "steplab.broadphase" entry points
 METHODS: Registry = Registry("steplab.broadphase", "broadphase method", [
     ("brute", brute_force_pairs), ("grid", grid_pairs), ("hash", hash_pairs), ("sap", sap_pairs),
-    ("sap-coherent", coherent_sap_pairs), ("bvh", bvh_pairs)], _as_method)
+    ("sap-coherent", coherent_sap_pairs), ("bvh", bvh_pairs)], function_entry("pairs(centers, radii)"))
 
 #: the method find_pairs uses when none is named
 DEFAULT_METHOD = "grid"

@@ -14,25 +14,17 @@ import dataclasses
 
 import numpy as np
 
-from steplab.core.registry import PluginError, Registry
+from steplab.core.registry import Registry, function_entry
 
 from . import overlap, swept
 from .response import normal_speed
-
-
-def _as_detector(obj) -> tuple[str | None, object]:
-    """A registry entry from what a plugin names: a function ``collision_times(pairs, radii, q0,
-    q1, iterations) -> (s, bracket start)`` (named by its entry point or ``register(name=...)``)."""
-    if not callable(obj):
-        raise PluginError(f"{obj!r} is not a function collision_times(pairs, radii, q0, q1, iterations)")
-    return getattr(obj, "name", None), obj
-
 
 #: detector name -> collision_times(pairs, radii, q0, q1, iterations) -> (s, bracket start), None for
 #: "none" (no collision handling); the one list of detectors: the world's validation and the scene
 #: schema read it, then registered ones and those of the "steplab.detectors" entry points
 _OWN = (("none", None), ("overlap", overlap.collision_times), ("swept", swept.collision_times))
-DETECTORS: Registry = Registry("steplab.detectors", "collision detector", _OWN, _as_detector)
+DETECTORS: Registry = Registry("steplab.detectors", "collision detector", _OWN,
+                               function_entry("collision_times(pairs, radii, q0, q1, iterations)"))
 #: steplab's own detectors, by name (the command line's --detector choices; reading the registry
 #: would load its plugins at import)
 DETECTOR_NAMES = tuple(name for name, _ in _OWN)

@@ -36,8 +36,6 @@ import math
 
 #: position corrections, the default first
 CORRECTIONS = ("soft", "baumgarte", "none")
-#: collision-handling methods of a scene: the lecture's event loop (the exact reference) and the solver
-METHODS = ("event", "solver")
 
 
 @dataclasses.dataclass(frozen=True)

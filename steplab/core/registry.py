@@ -89,6 +89,18 @@ def entry_point_origin(entry_point: metadata.EntryPoint) -> str:
     return f"{where} ({entry_point.name} = {entry_point.value})"
 
 
+def function_entry(signature: str) -> Callable[[object], tuple[str | None, object]]:
+    """The ``accept`` of a registry of functions: any callable, named by ``register(name=...)`` or
+    its entry point (``signature`` says what it must be, for the message)."""
+
+    def accept(obj):
+        if not callable(obj):
+            raise PluginError(f"{obj!r} is not a function {signature}")
+        return getattr(obj, "name", None), obj
+
+    return accept
+
+
 class Registry(MutableMapping):
     """Name -> entry: steplab's own entries, then the plugins of one entry-point group.
 
