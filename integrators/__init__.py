@@ -130,3 +130,41 @@ def get_integrator(method: str | Integrator) -> Integrator:
                                          f"{INTEGRATORS.errors[method]}") from None
         raise UnknownIntegratorError(
             f"unknown integrator {method!r}; valid: {', '.join(INTEGRATORS)}, or package.module:Name") from None
+
+
+# --- rotation methods (kind "rotation"): their own registry, since their names ("rk4") are
+# those of the translation methods they pair with; a scene's [simulation] rotation = "NAME"
+# and --rotation NAME look them up here, "steplab.rotations" entry points add more
+from .rotation import DEFAULT_ROTATION as DEFAULT_ROTATION  # noqa: E402
+from .rotation import METHODS as _ROTATION_METHODS  # noqa: E402
+from .rotation import RotationMethod as RotationMethod  # noqa: E402
+
+
+def _as_rotation(obj) -> tuple[str, RotationMethod]:
+    """A registry entry from what a plugin names: a RotationMethod instance, or a class made with no arguments."""
+    if isinstance(obj, type) and issubclass(obj, RotationMethod):
+        obj = obj()
+    if not isinstance(obj, RotationMethod):
+        raise PluginError(f"{obj!r} is a {type(obj).__name__}, not a steplab.integrators.RotationMethod")
+    return _as_integrator(obj)
+
+
+#: every rotation method by name: steplab's own, then the "steplab.rotations" entry points
+ROTATIONS: Registry = Registry("steplab.rotations", "rotation method",
+                               [(method.name, method) for method in _ROTATION_METHODS], _as_rotation)
+
+
+def get_rotation(method: str | RotationMethod) -> RotationMethod:
+    """The rotation method ``method`` (a name in :data:`ROTATIONS`, or a RotationMethod).
+
+    Raises
+    ------
+    UnknownIntegratorError
+        One line naming the valid methods.
+    """
+    if isinstance(method, RotationMethod):
+        return method
+    try:
+        return ROTATIONS[method]
+    except (KeyError, TypeError):
+        raise UnknownIntegratorError(f"unknown rotation method {method!r}; valid: {', '.join(ROTATIONS)}") from None

@@ -24,7 +24,7 @@ from typing import ClassVar
 
 import numpy as np
 from steplab.physics import quaternion as quat
-from steplab.physics._array import norm
+from steplab.physics._array import is_numpy, norm
 
 from .base import Integrator
 from .simulate import DIVERGENCE_FACTOR, DivergenceError
@@ -32,6 +32,9 @@ from .simulate import DIVERGENCE_FACTOR, DivergenceError
 #: Newton iterations the implicit midpoint rule may take; it converges quadratically, to
 #: round-off in 3-5 iterations for h |omega| < 1, so needing more means the step is too large
 MIDPOINT_MAX_ITERATIONS = 50
+#: the compiled loop cannot stop early: a fixed count, enough from explicit Euler's guess
+#: (error (h omega)^2, squared by each iteration) for h |omega| up to about 1
+MIDPOINT_COMPILED_ITERATIONS = 6
 #: the midpoint's Newton stops when a correction is below this many ulps of |I omega|
 MIDPOINT_TOLERANCE_ULPS = 4
 
@@ -45,9 +48,8 @@ def angular_acceleration(xp, model, t, q, omega):
 def _skew(xp, v):
     """[v]x, shape (..., 3, 3): [v]x u = v x u."""
     z = xp.zeros_like(v[..., 0])
-    return xp.stack([xp.stack([z, -v[..., 2], v[..., 1]], axis=-1),
-                     xp.stack([v[..., 2], z, -v[..., 0]], axis=-1),
-                     xp.stack([-v[..., 1], v[..., 0], z], axis=-1)], axis=-2)
+    entries = [z, -v[..., 2], v[..., 1], v[..., 2], z, -v[..., 0], -v[..., 1], v[..., 0], z]
+    return xp.stack(entries, axis=-1).reshape(v.shape[:-1] + (3, 3))
 
 
 def _solve(xp, matrix, rhs):
@@ -270,23 +272,26 @@ class ImplicitMidpoint(RotationMethod):
         xp = model.xp
         inertia = model.inertia
         pi0 = inertia * omega
-        pi1 = pi0
-        scale = MIDPOINT_TOLERANCE_ULPS * np.finfo(float).eps * xp.max(xp.abs(pi0))
-        for _ in range(MIDPOINT_MAX_ITERATIONS):
+        pi1 = pi0 + dt * quat.cross(xp, pi0, omega)  # explicit Euler's guess: Newton then needs 2-3 iterations
+        tolerance = MIDPOINT_TOLERANCE_ULPS * np.finfo(float).eps * xp.max(xp.abs(pi0), axis=-1)
+        # NumPy stops once every body has converged; the compiled loop takes a fixed count
+        iterations = MIDPOINT_MAX_ITERATIONS if is_numpy(xp) else MIDPOINT_COMPILED_ITERATIONS
+        for _ in range(iterations):
             pi_m = 0.5 * (pi0 + pi1)
             omega_m = pi_m / inertia
-            q1 = quat.multiply(xp, q, quat.cayley(xp, 0.25 * dt * omega_m))
-            q_m = quat.normalize(xp, 0.5 * (q + q1))
-            residual = pi1 - pi0 - dt * (quat.cross(xp, pi_m, omega_m)
-                                         + model.torque(xp, t + 0.5 * dt, q_m, omega_m))
+            residual = pi1 - pi0 - dt * quat.cross(xp, pi_m, omega_m)
+            if model.torques:  # at the midpoint orientation, normalised
+                q1 = quat.multiply(xp, q, quat.cayley(xp, 0.25 * dt * omega_m))
+                residual = residual - dt * model.torque(xp, t + 0.5 * dt, quat.normalize(xp, 0.5 * (q + q1)), omega_m)
             # d residual / d pi1 = 1 - h/2 ([pi_m]x I^-1 - [omega_m]x) (the torque's derivative left out)
             jacobian = xp.eye(3) - 0.5 * dt * (_skew(xp, pi_m) / inertia[..., None, :] - _skew(xp, omega_m))
             correction = _solve(xp, jacobian, residual)
             pi1 = pi1 - correction
-            if not xp.max(xp.abs(correction)) > scale:  # also stops on NaN; the driver reports it
+            converged = xp.max(xp.abs(correction), axis=-1) <= tolerance  # False on NaN
+            if is_numpy(xp) and np.all(converged):
                 break
-        else:
-            pi1 = pi1 * np.nan  # no convergence: the step is too large, reported as a divergence
+        # no convergence: the step is too large, reported by the driver as a divergence
+        pi1 = xp.where(converged[..., None], pi1, np.nan)
         omega1 = pi1 / inertia
         q1 = quat.multiply(xp, q, quat.cayley(xp, 0.25 * dt * 0.5 * (omega + omega1)))
         return quat.normalize(xp, q1), omega1
@@ -325,8 +330,12 @@ DEFAULT_ROTATION = "exponential-map"
 
 
 def simulate_rotation(method: RotationMethod, model, q0, omega0, dt: float, n_steps: int, t0: float = 0.0,
-                      save_every: int = 1):
+                      save_every: int = 1, backend: str = "numpy"):
     """Run ``method`` for ``n_steps`` fixed steps of ``dt`` from (q0, omega0 in the body frame).
+
+    ``backend="jax"`` runs the same ``step`` as one compiled loop (``jax.lax.scan`` over the
+    saved states, ``fori_loop`` inside; ``n_steps`` a multiple of ``save_every``); it agrees with
+    NumPy to round-off.
 
     Returns
     -------
@@ -343,13 +352,46 @@ def simulate_rotation(method: RotationMethod, model, q0, omega0, dt: float, n_st
     """
     q, omega = np.asarray(q0, float), np.asarray(omega0, float)
     limit = DIVERGENCE_FACTOR * max(1.0, float(np.max(np.abs(omega), initial=0.0)))
-    ts, qs, omegas = [t0], [q], [omega]
-    for k in range(1, n_steps + 1):
-        q, omega = method.step(model, t0 + (k - 1) * dt, q, omega, dt)
-        if k % save_every == 0 or k == n_steps:
-            if not (np.all(np.isfinite(omega)) and np.all(np.isfinite(q)) and np.max(np.abs(omega)) < limit):
-                raise DivergenceError(method.name, dt, k, t0 + k * dt)
-            ts.append(t0 + k * dt)
-            qs.append(q)
-            omegas.append(omega)
-    return np.array(ts), np.array(qs), np.array(omegas)
+    if backend == "jax":
+        ts, qs, omegas = _compiled_rotation(method, model, q, omega, dt, n_steps, t0, save_every)
+    else:
+        ts, qs, omegas = [t0], [q], [omega]
+        for k in range(1, n_steps + 1):
+            q, omega = method.step(model, t0 + (k - 1) * dt, q, omega, dt)
+            if k % save_every == 0 or k == n_steps:
+                if not (np.all(np.isfinite(omega)) and np.all(np.isfinite(q)) and np.max(np.abs(omega)) < limit):
+                    raise DivergenceError(method.name, dt, k, t0 + k * dt)
+                ts.append(t0 + k * dt)
+                qs.append(q)
+                omegas.append(omega)
+        ts, qs, omegas = np.array(ts), np.array(qs), np.array(omegas)
+    bad = ~(np.all(np.isfinite(qs), axis=(1, 2)) & np.all(np.abs(omegas) < limit, axis=(1, 2)))
+    if np.any(bad):  # the compiled loop runs to the end: the first bad saved state names the step
+        k = int(np.argmax(bad))
+        raise DivergenceError(method.name, dt, int(round((ts[k] - t0) / dt)), float(ts[k]))
+    return ts, qs, omegas
+
+
+def _compiled_rotation(method, model, q, omega, dt, n_steps, t0, save_every):
+    import jax
+    import jax.numpy as jnp
+
+    if n_steps % save_every:
+        raise ValueError(f"the compiled rotation loop needs n_steps ({n_steps}) to be a multiple of save_every "
+                         f"({save_every})")
+    model = dataclasses.replace(model, xp=jnp)
+
+    def chunk(state, k):
+        def one_step(i, state):
+            return method.step(model, t0 + (k * save_every + i) * dt, *state, dt)
+
+        state = jax.lax.fori_loop(0, save_every, one_step, state)
+        return state, state
+
+    @jax.jit
+    def run(q, omega):
+        return jax.lax.scan(chunk, (q, omega), jnp.arange(n_steps // save_every))[1]
+
+    qs, omegas = run(jnp.asarray(q), jnp.asarray(omega))
+    ts = t0 + dt * save_every * np.arange(n_steps // save_every + 1)
+    return ts, np.concatenate([q[None], np.asarray(qs)]), np.concatenate([omega[None], np.asarray(omegas)])

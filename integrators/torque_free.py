@@ -67,8 +67,8 @@ class TorqueFreeMotion:
         if not 0 < i1 < i2 < i3:
             raise ValueError(f"the exact torque-free motion needs 0 < I1 < I2 < I3, got {inertia.tolist()}")
         self.inertia, self.q0, self.omega0 = inertia, np.asarray(q0, float), omega0
-        self.momentum = float(np.linalg.norm(inertia * omega0))
-        two_e, l2 = float(np.sum(inertia * omega0**2)), self.momentum**2
+        two_e, l2 = float(np.sum(inertia * omega0**2)), float(np.sum((inertia * omega0) ** 2))
+        self.momentum = np.sqrt(l2)
         d, g = two_e * i3 - l2, l2 - two_e * i1
         self.energy = 0.5 * two_e
         if not (d > 0 and g > 0):

@@ -57,6 +57,8 @@ def principal_inertia(shape: str, mass: float, radius: float, size=None, length:
     I3 = m_c r^2 / 2 + 2/5 m_s r^2 and I1 = m_c (l^2/12 + r^2/4) + m_s (2/5 r^2 + l^2/4 + 3 l r / 8),
     each cap's centre of mass lying 3r/8 beyond the end of the cylinder.
     """
+    if shape not in SHAPES:
+        raise InertiaError(f"unknown shape {shape!r}; valid: {', '.join(SHAPES)}")
     if shape == "sphere":
         return np.full(3, 0.4 * mass * radius * radius)
     if shape == "box":
@@ -66,12 +68,11 @@ def principal_inertia(shape: str, mass: float, radius: float, size=None, length:
     if shape == "cylinder":
         across = mass / 12 * (3 * r2 + l2)
         return np.array([across, across, 0.5 * mass * r2])
-    if shape == "capsule":
+    else:  # the capsule
         cylinder, caps = math.pi * r2 * length, 4 / 3 * math.pi * r2 * radius
         m_c, m_s = mass * cylinder / (cylinder + caps), mass * caps / (cylinder + caps)
         across = m_c * (l2 / 12 + r2 / 4) + m_s * (0.4 * r2 + l2 / 4 + 3 * length * radius / 8)
         return np.array([across, across, 0.5 * m_c * r2 + 0.4 * m_s * r2])
-    raise InertiaError(f"unknown shape {shape!r}; valid: {', '.join(SHAPES)}")
 
 
 def check_inertia(inertia) -> np.ndarray:
