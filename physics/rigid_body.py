@@ -225,3 +225,47 @@ class ForceAtPoint:
 
     def torque(self, xp, t, q, omega_body):
         return torque_of_forces(xp, q, xp.asarray(self.body_point), xp.asarray(self.force))
+
+
+#: the [[bodies]] keys of a rotating body (beside mass, radius, position, velocity)
+SCENE_KEYS = ("shape", "size", "length", "inertia", "orientation", "angular_velocity")
+
+
+def from_scene_body(t, mass: float, radius: float):
+    """(shape, inertia, orientation, angular velocity) of one [[bodies]] table, or None for a point mass.
+
+    A body rotates when it has a non-sphere ``shape`` or any of ``inertia``, ``orientation``
+    and ``angular_velocity``; a sphere that rotates gets 2/5 m r^2. ``t`` is the body's
+    :class:`.scene_toml.Table`: every refusal is one line naming the file and key.
+    """
+    from .scene_toml import REQUIRED, short
+
+    shape = t.string("shape", "sphere", choices=SHAPES)
+    if "size" in t.data and shape != "box":
+        t.fail(f'is the edges of a box; this body\'s shape is "{shape}"', "size")
+    if "length" in t.data and shape not in ("capsule", "cylinder"):
+        t.fail(f'is the length of a capsule or cylinder; this body\'s shape is "{shape}"', "length")
+    if shape == "sphere" and not any(key in t.data for key in ("inertia", "orientation", "angular_velocity")):
+        return None
+    size = t.vector("size", REQUIRED, positive=True) if shape == "box" else None
+    length = (t.number("length", REQUIRED, positive=shape == "cylinder", nonnegative=True)
+              if shape in ("capsule", "cylinder") else None)
+    if "inertia" in t.data:
+        try:
+            inertia = check_inertia(t.vector("inertia", REQUIRED))
+        except InertiaError as err:
+            t.fail(str(err), "inertia")
+    else:
+        inertia = principal_inertia(shape, mass, radius, size, length)
+        if not np.all(np.isfinite(inertia) & (inertia > 0)):
+            t.fail(f"the {shape}'s principal moments {inertia.tolist()} kg m^2 are not finite and positive "
+                   "(the numbers overflow or underflow); give inertia = [I1, I2, I3]")
+    orientation = t.raw("orientation", [1.0, 0.0, 0.0, 0.0])
+    if (not isinstance(orientation, list) or len(orientation) != 4
+            or any(isinstance(x, bool) or not isinstance(x, (int, float)) for x in orientation)):
+        t.fail(f"must be a quaternion [w, x, y, z] of 4 numbers, got {short(orientation)}", "orientation")
+    try:
+        orientation = check_orientation([float(x) for x in orientation])
+    except (InertiaError, OverflowError) as err:
+        t.fail(str(err) if isinstance(err, InertiaError) else "must be finite", "orientation")
+    return shape, inertia, orientation, t.vector("angular_velocity", [0.0, 0.0, 0.0])

@@ -169,6 +169,14 @@ def test_methods_that_keep_the_length_of_L(name):
     assert np.max(np.abs(momentum / momentum[0] - 1)) <= 1e-13
 
 
+def test_dlm_keeps_the_angular_momentum_vector_in_space():
+    """Each sub-flow of the splitting is an exact rotation, so R(q) I omega is constant to round-off
+    (the implicit midpoint keeps |L| but not its direction: R(q) pi is cubic, not quadratic)."""
+    _, q, omega = simulate_rotation(get_rotation("dlm"), FREE, Q0[None], FLIP[None], 0.1, 5000, save_every=50)
+    momentum = quat.rotate(np, q[:, 0], INERTIA * omega[:, 0])
+    np.testing.assert_allclose(momentum, np.broadcast_to(momentum[0], momentum.shape), rtol=0, atol=1e-13)
+
+
 @pytest.mark.parametrize("name", METHODS)
 def test_orientation_error_converges_at_the_declared_order(name):
     method = get_rotation(name)
