@@ -238,6 +238,8 @@ def from_scene_body(t, mass: float, radius: float):
     and ``angular_velocity``; a sphere that rotates gets 2/5 m r^2. ``t`` is the body's
     :class:`.scene_toml.Table`: every refusal is one line naming the file and key.
     """
+    if not any(key in t.data for key in SCENE_KEYS):  # a point mass, as before: nothing more to read
+        return None
     from .scene_toml import REQUIRED, short
 
     shape = t.string("shape", "sphere", choices=SHAPES)
