@@ -90,17 +90,25 @@ def rotate_scene(scene, trajectory, rotation: str | None = None, backend: str = 
         qs, omegas = rotation_reference(model, q, omega, t, method="scipy-dop853")
         name = "scipy-dop853"
     else:
-        steps = np.rint((t - t[0]) / trajectory.dt).astype(int)
-        qs, omegas = [q], [omega]
-        for k in range(1, len(t)):
-            n = steps[k] - steps[k - 1]
+        steps = np.diff(np.rint((t - t[0]) / trajectory.dt).astype(int))
+        qs, omegas = [q[None]], [omega[None]]
+        # the saved states every n steps as one run (on JAX one compiled loop), the last
+        # (shorter) segment of a run that keeps its final state on its own
+        n, uniform = (steps[0], np.sum(np.cumprod(steps == steps[0]))) if len(steps) else (0, 0)
+        segments = ([(n, uniform)] if uniform and n > 0 else []) + [(k, 1) for k in steps[uniform:]]
+        t0 = t[0]
+        for n, count in segments:
             if n > 0:
-                _, q_k, omega_k = simulate_rotation(method, model, q, omega, trajectory.dt, n, t0=t[k - 1],
+                _, q_k, omega_k = simulate_rotation(method, model, q, omega, trajectory.dt, n * count, t0=t0,
                                                     save_every=n, backend=backend)
                 q, omega = q_k[-1], omega_k[-1]
-            qs.append(q)
-            omegas.append(omega)
-        qs, omegas, name = np.array(qs), np.array(omegas), method.name
+                qs.append(q_k[1:])
+                omegas.append(omega_k[1:])
+            else:  # a repeated saved time
+                qs.append(q[None])
+                omegas.append(omega[None])
+            t0 = t0 + n * count * trajectory.dt
+        qs, omegas, name = np.concatenate(qs), np.concatenate(omegas), method.name
     return RotationTrajectory(t, qs, quat.rotate(np, qs, omegas), name, bodies)
 
 

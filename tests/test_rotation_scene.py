@@ -148,3 +148,12 @@ def test_bad_body_keys_are_one_line(extra, message):
     with pytest.raises(SceneError) as err:
         scene(BALL + extra + "\n")
     assert message in str(err.value) and "\n" not in str(err.value) and str(err.value).startswith("s.toml: ")
+
+
+def test_scene_rotation_on_jax_agrees_with_numpy():
+    s = scene(BOX + BALL, forces="")
+    traj = simulate(s.model, s.integrator, s.y0, s.t_start, s.t_end, s.dt, save_every=7)  # 100 steps: 14 x 7 + 2
+    numpy_run, jax_run = (rotate_scene(s, traj, "exponential-map", backend=b) for b in ("numpy", "jax"))
+    assert jax_run.orientations.shape == (len(traj.t), 1, 4)
+    np.testing.assert_allclose(jax_run.orientations, numpy_run.orientations, rtol=0, atol=1e-13)
+    np.testing.assert_allclose(jax_run.angular_velocities, numpy_run.angular_velocities, rtol=0, atol=1e-12)
