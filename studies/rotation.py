@@ -261,6 +261,7 @@ def compute(p: dict, progress=None) -> dict:
             record["heavy_top"] += heavy_top(p, name)
         if progress is not None:
             progress(name)
+    record["methods"] = p["methods"]  # in the registry's order (the record's dicts are written with sorted keys)
     record["declared_orders"] = {name: get_rotation(name).order for name in p["methods"]}
     record["period_closed_form"] = TorqueFreeMotion(p["inertia"], quat.IDENTITY, p["flip_omega"]).period
     record["top_precession"] = top_precession()
@@ -277,7 +278,7 @@ def _style(name: str) -> dict:
 
 def plot(record: dict, out) -> list[str]:
     plt = plotting.plt
-    methods = list(record["declared_orders"])
+    methods = record["methods"]
     figures = []
 
     fig, (left, right) = plt.subplots(1, 2, figsize=(12.4, 4.8))
@@ -333,16 +334,14 @@ def plot(record: dict, out) -> list[str]:
     figures += plotting.save_figure(fig, out, "rotation_drift")
 
     fig, (left, right) = plt.subplots(1, 2, figsize=(12.4, 4.6))
-    width = 0.8 / 3
+    width, hatched = 0.8 / 3, []
     for axis in range(3):
         values = [s[f"axis{axis + 1}"] for s in record["stability"]]
         # stable on the whole grid: a bar to its top, hatched; unstable at its smallest point: a stub, crossed
         heights = [record["stability_grid_max"] if v is None else v or record["stability_grid_min"] for v in values]
         bars = left.bar(np.arange(len(values)) + (axis - 1) * width, heights, width, label=f"about axis {axis + 1}"
                         f" (I = {record['inertia'][axis]:g} kg m^2)")
-        for bar, v in zip(bars, values):
-            if v is None or v == 0:
-                bar.set_hatch("//" if v is None else "xx")
+        hatched += [(bar, "//" if v is None else "xx") for bar, v in zip(bars, values) if v is None or v == 0]
     left.set_yscale("log")
     left.set_xticks(np.arange(len(methods)), methods, rotation=35, ha="right", fontsize=8)
     left.set_ylabel("largest stable |omega| dt (rad per step)")
@@ -350,6 +349,8 @@ def plot(record: dict, out) -> list[str]:
                    "(//: stable on the whole grid; xx: unstable at its smallest omega dt)", fontsize=10)
     left.set_ylim(record["stability_grid_min"] / 2, record["stability_grid_max"] * 2)
     left.legend(fontsize=7)
+    for bar, hatch in hatched:  # after the legend, whose entries stay plain
+        bar.set_hatch(hatch)
     left.grid(True, axis="y", which="major", alpha=0.3)
     for name in methods:
         pts = [(r["dt"], r["error"]) for r in record["heavy_top"] if r["method"] == name and r["error"]]
@@ -374,31 +375,36 @@ def summary(record: dict) -> list[tuple[str, str]]:
 
 def rotation_table(data: dict) -> str:
     header = ["method", "order", "fitted", "period error", "energy drift", "|L| drift", "stable omega dt (1, 2, 3)",
-              "tumbler after (s)", "heavy top error"]
+              "tumbler after (s)", "heavy top error", "Bullet demo energy"]
     rows = []
-    for name, declared in data["declared_orders"].items():
+    for name in data["methods"]:
+        declared = data["declared_orders"][name]
         flip_rows = [r for r in data["flip"] if r["method"] == name]
         coarse = max(flip_rows, key=lambda r: r["omega_dt"] if r["period_error"] is not None else -1)
         d = next(d for d in data["drift"] if d["method"] == name)
         s = next(s for s in data["stability"] if s["method"] == name)
         top = min((r for r in data["heavy_top"] if r["method"] == name), key=lambda r: r["dt"])
+        demo = next(b for b in data["bullet"] if b["method"] == name)
         rows.append([name, str(declared), format_value(data["orders"][name], ".2f"),
                      f"{format_value(coarse['period_error'], '.1e')} at {coarse['omega_dt']:g}",
                      _or(d["energy"][-1], ".1e", "diverged"), _or(d["momentum"][-1], ".1e", "diverged"),
-                     ", ".join(_or(s[f"axis{k}"], ".2g", "whole grid") for k in (1, 2, 3)),
-                     _or(d["tumbler_after_s"], ".3g", "never"), _or(top["error"], ".1e", "diverged")])
+                     ", ".join("below grid" if s[f"axis{k}"] == 0 else _or(s[f"axis{k}"], ".2g", "whole grid")
+                               for k in (1, 2, 3)),
+                     _or(d["tumbler_after_s"], ".3g", "never"), _or(top["error"], ".1e", "diverged"),
+                     _or(demo["energy_change"], "+.1e", "diverged")])
     return markdown_table(header, rows) + (
         "\n\n(period error of omega(t) at the largest omega dt measured; drifts relative, at the end of the drift "
-        "run; stable omega dt about each principal axis, \"whole grid\": stable at every omega dt tried; heavy top "
-        "at the smallest dt.)")
+        "run; stable omega dt about each principal axis, \"whole grid\": stable at every omega dt tried, \"below "
+        "grid\": unstable at the smallest; heavy top at the smallest dt; Bullet demo: relative energy change after "
+        f"{BULLET_TIME:g} s at dt = 1/60 s.)")
 
 
 def _or(value, spec: str, missing: str) -> str:
     return missing if value is None else format(value, spec)
 
 
-TABLES = (Table("rotation", lambda r: {k: r[k] for k in ("declared_orders", "orders", "flip", "drift", "stability",
-                                                         "heavy_top")}, rotation_table),)
+TABLES = (Table("rotation", lambda r: {k: r[k] for k in ("methods", "declared_orders", "orders", "flip", "drift",
+                                                         "stability", "heavy_top", "bullet")}, rotation_table),)
 
 STUDY = Study("rotation", "Rotation: the engines' rotation methods against the exact tumbling of a rigid body",
               parameters, compute, plot, summary, tables=TABLES)
