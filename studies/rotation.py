@@ -260,7 +260,7 @@ def compute(p: dict, progress=None) -> dict:
             record["bullet"].append(bullet(p, name))
             record["heavy_top"] += heavy_top(p, name)
         if progress is not None:
-            progress(name)
+            progress()
     record["methods"] = p["methods"]  # in the registry's order (the record's dicts are written with sorted keys)
     record["declared_orders"] = {name: get_rotation(name).order for name in p["methods"]}
     record["period_closed_form"] = TorqueFreeMotion(p["inertia"], quat.IDENTITY, p["flip_omega"]).period

@@ -193,7 +193,7 @@ def test_orientation_error_converges_at_the_declared_order(name):
 
 
 @pytest.mark.parametrize("name", METHODS)
-def test_heavy_top_matches_the_diffrax_reference(name):
+def test_heavy_top_converges_to_the_reference_at_the_declared_order(name):
     """With torque: a top pivoted at the origin, its centre of mass d = 0.5 up the body z axis."""
     method = get_rotation(name)
     mass, gravity, d = 2.0, 9.81, 0.5
