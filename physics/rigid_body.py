@@ -139,11 +139,6 @@ class RigidBodies:
         """omega in the body frame, (R, 3): what the rotation methods integrate."""
         return quat.rotate_inverse(np, self.orientations, self.angular_velocities)
 
-    def replace(self, orientations, body_angular_velocities) -> RigidBodies:
-        """The same bodies at a new state, given (as the methods return it) omega in the body frame."""
-        return dataclasses.replace(self, orientations=np.asarray(orientations),
-                                   angular_velocities=quat.rotate(np, orientations, body_angular_velocities))
-
     def kinetic_energy(self) -> float:
         """Rotational kinetic energy sum 1/2 omega . I omega (body frame), J."""
         return rotational_energy(np, self.inertia, self.body_angular_velocities()).sum()
