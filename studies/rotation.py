@@ -24,6 +24,7 @@ import numpy as np
 from matplotlib.ticker import NullFormatter
 from steplab.integrators import ROTATIONS, get_rotation
 from steplab.integrators.rotation import simulate_rotation
+from steplab.integrators.rotation_stability import stable_omega_dt
 from steplab.integrators.torque_free import TorqueFreeMotion
 from steplab.physics import quaternion as quat
 from steplab.physics.rigid_body import ForceAtPoint, RotationModel, principal_inertia, rotational_energy
@@ -165,25 +166,10 @@ def drift(p: dict, name: str) -> dict:
 
 def stability(p: dict, name: str) -> dict:
     """Largest omega dt (on the grid) up to which a spin about each principal axis stays stable."""
-    inertia, grid, dt = np.array(p["inertia"]), np.array(p["stability_omega_dt"]), p["dt"]
-    omega0 = []
-    for axis in range(3):
-        direction = np.full(3, PERTURBATION)
-        direction[axis] = 1.0
-        omega0 += [w / dt * direction / np.linalg.norm(direction) for w in grid]
-    omega0 = np.array(omega0)
-    model = _batch([inertia] * len(omega0))
-    t, _, omega = simulate_rotation(get_rotation(name), model, np.broadcast_to(quat.IDENTITY, (len(omega0), 4)),
-                                    omega0, dt, p["stability_steps"], check=False)
-    energy = rotational_energy(np, model.inertia, omega)
-    with np.errstate(invalid="ignore"):
-        stable = np.all(energy <= (1 + STABLE_ENERGY_GROWTH) * energy[0], axis=0).reshape(3, len(grid))
-    out = {}
-    for axis in range(3):
-        unstable = np.nonzero(~stable[axis])[0]
-        # None: stable over the whole grid; 0.0: unstable at its smallest omega dt
-        out[f"axis{axis + 1}"] = None if not len(unstable) else (float(grid[unstable[0] - 1]) if unstable[0] else 0.0)
-    return {"method": name} | out
+    directions = np.full((3, 3), PERTURBATION) + (1 - PERTURBATION) * np.eye(3)
+    limits = stable_omega_dt(get_rotation(name), p["inertia"], directions, p["stability_omega_dt"],
+                             p["stability_steps"], STABLE_ENERGY_GROWTH)
+    return {"method": name} | {f"axis{axis + 1}": limit for axis, limit in enumerate(limits)}
 
 
 # --- Bullet's gyroscopic demo and the heavy top --------------------------------------------------

@@ -332,3 +332,30 @@ def test_quaternion_functions_run_on_jax():
     q, v = quat.normalize(np, rng.normal(size=(5, 4))), rng.normal(size=(5, 3))
     for f, args in ((quat.rotate, (q, v)), (quat.exp, (v,)), (quat.cayley, (v,)), (quat.multiply, (q, q))):
         np.testing.assert_allclose(np.asarray(f(jnp, *map(jnp.asarray, args))), f(np, *args), atol=1e-15)
+
+
+def test_stable_omega_dt_of_explicit_euler_about_the_major_axis_matches_its_linearisation():
+    """About axis 3 of (1, 2, 3), a small transverse spin oscillates at Omega = omega3 sqrt((I3 - I2)(I3 - I1)/(I1 I2))
+    = omega3; explicit Euler multiplies its energy by 1 + (Omega dt)^2 per step. From a transverse energy fraction of
+    1e-6, the energy first exceeds 1.1 E0 after 1000 steps at Omega dt = sqrt(ln(1 + 0.1 / 1e-6) / 1000)."""
+    from steplab.integrators.rotation_stability import OMEGA_DT_GRID, stable_omega_dt
+
+    predicted = np.sqrt(np.log(1 + 0.1 / 1e-6) / 1000)
+    limit = stable_omega_dt(get_rotation("explicit"), INERTIA, [[1e-3, 1e-3, 1.0]])[0]
+    grid = np.array(OMEGA_DT_GRID)
+    k = int(np.searchsorted(grid, limit))
+    assert grid[k] == limit and grid[k] <= predicted < grid[k + 1]
+    # exactly about a principal axis omega x I omega = 0: every method keeps the spin at any omega dt
+    assert stable_omega_dt(get_rotation("explicit"), INERTIA, [[0.0, 0.0, 1.0]]) == [None]
+
+
+def test_stable_rotation_dt_of_a_scene_is_the_limit_over_the_spin():
+    from steplab.integrators.rotation_stability import stable_omega_dt, stable_rotation_dt
+    from steplab.physics.rigid_body import RigidBodies
+
+    omega = np.array([[1e-3, 1e-3, 1.0], [0.0, 0.0, 0.0]]) * 30.0
+    bodies = RigidBodies(np.array([0, 1]), np.broadcast_to(INERTIA, (2, 3)), np.broadcast_to(quat.IDENTITY, (2, 4)),
+                         omega)
+    method = get_rotation("exponential-map")
+    expected = stable_omega_dt(method, INERTIA, omega[:1])[0] / np.linalg.norm(omega[0])
+    assert stable_rotation_dt(method, bodies) == pytest.approx(expected, rel=1e-15)
