@@ -139,9 +139,9 @@ class TorqueFreeMotion:
     def _frame(self, t, phi):
         """The body-to-L-frame orientation Rz(phi) Rx(theta) Rz(psi), shape (K, 4)."""
         body_l = self.inertia * self.angular_velocity(t)
+        # the two other axes in right-handed order after the polar one: (1, 2) for polar 3, and
+        # (2, 3) for polar 1, the frame relabelled (2, 3, 1)
         a, b = np.delete(np.arange(3), self.polar)
-        if self.polar == 0:  # the relabelled frame (2, 3, 1): a = axis 2, b = axis 3
-            a, b = 1, 2
         theta = np.arctan2(np.hypot(body_l[:, a], body_l[:, b]), body_l[:, self.polar])
         psi = np.arctan2(body_l[:, a], body_l[:, b])
         ez, ex = np.array([0.0, 0.0, 1.0]), np.array([1.0, 0.0, 0.0])
