@@ -185,6 +185,8 @@ class Model:
                 total = total + u
         return total
 
-    def energy(self, y):
-        """Mechanical energy, kinetic plus potential, J."""
-        return self.kinetic_energy(y[1]) + self.potential_energy(y[0])
+    def energy(self, y, rigid_bodies=None):
+        """Mechanical energy, kinetic plus potential, J; with ``rigid_bodies`` (a
+        physics.rigid_body.RigidBodies at the same instant) their rotational kinetic energy too."""
+        energy = self.kinetic_energy(y[1]) + self.potential_energy(y[0])
+        return energy if rigid_bodies is None else energy + rigid_bodies.kinetic_energy()

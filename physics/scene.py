@@ -20,7 +20,7 @@ import numpy as np
 
 from steplab.core.registry import BUILTIN
 
-from . import soft_body
+from . import rigid_body, soft_body
 from .forces import FORCES
 from .model import Model
 from .scene_library import SCENES
@@ -49,6 +49,10 @@ class Scene:
     description: str = ""
     #: the scene's [collisions] table (a physics.collision.CollisionWorld), or None
     collisions: object = None
+    #: the bodies that rotate (a physics.rigid_body.RigidBodies), or None: all point masses
+    rigid_bodies: rigid_body.RigidBodies | None = None
+    #: [simulation] rotation, the rotation method's name (None: steplab.integrators.DEFAULT_ROTATION)
+    rotation: str | None = None
 
 
 def builtin_scenes() -> list[str]:
@@ -153,6 +157,7 @@ class _SceneBuilder:
         self.pinned: list[bool] = []
         self.forces: list = []
         self.materials: list[str] = []
+        self.rotating: list[tuple] = []  # (body index, shape, inertia, orientation, angular velocity)
 
     def build(self, data, name: str) -> Scene:
         root = Table(data, "", self.label)
@@ -176,8 +181,9 @@ class _SceneBuilder:
         if forces is not None:
             self.add_forces(forces)
 
-        sim.allow("integrator", "dt", "t_start", "t_end")
+        sim.allow("integrator", "dt", "t_start", "t_end", "rotation")
         integrator = sim.string("integrator", DEFAULT_INTEGRATOR)
+        rotation = sim.string("rotation") if "rotation" in sim.data else None
         dt = sim.number("dt", REQUIRED, positive=True)
         t_start = sim.number("t_start", 0.0)
         t_end = sim.number("t_end", REQUIRED)
@@ -190,7 +196,14 @@ class _SceneBuilder:
         table = root.table("collisions")
         collisions = self.add_collisions(table) if table is not None else None
         return Scene(root.string("name", name), model, y0, integrator, dt, t_start, t_end,
-                     root.string("description", ""), collisions)
+                     root.string("description", ""), collisions, self.rigid_bodies(), rotation)
+
+    def rigid_bodies(self) -> rigid_body.RigidBodies | None:
+        if not self.rotating:
+            return None
+        index, shapes, inertia, orientations, angular_velocities = zip(*self.rotating)
+        return rigid_body.RigidBodies(np.array(index), np.array(inertia), np.array(orientations),
+                                      np.array(angular_velocities), shapes)
 
     def _append(self, table, name, mass, radius, position, velocity, pinned=False):
         if name in self.index:
@@ -212,13 +225,16 @@ class _SceneBuilder:
         self.pinned.append(pinned)
 
     def add_body(self, t: Table):
-        t.allow("name", "mass", "radius", "position", "velocity", "pinned", "material")
+        t.allow("name", "mass", "radius", "position", "velocity", "pinned", "material", *rigid_body.SCENE_KEYS)
         velocity, pinned = t.vector("velocity", [0, 0, 0]), t.boolean("pinned")
         if pinned and np.any(velocity != 0):
             t.fail("a pinned body never moves, so it cannot have a velocity", "velocity")
-        self._append(t, t.string("name", REQUIRED), t.number("mass", REQUIRED, positive=True),
-                     t.number("radius", REQUIRED, positive=True), t.vector("position", REQUIRED),
-                     velocity, pinned)
+        name = t.string("name", REQUIRED)
+        mass, radius = t.number("mass", REQUIRED, positive=True), t.number("radius", REQUIRED, positive=True)
+        self._append(t, name, mass, radius, t.vector("position", REQUIRED), velocity, pinned)
+        rotation = rigid_body.from_scene_body(t, mass, radius)
+        if rotation is not None:
+            self.rotating.append((len(self.names) - 1, *rotation))
 
     def add_soft_body(self, t: Table):
         t.allow("name", "shape", "size", "center", "rows", "cols", "spacing", "origin", "shear",

@@ -20,6 +20,7 @@ from . import (
     engines,
     frame_rate,
     restitution,
+    rotation,
     scene_tour,
     stability,
     truncation,
@@ -42,7 +43,7 @@ def _as_study(obj) -> tuple[str, Study]:
 #: runs and ``reproduce`` leaves out (it reproduces the paper's records)
 STUDIES: Registry = Registry("steplab.studies", "study", [(s.name, s) for s in (
     truncation.STUDY, stability.STUDY, work_precision.STUDY, frame_rate.STUDY, scene_tour.STUDY,
-    restitution.STUDY, tunnelling.STUDY, broadphase.STUDY, contacts.STUDY, engines.STUDY,
+    restitution.STUDY, tunnelling.STUDY, broadphase.STUDY, contacts.STUDY, engines.STUDY, rotation.STUDY,
 )], _as_study)
 
 
