@@ -37,14 +37,14 @@ from .references import ReferenceFailedError as ReferenceFailedError
 from .references import ScipyDOP853 as ScipyDOP853
 from .references import ScipyRadau as ScipyRadau
 from .registry import DEFAULT_REFERENCE as DEFAULT_REFERENCE
-from .registry import DEFAULT_ROTATION as DEFAULT_ROTATION
 from .registry import INTEGRATORS as INTEGRATORS
-from .registry import ROTATIONS as ROTATIONS
 from .registry import UnknownIntegratorError as UnknownIntegratorError
 from .registry import get_integrator as get_integrator
-from .registry import get_rotation as get_rotation
 from .registry import register_integrator as register_integrator
 from .rotation import RotationMethod as RotationMethod
+from .rotation_registry import DEFAULT_ROTATION as DEFAULT_ROTATION
+from .rotation_registry import ROTATIONS as ROTATIONS
+from .rotation_registry import get_rotation as get_rotation
 from .runge_kutta import RK4 as RK4
 from .runge_kutta import ButcherTableau as ButcherTableau
 from .runge_kutta import ExplicitRungeKutta as ExplicitRungeKutta
