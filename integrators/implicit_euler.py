@@ -90,6 +90,7 @@ class ImplicitEuler(Stepper):
     order = 1
     evaluations = 1
     implicit = True
+    scheme = "implicit"
     style = ("tab:brown", "X")
     stability_note = "none: |1 / (1 - z)| <= 1 on the whole left half-plane (A-stable)"
 

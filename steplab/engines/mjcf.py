@@ -33,6 +33,10 @@ from .base import scene_parts
 ENGINE = "MuJoCo"
 #: MuJoCo's integrators by the name of its ``integrator`` option
 INTEGRATORS = ("Euler", "RK4", "implicit", "implicitfast", "discrete")
+#: the MuJoCo integrator that steps as each of these steplab integrators does (the engines
+#: study's identification); ``steplab export`` writes it for a scene with that integrator
+EQUIVALENT_INTEGRATORS = {"semi-implicit-euler": "Euler", "rk4": "RK4", "implicit-damping-euler": "implicitfast",
+                          "implicit-euler": "discrete"}
 #: the contact's natural period over the step, 1 / (omega_0 dt): MuJoCo's own lower bound on
 #: its time constant (a stiffer contact spring is unstable at the step)
 CONTACT_STEPS = 2
