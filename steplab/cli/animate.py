@@ -13,7 +13,8 @@ def add_parser(sub, name: str) -> None:
     p.add_argument("--integrator", help="integrator name (default: the scene's)")
     p.add_argument("--compare", metavar="A,B",
                    help="side by side: integrators (euler,velocity-verlet) or detectors (overlap,swept)")
-    p.add_argument("--detector", choices=DETECTORS, help="collision detector (default: the scene's)")
+    p.add_argument("--detector", choices=DETECTORS, metavar="NAME",
+                   help="collision detector, one of %(choices)s (default: the scene's)")
     time_arguments(p)
     p.add_argument("--fps", type=count, default=30, help="frames per second (default: 30)")
     p.add_argument("--view", choices=("xy", "xz", "yz"), help="plane shown (default: the two axes moved along most)")

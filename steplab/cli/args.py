@@ -20,7 +20,8 @@ class Parser(argparse.ArgumentParser):
 
 class Deferred(Sequence):
     """Choices computed the first time argparse reads them (to check a value or print help),
-    so building the parser imports nothing: the detector names live in the collision package."""
+    so building the parser imports nothing: the detector names live in the collision package.
+    An argument with them needs a ``metavar``, else argparse reads them to build one."""
 
     def __init__(self, make: Callable[[], Sequence[str]]):
         self._make = make

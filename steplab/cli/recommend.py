@@ -18,8 +18,8 @@ def add_parser(sub, name: str) -> None:
     p.add_argument("--dt-max", type=positive, metavar="DT",
                    help="largest dt to consider, s, e.g. a frame, 1/60 (default: a quarter of the run)")
     p.add_argument("--integrators", metavar="A,B", help="candidates (default: every fixed-step integrator)")
-    p.add_argument("--detector", choices=DETECTORS,
-                   help="collision detector to measure with (default: the scene's; none: without collisions)")
+    p.add_argument("--detector", choices=DETECTORS, metavar="NAME", help="collision detector to measure "
+                   "with, one of %(choices)s (default: the scene's; none: without collisions)")
     json_argument(p)
 
 

@@ -26,9 +26,9 @@ def add_parser(sub, name: str) -> None:
                    help="refuse runs of more than N steps (default: 10,000,000)")
     p.add_argument("--out", type=Path, help="write the trajectory to FILE.npz or FILE.csv (and the "
                    "collisions, if any, to FILE.collisions.csv)")
-    p.add_argument("--detector", choices=DETECTORS,
-                   help="collision detection (overlap: overlap testing with bisection; swept: intersection "
-                   "testing; default: the scene's [collisions], else none)")
+    p.add_argument("--detector", choices=DETECTORS, metavar="NAME",
+                   help="collision detection, one of %(choices)s (overlap: overlap testing with bisection; swept: "
+                   "intersection testing; default: the scene's [collisions], else none)")
     solver_arguments(p)
     json_argument(p, "print the summary as JSON")
 
