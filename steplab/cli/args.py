@@ -102,7 +102,11 @@ def time_span(scene, args) -> tuple[float | None, float]:
     if dt is not None and getattr(args, "steps", None) is None:
         from steplab.integrators.simulate import step_count
 
-        if step_count(scene.t_start, t_end, dt) < 1:
+        try:
+            steps = step_count(scene.t_start, t_end, dt)
+        except ValueError:  # too many to count: the run itself says so, with what else is wrong
+            steps = 1
+        if steps < 1:
             ms = f"; a dt in milliseconds? {dt:g} ms is --dt {dt / 1000:g}" if dt >= 1 else ""
             raise ValueError(f"dt = {dt:g} s is longer than the run, t_end - t_start = {t_end - scene.t_start:g} s: "
                              f"pass --t-end {scene.t_start + dt:g} or later, or --steps N{ms}")
