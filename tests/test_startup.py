@@ -13,8 +13,8 @@ import sys
 import pytest
 
 #: what a NumPy-only command must not load: JAX (and diffrax), matplotlib, Dask, the study
-#: modules and the Numba-compiled collision and broadphase kernels
-HEAVY = ("jax", "diffrax", "matplotlib", "dask", "distributed", "steplab.physics.collision",
+#: modules, the Numba-compiled collision and broadphase kernels, and Numba itself
+HEAVY = ("jax", "diffrax", "matplotlib", "dask", "distributed", "numba", "steplab.physics.collision",
          "steplab.physics.broadphase", "steplab.studies.truncation", "steplab.studies.stability",
          "steplab.studies.work_precision", "steplab.studies.contacts", "steplab.studies.engines",
          "steplab.studies.plotting", "steplab.engines")

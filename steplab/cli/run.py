@@ -167,10 +167,9 @@ def print_summary(s: dict) -> None:
 
             print(f"  collisions (contact solver, {ContactSolver(**s['solver']).describe()}): "
                   f"{plural(c['impacts'], 'impact')}{extra}, at most {c['most_impacts_in_a_step']} in one step")
-            print(f"  largest residual: {c['largest_residual']:.3g} m/s, the worst contact's complementarity "
-                  "residual after a step's last sweep (how fast it still closes beyond its gap, or the velocity "
-                  "change its impulse still gives a separating pair); 0 when converged, lowered by --iterations; "
-                  "an unconverged solve loses energy at those contacts, it does not let them interpenetrate")
+            print(f"  largest residual: {c['largest_residual']:.3g} m/s (the worst contact's complementarity "
+                  "residual after a step's last sweep: 0 when converged, lowered by --iterations; a large one "
+                  "costs energy at the contacts, not penetration)")
         else:
             # the most resolved in one step counts impacts and resting-contact corrections together
             print(f"  collisions ({s['detector']}): {plural(c['impacts'], 'impact')}{extra}, "
