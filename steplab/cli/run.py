@@ -176,8 +176,6 @@ def print_summary(s: dict) -> None:
                   f"{plural(c['resting_corrections'], 'resting-contact correction')}, "
                   f"at most {c['most_impacts_in_a_step']} of them in one step")
     print(f"  wall time: {s['wall_time'] * 1e3:.3g} ms")
-    if s["warnings"]:
-        print(f"  warnings: {'; '.join(s['warnings'])}")
     if "out" in s:
         print(f"  trajectory written to {s['out']}")
     if "collisions_out" in s:
