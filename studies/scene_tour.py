@@ -19,8 +19,8 @@ from steplab.physics.scene import builtin_scenes, load_scene
 from .runner import Study, run_tasks
 
 BACKENDS = ("numpy", "jax")
-#: relative perturbation of the initial positions for the yardstick run: ten units in the last
-#: place of float64, about what one step's round-off changes
+#: relative perturbation of the initial positions (times a standard normal draw) for the
+#: yardstick run: about five units in the last place of float64, a few steps' round-off
 PERTURBATION = 1e-15
 #: the perturbation's draw
 SEED = 0

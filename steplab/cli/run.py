@@ -61,9 +61,11 @@ def command(args) -> int:
                         max_steps=args.max_steps or MAX_STEPS, progress=not args.json and sys.stderr.isatty(),
                         stepper=None if world is None else _keeping(world.stepper, kept))
     except Exception as err:
-        from steplab.physics.collision import ImpactCapError  # loaded: a world made the run
+        if world is None:
+            raise
+        from steplab.physics.collision import ImpactCapError  # loaded already: the world made the run
 
-        if world is None or not isinstance(err, ImpactCapError):
+        if not isinstance(err, ImpactCapError):
             raise
         if args.json:  # stopped, never dropped: one line, status 1 (and the record)
             print(json.dumps(stopped_summary(scene, integrator, dt, world, err, energy_start, run_warnings,
@@ -89,7 +91,8 @@ def command(args) -> int:
 
 
 def integrator_named(name: str):
-    """The integrator ``name``; a ``file.py:Name`` is read as the module ``file`` (with a note saying so)."""
+    """The integrator ``name`` (see ``get_integrator``); ``path/file.py:Name`` is the module
+    ``file``, imported from the file's folder, as the natural spelling of a file of one's own."""
     from steplab.integrators import UnknownIntegratorError, get_integrator
 
     module, colon, attribute = name.partition(":")

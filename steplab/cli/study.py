@@ -1,13 +1,12 @@
 """``steplab study`` and ``steplab reproduce``: studies into records, with progress as they run.
 
-In a terminal a bar (on stderr) counts the tasks of the study running; otherwise (``steplab
-reproduce > log``) one line per study goes to stdout the moment it finishes. The summary
-table of every study follows at the end, as before.
+In a terminal a bar (on stderr) counts the tasks of the study running; one line per study
+goes to stdout the moment it finishes, so ``steplab reproduce > log`` shows its progress as
+it goes. The summary table of every study follows at the end, as before.
 """
 
 from __future__ import annotations
 
-import sys
 import time
 from pathlib import Path
 
@@ -62,17 +61,16 @@ def command(args) -> int:
 
 
 class _Finished:
-    """Called with each record as its study finishes: one line on stdout when it is not a terminal."""
+    """Called with each record as its study finishes: one line on stdout, flushed."""
 
     def __init__(self, total: int):
         self.total, self.done, self.start = total, 0, time.perf_counter()
 
     def __call__(self, record: dict) -> None:
         self.done += 1
-        if not sys.stdout.isatty():
-            state = "cached" if record.get("cached") else "computed"
-            print(f"[{self.done}/{self.total}] {record['study']}: {state}, {time.perf_counter() - self.start:.0f} s "
-                  "since the start", flush=True)
+        state = "cached" if record.get("cached") else "computed"
+        print(f"[{self.done}/{self.total}] {record['study']}: {state}, {time.perf_counter() - self.start:.0f} s "
+              "since the start", flush=True)
 
 
 def _run(study, args, finished) -> dict:
@@ -82,7 +80,8 @@ def _run(study, args, finished) -> dict:
     from steplab.studies import run_study
 
     total = len(study.tasks(study.parameters(args.quick))) if study.tasks is not None else None
-    with tqdm(total=total, desc=study.name, unit="task", disable=None, leave=False) as bar:
+    with tqdm(total=total, desc=f"{study.name} ({finished.done + 1}/{finished.total})", unit="task",
+              disable=None, leave=False) as bar:
         record = run_study(study, args.out, quick=args.quick, force=args.force, progress=bar.update)
     finished(record)
     return record
