@@ -428,3 +428,11 @@ def test_pybullet_prints_nothing_when_an_engine_loads_it():
     done = subprocess.run([sys.executable, "-c", "from steplab.engines.base import require\n"
                            "require('pybullet', 'Bullet')\nprint('loaded')"], capture_output=True, text=True)
     assert (done.returncode, done.stdout, done.stderr) == (0, "loaded\n", "")
+
+
+def test_the_contact_solvers_residual_is_printed_with_its_unit_and_meaning(capsys):
+    """The drop on the contact solver: three bounces, each converged in its one iteration (residual ~ 0)."""
+    status, out, _ = run(capsys, "run", "drop", "--method", "solver")
+    [line] = [line for line in out.splitlines() if "largest residual" in line]
+    residual = float(line.split("largest residual: ")[1].split()[0])
+    assert status == 0 and residual < 1e-12 and "m/s (the worst contact's complementarity residual" in line
