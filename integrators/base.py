@@ -31,11 +31,16 @@ class Integrator:
     name: ClassVar[str]
     #: global order of accuracy (``None`` for the exact solution)
     order: ClassVar[int | None]
-    #: evaluations of the force per step (per Newton iteration for implicit methods;
+    #: evaluations of the force per step (per Newton iteration where ``scheme`` is "implicit";
     #: ``None`` for adaptive references, where it varies)
     evaluations: ClassVar[int | None]
     symplectic: ClassVar[bool] = False
+    #: the step needs the force Jacobian (a solve with it, or its matrix exponential)
     implicit: ClassVar[bool] = False
+    #: how a step finds its new state: "explicit"; "linearly implicit" (one linear solve with
+    #: the Jacobian, no iteration); "implicit" (Newton's method, iterated to a tolerance);
+    #: "exponential" (the damping's matrix exponential, no solve)
+    scheme: ClassVar[str] = "explicit"
     kind: ClassVar[str] = "fixed-step"
     #: matplotlib (colour, marker), so a method looks the same in every figure; None: the
     #: figures pick one from the name
@@ -51,6 +56,7 @@ class Integrator:
             "evaluations_per_step": self.evaluations,
             "symplectic": self.symplectic,
             "implicit": self.implicit,
+            "scheme": self.scheme,
             "description": doc[0] if doc else "",
         }
 

@@ -33,6 +33,7 @@ class ImplicitDampingEuler(Stepper):
     symplectic = True
     #: linearly implicit: one solve with the damping Jacobian, no Newton iteration
     implicit = True
+    scheme = "linearly implicit"
     style = ("tab:olive", "h")
     stability_note = "2 undamped; 2 sqrt(1 + zeta^2) + 2 zeta damped"
 

@@ -7,7 +7,6 @@ import warnings
 
 import numpy as np
 
-from . import conjugate_gradients
 from .base import Stepper
 
 #: Newton iterations before a step is declared failed (its state becomes NaN, so the
@@ -73,8 +72,10 @@ class ImplicitEuler(Stepper):
         more accurate than that.
     linear_solver : {"auto", "dense", "cg"}
         ``"auto"`` (default): dense up to DENSE_MAX_BODIES bodies (and always on JAX), CG above.
-    cg_rtol : float
-        Relative residual |b - A x| / |b| each CG solve stops at.
+    cg_rtol : float, optional
+        Relative residual |b - A x| / |b| each CG solve stops at. Default:
+        ``conjugate_gradients.CG_RTOL``, looked up when a CG step runs (so that listing
+        the integrators imports neither the compiled solver nor Numba).
     newton_iterations : int, optional
         Take exactly this many Newton iterations instead of iterating to ``rtol``: 1 is
         Baraff and Witkin's linearised step (linearised at the predicted position q + dt v),
@@ -83,13 +84,14 @@ class ImplicitEuler(Stepper):
 
     rtol: float | None = None
     linear_solver: str = "auto"
-    cg_rtol: float = conjugate_gradients.CG_RTOL
+    cg_rtol: float | None = None
     newton_iterations: int | None = None
 
     name = "implicit-euler"
     order = 1
     evaluations = 1
     implicit = True
+    scheme = "implicit"
     style = ("tab:brown", "X")
     stability_note = "none: |1 / (1 - z)| <= 1 on the whole left half-plane (A-stable)"
 
@@ -97,7 +99,7 @@ class ImplicitEuler(Stepper):
         if self.linear_solver not in LINEAR_SOLVERS:
             raise ValueError(f"implicit-euler: linear_solver must be one of {', '.join(LINEAR_SOLVERS)}, "
                              f"got {self.linear_solver!r}")
-        if not 0 < self.cg_rtol < 1:
+        if self.cg_rtol is not None and not 0 < self.cg_rtol < 1:
             raise ValueError(f"implicit-euler: cg_rtol must be in (0, 1), got {self.cg_rtol!r}")
         if self.newton_iterations is not None and not (isinstance(self.newton_iterations, int)
                                                         and self.newton_iterations >= 1):
@@ -172,6 +174,10 @@ def _newton_cg(model, t1, q, v, dt, rtol, cg_rtol, iterations=None, report=None)
     """
     from steplab.physics.sparse_jacobian import newton_system
 
+    from . import conjugate_gradients
+
+    cg_rtol = conjugate_gradients.CG_RTOL if cg_rtol is None else cg_rtol
+
     masses = np.asarray(model.masses, dtype=float)
     pinned = np.asarray(model.pinned)
     v1, previous, definite = v, None, False
@@ -228,6 +234,8 @@ def _solve_newton_system(model, t1, q1, v1, dt, matrix, b, cg_rtol, definite):
     which was solved.
     """
     from steplab.physics.sparse_jacobian import newton_matrix
+
+    from . import conjugate_gradients
 
     b = b.ravel()
     while True:

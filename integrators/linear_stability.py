@@ -22,7 +22,6 @@ import cmath
 import functools
 
 import numpy as np
-from scipy.optimize import brentq
 
 #: search interval of omega dt: stable already at OMEGA_DT_MIN or not at all counts as
 #: "unstable for every dt" (0); still stable at OMEGA_DT_MAX as "no limit" (None)
@@ -150,4 +149,6 @@ def _search_limit(stepper, zeta: float) -> float | None:
     if stable.all():
         return None
     k = int(np.argmin(stable))  # first unstable grid point
+    from scipy.optimize import brentq  # here, not at the top: SciPy's import costs a listing 0.2 s
+
     return float(brentq(excess, ys[k - 1], ys[k], xtol=LIMIT_XTOL))

@@ -175,6 +175,7 @@ class DiffraxKvaerno5(DiffraxReference):
     name = "diffrax-kvaerno5"
     order = 5
     implicit = True
+    scheme = "implicit"
 
 
 @dataclasses.dataclass(frozen=True)
@@ -207,3 +208,4 @@ class ScipyRadau(ScipyReference):
     name = "scipy-radau"
     order = 5
     implicit = True
+    scheme = "implicit"

@@ -67,9 +67,9 @@ def dt_warning(model, q, stepper, dt: float) -> str | None:
     Cheap enough to run before every ``steplab run``: the mode by central differences
     (milliseconds, no compilation), then one spectral radius at omega_max dt; the limit
     itself is searched only when that step already grows. Silent for a model without
-    springs or with forces that overflow at the initial state, for a solver, for an
-    unconditionally stable method, and for one unstable at every dt (explicit Euler on an
-    undamped mode: its slow growth is the lecture's point).
+    springs or with forces that overflow at the initial state, for a solver and for an
+    unconditionally stable method. A method unstable at every dt (explicit Euler on an
+    undamped mode) is warned about too, with its growth per step: slow growth is still growth.
     """
     if not isinstance(stepper, Stepper):
         return None
@@ -80,9 +80,14 @@ def dt_warning(model, q, stepper, dt: float) -> str | None:
     if mode.omega is None or stepper.spectral_radius(mode.omega * dt, mode.damping_ratio) <= 1 + GROWTH_TOLERANCE:
         return None
     limit = stable_step(mode, stepper)
-    if not limit.dt_max_damped:  # None: no limit; 0: unstable at every dt
+    if limit.dt_max_damped is None:  # no limit
         return None
     damped = f", damping ratio {mode.damping_ratio:.3g}" if mode.damping_ratio else ""
+    if limit.dt_max_damped == 0:  # unstable at every dt: the amplitude's growth factor per step says how fast
+        growth = stepper.spectral_radius(mode.omega * dt, mode.damping_ratio)
+        return (f"dt = {dt:g} s exceeds the largest stable dt of {stepper.name} on this scene: there is none, it "
+                f"grows at every dt (stiffest mode: omega_max = {mode.omega:.4g} rad/s{damped}; each step "
+                f"multiplies its amplitude by {growth:.4g}, its energy by {growth ** 2:.4g}); see steplab check")
     hint = (f" (a dt in milliseconds? {dt:g} ms is --dt {dt / 1000:g})"
             if dt >= 1 and dt / 1000 <= limit.dt_max_damped else "")
     return (f"dt = {dt:g} s exceeds the largest stable dt of {stepper.name} on this scene, "

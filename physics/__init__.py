@@ -1,7 +1,8 @@
 """steplab's physical model: state, forces, scenes.
 
-Importing steplab turns on 64-bit floats in JAX (``jax_enable_x64``): float64 is the
-default everywhere, float32 is asked for explicitly.
+Importing steplab turns on 64-bit floats in JAX (``jax_enable_x64``, set in
+``steplab/__init__.py`` before JAX loads): float64 is the default everywhere, float32 is
+asked for explicitly.
 """
 
 from __future__ import annotations
@@ -12,25 +13,30 @@ if __name__ != "steplab.physics":
     raise ImportError(f"{__name__} is steplab's physics/ folder imported under the wrong name: "
                       "import steplab.physics instead")
 
-import jax
+from steplab.core.lazy_exports import lazy_exports  # noqa: E402
 
-jax.config.update("jax_enable_x64", True)
+from .projectile import projectile as projectile  # noqa: E402  (eager: also a submodule's name)
 
-from .broadphase import find_pairs as find_pairs  # noqa: E402
-from .central_gravity import CentralGravity as CentralGravity  # noqa: E402
-from .central_gravity import kepler_orbit as kepler_orbit  # noqa: E402
-from .constant_force import ConstantForce as ConstantForce  # noqa: E402
-from .dampers import Dampers as Dampers  # noqa: E402
-from .drag import Drag as Drag  # noqa: E402
-from .force import Force as Force  # noqa: E402
-from .forces import FORCES as FORCES  # noqa: E402
-from .forces import register_force as register_force  # noqa: E402
-from .friction import Friction as Friction  # noqa: E402
-from .gravity import Gravity as Gravity  # noqa: E402
-from .model import Model as Model  # noqa: E402
-from .projectile import projectile as projectile  # noqa: E402
-from .springs import Springs as Springs  # noqa: E402
-from .state import State as State  # noqa: E402
-from .state import from_lecture_state as from_lecture_state  # noqa: E402
-from .state import lecture_derivative as lecture_derivative  # noqa: E402
-from .state import lecture_state as lecture_state  # noqa: E402
+#: the public names, each imported from its module on first use (steplab/core/lazy_exports.py):
+#: ``import steplab.physics`` loads neither JAX nor the Numba kernels
+_EXPORTS = {
+    "find_pairs": ".broadphase",
+    "CentralGravity": ".central_gravity",
+    "kepler_orbit": ".central_gravity",
+    "ConstantForce": ".constant_force",
+    "Dampers": ".dampers",
+    "Drag": ".drag",
+    "Force": ".force",
+    "FORCES": ".forces",
+    "register_force": ".forces",
+    "Friction": ".friction",
+    "Gravity": ".gravity",
+    "Model": ".model",
+    "Springs": ".springs",
+    "State": ".state",
+    "from_lecture_state": ".state",
+    "lecture_derivative": ".state",
+    "lecture_state": ".state",
+}
+__getattr__, __dir__ = lazy_exports(__name__, _EXPORTS)
+__all__ = [*_EXPORTS, "projectile"]

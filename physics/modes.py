@@ -26,8 +26,6 @@ import dataclasses
 
 import numpy as np
 
-from . import sparse_jacobian
-
 #: below this many degrees of freedom S is formed column by column and solved densely
 #: (ARPACK wants several more dimensions than the one eigenvalue it is asked for)
 DENSE_SIZE = 60
@@ -91,7 +89,7 @@ def stiffest_mode(model, q, v=None, derivative: str = "jvp") -> StiffestMode:
     shape, size = q0.shape, q0.size
     if derivative not in ("jvp", "difference"):
         raise ValueError(f"derivative must be 'jvp' or 'difference', got {derivative!r}")
-    if size > SPARSE_SIZE and sparse_jacobian.is_complete(model):
+    if size > SPARSE_SIZE and _sparse_is_exact(model):
         derivatives = _sparse_derivatives(model, q0, v0)
     elif derivative == "jvp":
         derivatives = _autodiff_derivatives(model, q0, v0)
@@ -140,8 +138,18 @@ def stiffest_mode(model, q, v=None, derivative: str = "jvp") -> StiffestMode:
     return StiffestMode(omega, zeta if zeta > 0 else 0.0, pattern / scale)
 
 
+def _sparse_is_exact(model) -> bool:
+    """The forces' sparse Jacobian covers every force of ``model`` (compiled with Numba: imported
+    only for a model this large, so a small run never loads Numba for its stability check)."""
+    from . import sparse_jacobian
+
+    return sparse_jacobian.is_complete(model)
+
+
 def _sparse_derivatives(model, q0, v0):
     """``(dq, dv) -> (J_q dq, J_v dv)`` at (q0, v0), exact: the forces' sparse Jacobian."""
+    from . import sparse_jacobian
+
     jq, jv = sparse_jacobian.sparse_jacobian(model.cast(np, np.float64), 0.0, q0, v0)
 
     def derivatives(dq, dv):

@@ -6,47 +6,57 @@ Each study module defines ``STUDY`` (a :class:`studies.runner.Study`) and is lis
 
 from __future__ import annotations
 
+import functools
+import importlib
+
 # Only the installed name: run from the repository root, ``import studies`` would find this
 # folder too, and a Numba kernel cached under that foreign name fails to load elsewhere.
 if __name__ != "steplab.studies":
     raise ImportError(f"{__name__} is steplab's studies/ folder imported under the wrong name: "
                       "import steplab.studies instead")
 
-from steplab.core.registry import BUILTIN, PluginError, Registry
+from steplab.core.lazy_exports import lazy_exports  # noqa: E402
 
-from . import (
-    broadphase,
-    contacts,
-    engines,
-    frame_rate,
-    restitution,
-    rotation,
-    scene_tour,
-    stability,
-    truncation,
-    tunnelling,
-    work_precision,
-)
-from .runner import Study as Study
-from .runner import run_study as run_study
+#: the study modules, in the order ``steplab reproduce`` runs them; each defines ``STUDY``
+BUILTIN_MODULES = ("truncation", "stability", "work_precision", "frame_rate", "scene_tour", "restitution",
+                   "tunnelling", "broadphase", "contacts", "engines", "rotation")
+
+# ``Study``, ``run_study`` and the submodules are imported on first use (steplab/core/lazy_exports.py),
+# and so is ``STUDIES``, below: importing one module of this package (records, timing) does
+# not import every study, nor matplotlib
+_getattr, __dir__ = lazy_exports(__name__, {"Study": ".runner", "run_study": ".runner"})
 
 
-def _as_study(obj) -> tuple[str, Study]:
-    """A registry entry from what a "steplab.studies" entry point names: a Study."""
-    if not isinstance(obj, Study):
-        raise PluginError(f"{obj!r} is a {type(obj).__name__}, not a steplab.studies.Study")
-    return obj.name, obj
+def __getattr__(name: str):
+    if name == "STUDIES":
+        return _registry()
+    return _getattr(name)
 
 
-#: every study, by name: steplab's own, in the order ``steplab reproduce`` runs them, then
-#: those of installed plugins ("steplab.studies" entry points), which ``steplab study NAME``
-#: runs and ``reproduce`` leaves out (it reproduces the paper's records)
-STUDIES: Registry = Registry("steplab.studies", "study", [(s.name, s) for s in (
-    truncation.STUDY, stability.STUDY, work_precision.STUDY, frame_rate.STUDY, scene_tour.STUDY,
-    restitution.STUDY, tunnelling.STUDY, broadphase.STUDY, contacts.STUDY, engines.STUDY, rotation.STUDY,
-)], _as_study)
+@functools.cache
+def _registry():
+    """:data:`STUDIES`, built on first use: steplab's own studies, in the order ``steplab reproduce``
+    runs them, then those of installed plugins ("steplab.studies" entry points), which
+    ``steplab study NAME`` runs and ``reproduce`` leaves out (it reproduces the paper's records)."""
+    from steplab.core.registry import PluginError, Registry
+
+    from .runner import Study
+
+    def as_study(obj) -> tuple[str, Study]:
+        """A registry entry from what a "steplab.studies" entry point names: a Study."""
+        if not isinstance(obj, Study):
+            raise PluginError(f"{obj!r} is a {type(obj).__name__}, not a steplab.studies.Study")
+        return obj.name, obj
+
+    studies = [importlib.import_module(f".{name}", __name__).STUDY for name in BUILTIN_MODULES]
+    registry = Registry("steplab.studies", "study", [(s.name, s) for s in studies], as_study)
+    globals()["STUDIES"] = registry
+    return registry
 
 
-def builtin_studies() -> list[Study]:
+def builtin_studies() -> list:
     """steplab's own studies, in the order ``steplab reproduce`` runs them."""
-    return [study for name, study in STUDIES.items() if STUDIES.origin(name) == BUILTIN]
+    from steplab.core.registry import BUILTIN
+
+    registry = _registry()
+    return [study for name, study in registry.items() if registry.origin(name) == BUILTIN]

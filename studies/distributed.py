@@ -30,6 +30,7 @@ import dataclasses
 import functools
 import json
 import socket
+from collections.abc import Callable
 from pathlib import Path
 
 import numpy as np
@@ -100,11 +101,12 @@ class _Run:
 
 
 def run_studies(studies: list[Study], out: str | Path, client, quick: bool = False,
-                force: bool = False) -> list[dict]:
+                force: bool = False, finished: Callable[[dict], None] | None = None) -> list[dict]:
     """Run ``studies`` on the cluster of ``client`` into ``out`` (each unless cached); their records, in order.
 
     The untimed tasks of every study given as tasks go to the cluster at once; the timed
     tasks and the other studies run afterwards here, one at a time (see the module's docstring).
+    ``finished(record)`` is called as each study's record is written (or found cached).
     """
     from distributed import as_completed
     from tqdm import tqdm
@@ -112,7 +114,7 @@ def run_studies(studies: list[Study], out: str | Path, client, quick: bool = Fal
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
     remove_temporary_files(out)  # what a run killed by SIGKILL left half-written
-    records, runs, alone, futures, cluster = {}, [], [], {}, describe(client)
+    records, runs, alone, futures, cluster = _Records(finished), [], [], {}, describe(client)
     for study in studies:
         if not force and is_cached(study, out, quick):
             records[study.name] = run_study(study, out, quick)
@@ -160,6 +162,19 @@ def run_studies(studies: list[Study], out: str | Path, client, quick: bool = Fal
             records[study.name] = run_study(study, out, quick, force)
             bar.update()
     return [records[study.name] for study in studies]
+
+
+class _Records(dict):
+    """The records by study name; each one stored is passed to ``finished`` as it comes."""
+
+    def __init__(self, finished: Callable[[dict], None] | None):
+        super().__init__()
+        self.finished = finished
+
+    def __setitem__(self, name: str, record: dict) -> None:
+        super().__setitem__(name, record)
+        if self.finished is not None:
+            self.finished(record)
 
 
 def _plan(study: Study, out: Path, quick: bool, force: bool) -> _Run:

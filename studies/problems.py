@@ -33,16 +33,31 @@ class Problem:
         return self.solution(self.t_end)
 
 
+def constant_force_solution(model: Model, y0: np.ndarray, t_start: float) -> Callable | None:
+    """``solution(t) -> y`` (2, N, 3) in closed form, the lecture's projectile, where the total
+    force of ``model`` is constant; None where it is not."""
+    if model.constant_acceleration is None:
+        return None
+    g = np.asarray(model.constant_acceleration)
+
+    def solution(t):
+        p, v = projectile(t, y0[0], y0[1], g, t_start)
+        return np.stack([p, v])
+
+    return solution
+
+
+def problem_of(scene, t_end: float) -> Problem:
+    """``scene`` run to ``t_end``: exact where its force is constant, else measured against the references."""
+    return Problem(scene.name, scene.description, scene.model, scene.y0, scene.t_start, t_end,
+                   constant_force_solution(scene.model, scene.y0, scene.t_start))
+
+
 def projectile_problem() -> Problem:
     """The lecture's projectile from t = 5 s, integrated for 2 s (constant force: exact)."""
     scene = load_scene("projectile")
-    g = np.asarray(scene.model.constant_acceleration)
-
-    def solution(t):
-        p, v = projectile(t, scene.y0[0], scene.y0[1], g, scene.t_start)
-        return np.stack([p, v])
-
-    return Problem("projectile", "lecture projectile (exact)", scene.model, scene.y0, 5.0, 7.0, solution)
+    return Problem("projectile", "lecture projectile (exact)", scene.model, scene.y0, 5.0, 7.0,
+                   constant_force_solution(scene.model, scene.y0, scene.t_start))
 
 
 def oscillator_problem(damping_ratio: float = 0.0, t_end: float = 1.125) -> Problem:

@@ -24,7 +24,7 @@ def test_the_wheel_holds_only_the_steplab_package(tmp_path):
     assert {t for t in top if not t.endswith(".dist-info")} == {"steplab"}
     for module in ("steplab/physics/model.py", "steplab/integrators/simulate.py", "steplab/studies/runner.py",
                    "steplab/physics/collision/step.py", "steplab/physics/broadphase/bvh.py",
-                   "steplab/physics/scenes/drop.toml", "steplab/cli.py"):
+                   "steplab/physics/scenes/drop.toml", "steplab/cli/__init__.py"):
         assert module in names
     assert not any(name.startswith(("physics/", "integrators/", "studies/", "tests/")) for name in names)
 

@@ -5,7 +5,8 @@
 3. accuracy-matched: time to a final error of 1e-8 m against scipy and diffrax;
 4. broadphase against scipy's cKDTree; 5. compile times; 6. batching with ``jax.vmap``;
 7. collisions: ball pits of 10^3 to 10^5 spheres against MuJoCo and pybullet (:mod:`.collisions`);
-8. implicit Euler's step on the cloth against semi-implicit Euler's (:mod:`.implicit`, issue 16).
+8. implicit Euler's step on the cloth against semi-implicit Euler's (:mod:`.implicit`, issue 16);
+9. start-up: the light commands in fresh processes beside ``import numpy`` (:mod:`.startup`, issue 29).
 
 Each section takes the :class:`.Config`, the :class:`.Record` and a progress callback.
 """
@@ -25,6 +26,7 @@ from .config import COMPILE_TARGET_SECONDS, SEED, Config
 from .implicit import implicit_euler_cloth
 from .profile import compiled_text, loop_kernels
 from .record import Record, final_difference, size_label
+from .startup import startup
 from .systems import cloth_model, particles_model, step_bytes
 
 # --- 1. the small system: one oscillator, 10^5 steps ---------------------------------------------
@@ -393,4 +395,4 @@ def batching(config: Config, record: Record, progress) -> None:
 
 
 SECTIONS = (small_system, large_systems, accuracy_matched, broadphase, compile_times, batching, ball_pits,
-            implicit_euler_cloth)
+            implicit_euler_cloth, startup)

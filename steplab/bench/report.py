@@ -6,6 +6,8 @@ real-time factor (simulated seconds per wall second) and its target.
 
 from __future__ import annotations
 
+from .startup import footer as startup_footer
+
 
 def rows(record: dict) -> list[dict]:
     """One row per comparison, in the order run: name, group, what, peer, medians, ratio, target."""
@@ -131,6 +133,7 @@ def _footer(record: dict) -> list[str]:
     others = {k: v for k, v in record["compile_seconds"].items() if not k.startswith("scene ")}
     if others:
         out.append("JIT compile time, " + ", ".join(f"{k}: {v:.3g} s" for k, v in others.items()))
+    out += startup_footer(record)
     prov = record.get("provenance", {})
     mode = "quick" if record["quick"] else "full"
     out.append(f"ratio = steplab median / peer median (below 1: steplab faster), (min) the same of the "

@@ -40,13 +40,34 @@ class EngineNotInstalledError(ImportError):
 
 
 def require(package: str, engine: str):
-    """Import ``package`` for ``engine``, or EngineNotInstalledError saying how to install it."""
+    """Import ``package`` for ``engine``, or EngineNotInstalledError saying how to install it.
+
+    File descriptors 1 and 2 go to /dev/null during the import: pybullet's C code prints
+    its build time when it loads (on stderr, as of pybullet 3.2), which would land in the
+    middle of a command's output. Python reports a failed import by exception, not there.
+    """
+    import ctypes
+    import importlib
+    import os
+    import sys
+
+    sys.stdout.flush()
+    sys.stderr.flush()
+    saved = [os.dup(fd) for fd in (1, 2)]
     try:
+        with open(os.devnull, "wb") as null:
+            for fd in (1, 2):
+                os.dup2(null.fileno(), fd)
         return importlib.import_module(package)
     except ImportError:
         raise EngineNotInstalledError(
             f"{engine} needs the Python package {package!r}, which is not installed "
             '(pip install -e ".[engines]")') from None
+    finally:
+        ctypes.CDLL(None).fflush(None)  # what C's stdio buffered goes to /dev/null too, not out later
+        for fd, copy in zip((1, 2), saved):
+            os.dup2(copy, fd)
+            os.close(copy)
 
 
 def version(distribution: str) -> str | None:

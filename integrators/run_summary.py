@@ -1,0 +1,40 @@
+"""What a run of a scene says about itself: the summary ``steplab run`` prints and writes as JSON.
+
+Assembled here, beside :func:`~steplab.integrators.simulate`, from the scene, the
+trajectory and the collision world that made it; the command line only prints it. Every
+number carries its unit in its key's documentation: times in s, positions in m,
+velocities in m/s, energies in J, ``wall_time`` in s.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+
+
+def run_summary(scene, integrator, dt: float, traj, world, precision: str, energy_start: float,
+                warnings: list[str]) -> dict:
+    """The summary of ``traj``, a finished run of ``scene`` by ``integrator`` at ``dt`` with collision
+    ``world`` (None: without collisions); ``energy_start`` (J) is the scene's initial energy."""
+    energy_end = float(scene.model.energy(traj.y[-1].astype(float)))
+    return {
+        "scene": scene.name, "integrator": integrator.name, "dt": dt, "steps": traj.steps,
+        "t_start": scene.t_start, "t_end": float(traj.t[-1]), "backend": traj.backend,
+        "precision": precision, "bodies": list(scene.model.names),
+        "final_positions": traj.positions[-1].tolist(), "final_velocities": traj.velocities[-1].tolist(),
+        "energy_start": energy_start, "energy_end": energy_end,
+        "energy_change": energy_end - energy_start,
+        "energy_relative_change": (energy_end - energy_start) / abs(energy_start) if energy_start else None,
+        "wall_time": traj.wall_time, "detector": world.detector if world is not None else "none",
+        "method": world.method if world is not None else None,
+        "solver": dataclasses.asdict(world.solver) if world is not None and world.method == "solver" else None,
+        "collisions": traj.collisions.summary() if traj.collisions is not None else None, "warnings": warnings,
+    }
+
+
+def stopped_summary(scene, integrator, dt: float, world, error, energy_start: float, warnings: list[str],
+                    log=None) -> dict:
+    """The summary of a run stopped by ``error`` at ``error.t`` (s), before a step that held more
+    impacts than the cap; ``log``: the collisions up to there."""
+    return {"scene": scene.name, "integrator": integrator.name, "dt": dt, "detector": world.detector,
+            "error": str(error), "stopped_at": error.t, "warnings": [*warnings, str(error)],
+            "energy_start": energy_start, "collisions": log.summary() if log is not None else None}

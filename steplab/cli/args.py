@@ -1,0 +1,149 @@
+"""Argument types and the argument groups several commands share: time span, contact solver, output."""
+
+from __future__ import annotations
+
+import argparse
+import functools
+import math
+from collections.abc import Callable, Sequence
+from pathlib import Path
+
+from .errors import EXIT_BAD_INPUT
+
+
+class Parser(argparse.ArgumentParser):
+    """argparse, but errors are one line (usage stays in --help)."""
+
+    def error(self, message):
+        self.exit(EXIT_BAD_INPUT, f"{self.prog}: error: {message} (see {self.prog} --help)\n")
+
+
+class Deferred(Sequence):
+    """Choices computed the first time argparse reads them (to check a value or print help),
+    so building the parser imports nothing: the detector names live in the collision package.
+    An argument with them needs a ``metavar``, else argparse reads them to build one."""
+
+    def __init__(self, make: Callable[[], Sequence[str]]):
+        self._make = make
+
+    @functools.cached_property
+    def _items(self) -> tuple[str, ...]:
+        return tuple(self._make())
+
+    def __getitem__(self, index):
+        return self._items[index]
+
+    def __len__(self) -> int:
+        return len(self._items)
+
+
+def _detector_names() -> tuple[str, ...]:
+    from steplab.physics.collision.detectors import DETECTOR_NAMES
+
+    return DETECTOR_NAMES
+
+
+DETECTORS = Deferred(_detector_names)
+
+
+def _collision_method_names() -> tuple[str, ...]:
+    from steplab.physics.collision.methods import COLLISION_METHODS
+
+    return tuple(COLLISION_METHODS)
+
+
+COLLISION_METHODS = Deferred(_collision_method_names)
+
+
+def finite(text: str) -> float:
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"must be a number, got {text!r}") from None
+    if not math.isfinite(value):
+        raise argparse.ArgumentTypeError(f"must be finite, got {text}")
+    return value
+
+
+def positive(text: str) -> float:
+    value = finite(text)
+    if not value > 0:
+        raise argparse.ArgumentTypeError(f"must be > 0, got {text}")
+    return value
+
+
+def count(text: str) -> int:
+    try:
+        value = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"must be a positive integer, got {text!r}") from None
+    if value < 1:
+        raise argparse.ArgumentTypeError(f"must be a positive integer, got {text}")
+    return value
+
+
+def scene_argument(p) -> None:
+    p.add_argument("scene", help="built-in scene name (see `steplab scenes`) or path to a TOML file")
+
+
+def time_arguments(p, dt: bool = True, steps: bool = False) -> None:
+    """--dt, --t-end and (``steps``) --steps, which excludes --t-end."""
+    if dt:
+        p.add_argument("--dt", type=positive, help="time step, s (default: the scene's)")
+    ends = p.add_mutually_exclusive_group() if steps else p
+    ends.add_argument("--t-end", type=finite, help="end time, s (default: the scene's)")
+    if steps:
+        ends.add_argument("--steps", type=count, metavar="N", help="run exactly N steps of dt instead of to --t-end")
+
+
+def time_span(scene, args) -> tuple[float | None, float]:
+    """``(dt, t_end)``: the scene's, with --dt and --t-end applied (dt None where the command has none).
+
+    Raises ValueError, one line, when the run would not reach past the start: t_end not
+    later than t_start, or (with a dt and no --steps) a span that holds no whole step,
+    with what to pass instead.
+    """
+    dt = getattr(args, "dt", None)
+    dt = scene.dt if dt is None and "dt" in vars(args) else dt
+    t_end = scene.t_end if args.t_end is None else args.t_end
+    if not t_end > scene.t_start:
+        raise ValueError(f"--t-end {t_end:g} must be later than the scene's t_start = {scene.t_start:g}")
+    if dt is not None and getattr(args, "steps", None) is None:
+        from steplab.integrators.simulate import step_count
+
+        try:
+            steps = step_count(scene.t_start, t_end, dt)
+        except ValueError:  # too many to count: the run itself says so, with what else is wrong
+            steps = 1
+        if steps < 1:
+            ms = f"; a dt in milliseconds? {dt:g} ms is --dt {dt / 1000:g}" if dt >= 1 else ""
+            raise ValueError(f"dt = {dt:g} s is longer than the run, t_end - t_start = {t_end - scene.t_start:g} s: "
+                             f"pass --t-end {scene.t_start + dt:g} or later, or --steps N{ms}")
+    return dt, t_end
+
+
+def solver_arguments(p) -> None:
+    """Collision handling: --method and the contact solver's --iterations and --substeps."""
+    p.add_argument("--method", choices=COLLISION_METHODS, metavar="NAME",
+                   help="collision handling (event: the lecture's event loop, each impact at its time; "
+                   "solver: the engines' contact solver; default: the scene's)")
+    p.add_argument("--iterations", type=count, metavar="N",
+                   help="contact solver: sweeps per substep (default: the scene's, else 1, Box2D v3's)")
+    p.add_argument("--substeps", type=count, metavar="N",
+                   help="contact solver: substeps per step (default: the scene's, else 4)")
+
+
+def json_argument(p, help: str = "print machine-readable JSON") -> None:
+    p.add_argument("--json", action="store_true", help=help)
+
+
+def study_arguments(p) -> None:
+    """Where a study's records go, and where its tasks run."""
+    p.add_argument("--quick", action="store_true", help="a short version (under a minute, for CI)")
+    p.add_argument("--out", type=Path, default=Path("results"), help="results folder (default: results/)")
+    p.add_argument("--force", action="store_true", help="re-run even if the cached result is current")
+    where = p.add_mutually_exclusive_group()  # on a Dask cluster (studies/distributed.py); default: this process
+    where.add_argument("--workers", type=count, metavar="N", help="run the sweeps' tasks on a local Dask cluster "
+                       "of N worker processes (timing studies run alone afterwards)")
+    where.add_argument("--scheduler", metavar="ADDRESS", help="run them on the Dask cluster whose scheduler is "
+                       "at ADDRESS (e.g. tcp://host:8786; see the README)")

@@ -1,0 +1,87 @@
+"""``steplab recommend``: the cheapest integrator and dt that meet an error tolerance on a scene."""
+
+from __future__ import annotations
+
+import json
+import sys
+
+from .args import DETECTORS, json_argument, positive, scene_argument, time_arguments, time_span
+from .errors import EXIT_DIVERGED
+
+
+def add_parser(sub, name: str) -> None:
+    p = sub.add_parser(name, help="the cheapest integrator and dt that meet an error tolerance")
+    scene_argument(p)
+    p.add_argument("--tol", type=positive, required=True, help="largest final position error, m (with "
+                   "collisions: largest position error over the run)")
+    time_arguments(p, dt=False)
+    p.add_argument("--dt-max", type=positive, metavar="DT",
+                   help="largest dt to consider, s, e.g. a frame, 1/60 (default: a quarter of the run)")
+    p.add_argument("--integrators", metavar="A,B", help="candidates (default: every fixed-step integrator)")
+    p.add_argument("--detector", choices=DETECTORS, metavar="NAME", help="collision detector to measure "
+                   "with, one of %(choices)s (default: the scene's; none: without collisions)")
+    json_argument(p)
+
+
+def command(args) -> int:
+    from steplab.physics.scene import load_scene
+    from steplab.studies.problems import problem_of
+    from steplab.studies.recommend import recommend
+
+    from .run import collision_world
+
+    scene = load_scene(args.scene)
+    _, t_end = time_span(scene, args)
+    integrators = None
+    if args.integrators is not None:
+        from steplab.studies.recommend_collisions import check_integrators
+
+        integrators = check_integrators(n.strip() for n in args.integrators.split(","))
+        if not integrators:
+            raise ValueError("--integrators: give at least one fixed-step integrator")
+    world = collision_world(scene, args.detector, "numpy")
+    if world is not None:
+        return _with_collisions(args, scene, t_end, world, integrators)
+    result = recommend(problem_of(scene, t_end), args.tol, dt_max=args.dt_max, integrators=integrators)
+    if args.json:
+        print(json.dumps(result, indent=2))
+        return 0
+    if result["dt"] is None:
+        print(f"{result['note']}; {result['integrator']} does at rtol = {result['rtol']:g}: error "
+              f"{result['error']:.3g} m in {result['seconds'] * 1e3:.3g} ms")
+    else:
+        print(f"{scene.name}: {result['integrator']} with dt = {result['dt']:.6g} s ({result['steps']} steps) "
+              f"reaches error {result['error']:.3g} m <= {args.tol:g} m in {result['seconds'] * 1e3:.3g} ms "
+              "(compiled, median)")
+    return 0
+
+
+def _with_collisions(args, scene, t_end, world, integrators) -> int:
+    """``recommend`` measured with the scene's collisions; status 1 with the evidence when nothing passes."""
+    from steplab.studies.recommend_collisions import NoCollisionStepError, recommend_with_collisions
+
+    from .run import plural
+
+    try:
+        r = recommend_with_collisions(scene.model, scene.y0, scene.t_start, t_end, world, args.tol,
+                                      scene_dt=scene.dt, dt_max=args.dt_max, integrators=integrators,
+                                      progress=not args.json and sys.stderr.isatty())
+    except NoCollisionStepError as err:
+        if not args.json:
+            raise
+        print(json.dumps(err.evidence | {"error": str(err)}, indent=2))
+        return EXIT_DIVERGED
+    if args.json:
+        print(json.dumps(r, indent=2))
+        return 0
+    ref = r["reference"]
+    measured = (f"largest position error {r['error']:.3g} m <= {args.tol:g} m" if r["regime"] == "trajectories"
+                else f"energy error {100 * r['energy_error']:.3g} %, largest penetration {r['penetration']:.3g} m")
+    print(f"{scene.name}: {r['integrator']} with dt = {r['dt']:.6g} s ({r['steps']} steps), {r['detector']} "
+          f"detector: {measured}, {plural(r['impacts'], 'impact')} (reference: {ref['impacts']}), "
+          f"{r['seconds'] * 1e3:.3g} ms (NumPy event loop, median)")
+    print(f"  reference: {ref['integrator']} at dt = {ref['dt']:.3g} s, converged to {ref['convergence']:.3g} m "
+          f"against dt = {2 * ref['dt']:.3g} s ({plural(ref['impacts_at_2dt'], 'impact')} there)")
+    if "note" in r:
+        print(f"  note: {r['note']}")
+    return 0

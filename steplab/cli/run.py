@@ -1,0 +1,194 @@
+"""``steplab run``: simulate a scene, print its summary (or JSON), write its trajectory."""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+import sys
+from pathlib import Path
+
+from .args import DETECTORS, count, json_argument, scene_argument, solver_arguments, time_arguments, time_span
+from .errors import EXIT_DIVERGED, fail
+
+
+def add_parser(sub, name: str) -> None:
+    p = sub.add_parser(name, help="simulate a scene and write its trajectory")
+    scene_argument(p)
+    p.add_argument("--integrator", help="integrator name, or package.module:Name (default: the scene's)")
+    time_arguments(p, steps=True)
+    p.add_argument("--backend", choices=("numpy", "jax"), default="numpy",
+                   help="numpy: step by step; jax: compiled loop (default: numpy)")
+    p.add_argument("--precision", choices=("float64", "float32"), default="float64",
+                   help="floating-point precision (default: float64)")
+    p.add_argument("--save-every", type=count, default=1, metavar="K",
+                   help="keep every K-th state in the trajectory (default: 1)")
+    p.add_argument("--max-steps", type=count, default=None, metavar="N",
+                   help="refuse runs of more than N steps (default: 10,000,000)")
+    p.add_argument("--out", type=Path, help="write the trajectory to FILE.npz or FILE.csv (and the "
+                   "collisions, if any, to FILE.collisions.csv)")
+    p.add_argument("--detector", choices=DETECTORS, metavar="NAME",
+                   help="collision detection, one of %(choices)s (overlap: overlap testing with bisection; swept: "
+                   "intersection testing; default: the scene's [collisions], else none)")
+    solver_arguments(p)
+    json_argument(p, "print the summary as JSON")
+
+
+def command(args) -> int:
+    import numpy as np
+
+    from steplab.integrators.run_summary import run_summary, stopped_summary
+    from steplab.integrators.simulate import MAX_STEPS, simulate
+    from steplab.integrators.stable_dt import dt_warning
+    from steplab.io import check_trajectory_path, save_trajectory
+    from steplab.physics.scene import load_scene
+
+    if args.out is not None:
+        check_trajectory_path(args.out)  # before the run, not after it
+    scene = load_scene(args.scene)
+    integrator = integrator_named(args.integrator or scene.integrator)
+    dt, t_end = time_span(scene, args)
+    world = with_method(collision_world(scene, args.detector, args.backend), args)
+    warning = dt_warning(scene.model, scene.y0[0], integrator, dt)  # before the run: it may be long
+    if warning is not None:
+        print(f"steplab run: warning: {warning}", file=sys.stderr)
+    run_warnings = [] if warning is None else [warning]
+    end = {"n_steps": args.steps} if args.steps is not None else {"t_end": t_end}
+    kept = []  # the run's collision step, whose log tells what happened before a stop
+    energy_start = float(scene.model.energy(scene.y0))
+    try:
+        traj = simulate(scene.model, integrator, scene.y0, scene.t_start, dt=dt, **end, backend=args.backend,
+                        dtype=np.dtype(args.precision), save_every=args.save_every,
+                        max_steps=args.max_steps or MAX_STEPS, progress=not args.json and sys.stderr.isatty(),
+                        stepper=None if world is None else _keeping(world.stepper, kept))
+    except Exception as err:
+        if world is None:
+            raise
+        from steplab.physics.collision import ImpactCapError  # loaded already: the world made the run
+
+        if not isinstance(err, ImpactCapError):
+            raise
+        if args.json:  # stopped, never dropped: one line, status 1 (and the record)
+            print(json.dumps(stopped_summary(scene, integrator, dt, world, err, energy_start, run_warnings,
+                                             kept[0].log if kept else None), indent=2))
+        return fail(args.command, str(err), EXIT_DIVERGED)
+    summary = run_summary(scene, integrator, dt, traj, world, args.precision, energy_start, run_warnings)
+    if args.out is not None:
+        save_trajectory(args.out, traj, scene.model, {k: summary[k] for k in (
+            "scene", "integrator", "dt", "steps", "t_start", "t_end", "backend", "precision", "detector",
+            "collisions")})
+        summary["out"] = str(args.out)
+        if traj.collisions is not None:
+            from steplab.core.records import write_atomic
+
+            path = args.out.with_name(args.out.stem + ".collisions.csv")
+            write_atomic(path, traj.collisions.to_csv().encode())
+            summary["collisions_out"] = str(path)
+    if args.json:
+        print(json.dumps(summary, indent=2))
+    else:
+        print_summary(summary)
+    return 0
+
+
+def integrator_named(name: str):
+    """The integrator ``name`` (see ``get_integrator``); ``path/file.py:Name`` is the module
+    ``file``, imported from the file's folder, as the natural spelling of a file of one's own."""
+    from steplab.integrators import UnknownIntegratorError, get_integrator
+
+    module, colon, attribute = name.partition(":")
+    if colon and module.endswith(".py"):
+        path = Path(module)
+        if not path.is_file():
+            raise UnknownIntegratorError(f"integrator {name!r}: no file {module} here; name a module as "
+                                         f"package.module:Name, without .py")
+        if str(path.resolve().parent) not in sys.path:
+            sys.path.append(str(path.resolve().parent))
+        name = f"{path.stem}:{attribute}"
+    return get_integrator(name)
+
+
+def _keeping(make_step, kept: list):
+    """``make_step`` (a stepper factory for ``simulate``) that also appends the step it builds to ``kept``."""
+    def stepper(model, integrator):
+        step = make_step(model, integrator)
+        kept.append(step)
+        return step
+
+    return stepper
+
+
+def with_method(world, args):
+    """``world`` with the run's --method, --iterations and --substeps applied."""
+    if world is None:
+        if args.method or args.iterations or args.substeps:
+            raise ValueError("--method, --iterations and --substeps need a scene with collisions (or --detector)")
+        return None
+    method = args.method or world.method
+    if method != "solver" and (args.iterations or args.substeps):
+        raise ValueError("--iterations and --substeps set the contact solver: add --method solver")
+    changes = {k: getattr(args, k) for k in ("iterations", "substeps") if getattr(args, k)}
+    return dataclasses.replace(world, method=method, solver=dataclasses.replace(world.solver, **changes))
+
+
+def collision_world(scene, detector, backend):
+    """The scene's collision world with ``detector`` (None: the scene's) applied, or None for no collisions."""
+    world = scene.collisions
+    if detector is not None:
+        if world is None and detector != "none":
+            from steplab.physics.collision import CollisionWorld
+
+            world = CollisionWorld(detector=detector)  # bodies against each other, eps = 1
+        elif world is not None:
+            world = world.with_detector(detector)
+    if world is None or world.detector == "none":
+        return None
+    if backend != "numpy":
+        raise ValueError(f"scene {scene.name!r} has collisions ({world.detector} detector), which run on the "
+                         f"NumPy backend only; use --backend numpy, or --detector none")
+    return world
+
+
+def print_summary(s: dict) -> None:
+    steps = plural(s["steps"], "step") if s["steps"] else "reference solve"
+    print(f"{s['scene']}: {s['integrator']}, dt = {s['dt']:g} s, {steps}, "
+          f"t = {s['t_start']:g} -> {s['t_end']:g} s ({s['backend']}, {s['precision']})")
+    shown = list(zip(s["bodies"], s["final_positions"], s["final_velocities"]))
+    print(f"  {'body':<14} {'position (m)':>36}   {'velocity (m/s)':>36}")
+    for name, p, v in shown[:8]:
+        print(f"  {name:<14} {_vec(p):>36}   {_vec(v):>36}")
+    if len(shown) > 8:
+        print(f"  ... and {len(shown) - 8} more bodies")
+    change = s["energy_change"]
+    rel = f" ({100 * change / abs(s['energy_start']):+.3g} %)" if s["energy_start"] else ""
+    print(f"  energy: {s['energy_start']:.6g} J -> {s['energy_end']:.6g} J, change {change:+.4g} J{rel}")
+    if s.get("collisions") is not None:
+        c = s["collisions"]
+        extra = "".join(f", {c[k]} {label}" for k, label in (("triggers", "trigger entries"),
+                                                            ("cancelled", "cancelled")) if c[k])
+        if s.get("method") == "solver":
+            from steplab.physics.collision.solver_settings import ContactSolver
+
+            print(f"  collisions (contact solver, {ContactSolver(**s['solver']).describe()}): "
+                  f"{plural(c['impacts'], 'impact')}{extra}, at most {c['most_impacts_in_a_step']} in one step")
+            print(f"  largest residual: {c['largest_residual']:.3g} m/s (the worst contact's complementarity "
+                  "residual after a step's last sweep: 0 when converged, lowered by --iterations; a large one "
+                  "costs energy at the contacts, not penetration)")
+        else:
+            # the most resolved in one step counts impacts and resting-contact corrections together
+            print(f"  collisions ({s['detector']}): {plural(c['impacts'], 'impact')}{extra}, "
+                  f"{plural(c['resting_corrections'], 'resting-contact correction')}, "
+                  f"at most {c['most_impacts_in_a_step']} of them in one step")
+    print(f"  wall time: {s['wall_time'] * 1e3:.3g} ms")
+    if "out" in s:
+        print(f"  trajectory written to {s['out']}")
+    if "collisions_out" in s:
+        print(f"  collisions written to {s['collisions_out']}")
+
+
+def plural(n: int, noun: str) -> str:
+    """``1 impact``, ``2 impacts``, ``0 impacts``."""
+    return f"{n} {noun}{'' if n == 1 else 's'}"
+
+
+def _vec(v) -> str:
+    return "(" + ", ".join(f"{x:10.5g}" for x in v) + ")"
