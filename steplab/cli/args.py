@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import argparse
-import functools
 import math
 from collections.abc import Callable, Sequence
 from pathlib import Path
@@ -26,8 +25,8 @@ class Deferred(Sequence):
     def __init__(self, make: Callable[[], Sequence[str]]):
         self._make = make
 
-    @functools.cached_property
-    def _items(self) -> tuple[str, ...]:
+    @property
+    def _items(self) -> tuple[str, ...]:  # read anew each time: a plugin may register a name later
         return tuple(self._make())
 
     def __getitem__(self, index):
