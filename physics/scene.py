@@ -60,8 +60,11 @@ def builtin_scenes() -> list[str]:
     return sorted(SCENES)
 
 
-def load_scene(scene: str | Path) -> Scene:
-    """Load a scene by name (steplab's or a plugin's) or by path to a TOML file."""
+def load_scene(scene: str | Path, collisions: bool = True) -> Scene:
+    """Load a scene by name (steplab's or a plugin's) or by path to a TOML file.
+
+    ``collisions=False`` leaves its [collisions] table unread (``Scene.collisions`` None): what
+    a listing of scenes needs, without importing the compiled collision kernels."""
     path = Path(scene)
     if str(scene) in SCENES:
         text = SCENES[str(scene)].read_bytes()
@@ -79,14 +82,14 @@ def load_scene(scene: str | Path) -> Scene:
                          f"{', '.join(builtin_scenes())}")
     # a file name that is not UTF-8 (surrogate escapes) must still print as a scene name
     name = path.stem.encode("utf-8", "surrogateescape").decode("utf-8", "backslashreplace")
-    return parse_scene(text, label, name=name)
+    return parse_scene(text, label, name=name, collisions=collisions)
 
 
-def parse_scene(text: bytes | str, label: str = "<scene>", name: str = "scene") -> Scene:
-    """Build a scene from TOML text; ``label`` names it in error messages."""
+def parse_scene(text: bytes | str, label: str = "<scene>", name: str = "scene", collisions: bool = True) -> Scene:
+    """Build a scene from TOML text; ``label`` names it in error messages (``collisions``: see load_scene)."""
     data = read_toml(text, label)
     with np.errstate(all="ignore"):  # every derived number is checked; no warnings on stderr
-        return _SceneBuilder(label).build(data, name)
+        return _SceneBuilder(label).build(data, name, collisions)
 
 
 @dataclasses.dataclass(frozen=True)
@@ -159,7 +162,7 @@ class _SceneBuilder:
         self.materials: list[str] = []
         self.rotating: list[tuple] = []  # (body index, shape, inertia, orientation, angular velocity)
 
-    def build(self, data, name: str) -> Scene:
+    def build(self, data, name: str, collisions: bool = True) -> Scene:
         root = Table(data, "", self.label)
         root.allow("name", "description", "simulation", "bodies", "soft_bodies", "particles", "forces",
                    "collisions")
@@ -193,7 +196,7 @@ class _SceneBuilder:
         model = Model(np.array(self.masses), np.array(self.radii), self.forces,
                       pinned=np.array(self.pinned), names=self.names)
         y0 = np.stack([np.array(self.positions), np.array(self.velocities)])
-        table = root.table("collisions")
+        table = root.table("collisions") if collisions else None
         collisions = self.add_collisions(table) if table is not None else None
         return Scene(root.string("name", name), model, y0, integrator, dt, t_start, t_end,
                      root.string("description", ""), collisions, self.rigid_bodies(), rotation)

@@ -9,6 +9,7 @@ from __future__ import annotations
 import json
 import subprocess
 import sys
+from pathlib import Path
 
 import pytest
 
@@ -31,7 +32,7 @@ def heavy(modules: list[str]) -> list[str]:
     return [m for m in modules if any(m == h or m.startswith(h + ".") for h in HEAVY)]
 
 
-@pytest.mark.parametrize("argv", [["run", "projectile"], ["integrators"], ["--help"]])
+@pytest.mark.parametrize("argv", [["run", "projectile"], ["integrators"], ["scenes"], ["--help"]])
 def test_light_commands_import_nothing_heavy(argv):
     code = f"from steplab.cli import main\ntry:\n    main({argv!r})\nexcept SystemExit:\n    pass"
     modules = loaded_after(code)
@@ -64,3 +65,11 @@ def test_the_public_names_are_there_on_first_use():
     assert steplab.load_scene("projectile").name == "projectile"
     with pytest.raises(AttributeError, match="has no attribute 'nope'"):
         physics.nope  # noqa: B018
+
+
+def test_a_listing_piped_into_head_ends_quietly(tmp_path):
+    """``steplab scenes | head -1``: the closed pipe ends the command with status 0 and no error line."""
+    script = Path(sys.executable).parent / "steplab"
+    done = subprocess.run(f"'{script}' scenes | head -1; exit ${{PIPESTATUS[0]}}", shell=True, executable="/bin/bash",
+                          cwd=tmp_path, capture_output=True, text=True)
+    assert done.returncode == 0 and done.stderr == "" and done.stdout.startswith("name")

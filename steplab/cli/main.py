@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import importlib
+import os
 import sys
 import warnings
 from pathlib import Path
@@ -62,6 +63,9 @@ def _run_command(args) -> int:
         sys.path.append(str(Path.cwd()))
     try:
         return _module(args.command).command(args) or 0
+    except BrokenPipeError:  # `steplab scenes | head`: the reader has what it wanted
+        os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())  # no second error at exit's flush
+        return 0
     except OSError as err:  # an unwritable --out or results folder, a full disk
         where = f"{err.filename}: " if err.filename else ""
         return fail(args.command, f"{where}{err.strerror or err}", EXIT_BAD_INPUT)
