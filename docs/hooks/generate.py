@@ -104,6 +104,8 @@ def integrators_markdown() -> tuple[str, str]:
         rows.append([f"[`{name}`](#{name})", d["kind"], cell(d["order"]), cell(evaluations),
                      cell(d["symplectic"]), cell(d["implicit"]), note or "-"])
         doc = inspect.cleandoc(type(method).__doc__ or d["description"])
+        # a numpydoc section ("Parameters" over dashes) would read as a Markdown heading
+        doc = re.sub(r"^(\w[\w ]*)\n-{3,}$", r"**\1**", doc, flags=re.M)
         text = f"### `{name}` {{#{name}}}\n\n`{type(method).__module__}.{type(method).__name__}`"
         text += f" (from {INTEGRATORS.origin(name)})\n\n{doc}\n\n"
         if note:
