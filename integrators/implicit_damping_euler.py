@@ -33,7 +33,7 @@ class ImplicitDampingEuler(Stepper):
     symplectic = True
     #: linearly implicit: one solve with the damping Jacobian, no Newton iteration
     implicit = True
-    style = ("tab:olive", "h")
+    style = ("tab:gray", "h")
     stability_note = "2 undamped; 2 sqrt(1 + zeta^2) + 2 zeta damped"
 
     def step(self, model, t, y, dt, carry):

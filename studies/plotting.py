@@ -17,9 +17,10 @@ from steplab.integrators import UnknownIntegratorError, get_integrator  # noqa: 
 from .records import write_atomic  # noqa: E402
 
 #: colours and markers for a method that states no ``style`` (a plugin, a test stepper):
-#: the ones steplab's own methods leave free, picked by a stable checksum of the name
-#: (not Python's hash(), which is salted per process), so a figure is the same every run
-SPARE_COLOURS = ("tab:gray", "tab:cyan", "black", "darkgoldenrod", "navy", "crimson", "teal")
+#: ones steplab's own methods (tab10 and black, one each) leave free, picked by a stable
+#: checksum of the name (not Python's hash(), which is salted per process), so a figure is the
+#: same every run
+SPARE_COLOURS = ("darkgoldenrod", "navy", "crimson", "teal", "lime", "magenta", "sienna")
 SPARE_MARKERS = ("h", "p", "d", "<", ">", "8", "H")
 
 
@@ -38,6 +39,11 @@ def style(name: str) -> dict:
         colour_marker = colour, SPARE_MARKERS[k // len(SPARE_COLOURS) % len(SPARE_MARKERS)]
     colour, marker = colour_marker
     return {"color": colour, "marker": marker, "label": name}
+
+
+def colour(name: str) -> str:
+    """Method ``name``'s colour as ``#rrggbb``: the one matplotlib draws it in, for the Plotly pages."""
+    return matplotlib.colors.to_hex(style(name)["color"])
 
 
 def save_figure(fig, out: Path, stem: str) -> list[str]:

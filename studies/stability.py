@@ -213,7 +213,7 @@ def plot(record: dict, out) -> list[str]:
     plt = plotting.plt
     figures = []
 
-    fig, ax = plt.subplots(figsize=(7.5, 6.5))
+    fig, ax = plt.subplots(figsize=(10, 6.5))
     x, y = np.meshgrid(np.linspace(-4.5, 2.5, 400), np.linspace(-3.5, 3.5, 400))
     z = x + 1j * y  # the grid avoids z = 1, the pole of implicit Euler's R
     for methods in stability_regions(record["parameters"]["integrators"]):
@@ -251,7 +251,8 @@ def plot(record: dict, out) -> list[str]:
     ax.set_ylim(-3.5, 3.5)
     ax.set_title("Stability regions |R(z)| <= 1 (shaded) and measured limits\n"
                  "markers: largest stable omega dt on the oscillator, undamped (imaginary axis) and damped")
-    ax.legend(fontsize=7, loc="lower left", ncol=2)
+    # beside the axes: inside, it covered RK4's contour
+    ax.legend(fontsize=7, loc="upper left", bbox_to_anchor=(1.02, 1.0), borderaxespad=0)
     figures += plotting.save_figure(fig, out, "stability_regions")
 
     fig, axes = plt.subplots(1, 2, figsize=(13, 5), sharey=True)
