@@ -33,6 +33,9 @@ def results_folder() -> Path:
 
 #: the folders that install under the ``steplab`` name (pyproject.toml's package-dir)
 INSTALLED_AS_STEPLAB = ("physics", "integrators", "studies")
+#: a reference page's line ``<!-- api: steplab.physics -->`` becomes the package and each of its
+#: modules, found in its folder (so a new module is documented the moment it is written)
+API_MARK = re.compile(r"^<!-- api: ([\w.]+) -->$", re.M)
 
 
 @event_priority(100)  # before mkdocstrings reads its handler's options
@@ -76,6 +79,7 @@ def on_files(files, config):
 
 
 def on_page_markdown(markdown, page, config, files):
+    markdown = API_MARK.sub(lambda m: api_markdown(m.group(1)), markdown)
     if REGISTRY_TABLE in markdown:
         table, theory = integrators_markdown()
         markdown = markdown.replace(REGISTRY_TABLE, table).replace(REGISTRY_THEORY, theory)
@@ -83,6 +87,24 @@ def on_page_markdown(markdown, page, config, files):
         # pandoc's citations [@key] as plain text: the site has no bibliography processor
         markdown = re.sub(r"\[@([\w:-]+)\]", r"(\1)", markdown)
     return markdown
+
+
+def package_folder(package: str) -> Path:
+    """The source folder of an installed package name (steplab.physics -> physics/)."""
+    parts = package.split(".")
+    if len(parts) > 1 and parts[1] in INSTALLED_AS_STEPLAB:
+        return ROOT.joinpath(*parts[1:])
+    return ROOT.joinpath(*parts)
+
+
+def api_markdown(package: str) -> str:
+    """mkdocstrings blocks for ``package`` and each of its public modules (not its subpackages,
+    which have pages of their own)."""
+    modules = sorted(p.stem for p in package_folder(package).glob("*.py") if not p.name.startswith("_"))
+    blocks = [f"::: {package}\n    options:\n      show_root_heading: false\n"]
+    blocks += [f"## `{package}.{name}`\n\n::: {package}.{name}\n    options:\n      show_root_heading: false\n"
+               for name in modules]
+    return "\n".join(blocks)
 
 
 def integrators_markdown() -> tuple[str, str]:
