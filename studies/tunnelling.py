@@ -368,11 +368,14 @@ def plot(record: dict, out) -> list[str]:
     # below the axes, in two columns: inside, it would cover the measured points
     ax.legend(fontsize=7, loc="upper center", bbox_to_anchor=(0.5, -0.13), ncol=2, frameon=False)
     ax.grid(True, which="major", alpha=0.3)
-    # each label up the left side of its line, inside the axes, above the measured points there
-    for x, text in ((2.0 ** (lecture - 1), "2^(k-1): bracket v dt / 2^k reaches the middle"),
-                    (2.0**lecture, "2^k: as if no bisection")):
+    # each line tagged at the top, what it marks said in the empty lower left (the data falls
+    # from the top left to the lower right, so labels there would cover points or leave the axes)
+    for x, tag in ((2.0 ** (lecture - 1), "2^(k-1)"), (2.0**lecture, "2^k")):
         stop.axvline(x, color="gray", ls="--", lw=0.8)
-        stop.text(x / 1.04, 1.0, text, color="gray", fontsize=7, va="top", ha="right", rotation=90)
+        stop.text(x / 1.04, 1.3, tag, color="gray", fontsize=7, va="top", ha="right")
+    stop.text(0.03, 0.03, "dashed lines, v dt / (w + 2r) =\n2^(k-1): the bracket v dt / 2^k reaches the wall's "
+              "middle\n2^k: every shot as if without bisection", transform=stop.transAxes, color="gray",
+              fontsize=7, va="bottom", ha="left")
     stop.set_xlim(0.3, max(params["ratios"]) * 1.1)
     stop.set_ylim(min(0.5 / params["trials"], 0.25 / max(params["ratios"])), 1.5)
     stop.set_xlabel("v dt / (w + 2r)")
