@@ -199,15 +199,16 @@ def _quoted(name: str, value_of, template: Path) -> str:
     return markdown_table(["record path", "value", "where the paper quotes it"], rows) if rows else ""
 
 
-def errata_page(studies: list) -> str:
-    text = "# Errata: the lecture's errors\n\n" + _nav("errata.html")
+def errata_page(studies: list, suffix: str = ".html") -> str:
+    """The lecture's errors the studies' records list; ``suffix`` as for :func:`index_page`."""
+    text = "# Errata: the lecture's errors\n\n" + (_nav("errata.html") if suffix == ".html" else "")
     text += "What the studies found wrong in the lecture, each with the evidence steplab computed.\n\n"
     found = False
     for study, record in studies:
         for table in study.tables:
             if table.name in ERRATA_TABLES:
                 found = True
-                text += f"## [{study.name}]({study.name}.html): {table.name.replace('_', ' ')}\n\n"
+                text += f"## [{study.name}]({study.name}{suffix}): {table.name.replace('_', ' ')}\n\n"
                 text += _draw(table, record) + "\n\n"
     if not found:
         text += "None of the studies in this results folder checks the lecture (truncation, restitution " \
@@ -215,8 +216,8 @@ def errata_page(studies: list) -> str:
     return text
 
 
-def bench_page(bench: dict) -> str:
-    text = "# Bench: steplab against its peers\n\n" + _nav("") + _draw(BENCH_TABLE, bench) + "\n\n"
+def bench_page(bench: dict, nav: bool = True) -> str:
+    text = "# Bench: steplab against its peers\n\n" + (_nav("") if nav else "") + _draw(BENCH_TABLE, bench) + "\n\n"
     engines = collision_markdown(bench)
     if engines:
         text += "## The engines: ball pits against MuJoCo and pybullet\n" + "\n".join(engines) + "\n\n"
@@ -280,9 +281,9 @@ def docs_pages(results: Path | None, paper: Path = PAPER) -> dict[str, bytes]:
         pages[f"{study.name}.md"] = study_page(study, record, results, nav=False)
         for figure in _pngs(record):
             pages[f"{FIGURES}/{figure}"] = (Path(results) / figure).read_bytes()
-    pages["errata.md"] = errata_page(studies).replace(_nav("errata.html"), "").replace(".html)", ".md)")
+    pages["errata.md"] = errata_page(studies, suffix=".md")
     bench = records.get("bench")
-    pages["bench.md"] = (bench_page(bench).replace(_nav(""), "") if bench is not None else
+    pages["bench.md"] = (bench_page(bench, nav=False) if bench is not None else
                          "# Bench: steplab against its peers\n\nThis results folder has no `bench.json`: "
                          "`steplab bench --json results/bench.json` writes it.\n")
     missing = [s.name for s in STUDIES.values() if s.name not in records]
