@@ -36,6 +36,10 @@ INSTALLED_AS_STEPLAB = ("physics", "integrators", "studies")
 #: a reference page's line ``<!-- api: steplab.physics -->`` becomes the package and each of its
 #: modules, found in its folder (so a new module is documented the moment it is written)
 API_MARK = re.compile(r"^<!-- api: ([\w.]+) -->$", re.M)
+#: the pages read in place from elsewhere in the repository, whose links may name files the
+#: site does not have (a test file, pyproject.toml): those links become the path as code
+READ_IN_PLACE = ("contributing.md", "paper/paper.md", "paper/tutorial.md")
+LINK = re.compile(r"(?<!!)\[([^\]]+)\]\(([^)\s]+)\)")
 
 
 @event_priority(100)  # before mkdocstrings reads its handler's options
@@ -83,10 +87,27 @@ def on_page_markdown(markdown, page, config, files):
     if REGISTRY_TABLE in markdown:
         table, theory = integrators_markdown()
         markdown = markdown.replace(REGISTRY_TABLE, table).replace(REGISTRY_THEORY, theory)
+    if page.file.src_uri in READ_IN_PLACE:
+        markdown = LINK.sub(lambda m: _link_or_path(m, page.file.src_uri, files), markdown)
     if page.file.src_uri == "paper/paper.md":
         # pandoc's citations [@key] as plain text: the site has no bibliography processor
         markdown = re.sub(r"\[@([\w:-]+)\]", r"(\1)", markdown)
     return markdown
+
+
+def _link_or_path(match, page: str, files) -> str:
+    # the link as its file in the repository meant it: relative to where the file lives (the root
+    # for CONTRIBUTING.md), a docs/ page by its place in the site; the site mirrors paper/
+    text, target = match.groups()
+    if re.match(r"[a-z]+:|#", target):  # a web address, an anchor on the page
+        return match.group(0)
+    home = "" if page == "contributing.md" else os.path.dirname(page)
+    path, _, anchor = target.partition("#")
+    path = os.path.normpath(os.path.join(home, path)).replace(os.sep, "/").removeprefix("docs/")
+    if files.get_file_from_path(path) is None:
+        return f"{text} (`{target}`)"
+    relative = os.path.relpath(path, os.path.dirname(page) or ".").replace(os.sep, "/")
+    return f"[{text}]({relative}{'#' + anchor if anchor else ''})"
 
 
 def package_folder(package: str) -> Path:
