@@ -227,7 +227,9 @@ def plot(record: dict, out) -> list[str]:
         ax.contour(x, y, r, levels=[1], colors=[colour], linewidths=1.5)
         label = f"|R(z)| = 1: {name}" + (" (stable outside)" if outside else "")
         ax.plot([], [], color=colour, lw=2, label=label)
-    # measured thresholds: on the imaginary axis (undamped) and on the damped ray
+    # measured thresholds: on the imaginary axis (undamped) and on the damped ray; each method
+    # named once, where it first appears (a method unstable undamped has only its damped marker)
+    named = set()
     for zeta, result in record["by_damping_ratio"].items():
         mu = complex(-float(zeta), np.sqrt(1 - float(zeta) ** 2))
         for method, value in result["measured"].items():
@@ -237,7 +239,8 @@ def plot(record: dict, out) -> list[str]:
             style = plotting.style(method)
             ax.plot(point.real, point.imag, linestyle="none", ms=8, mfc="none", mew=1.5,
                     color=style["color"], marker=style["marker"],
-                    label=f"measured {method}" if zeta == "0" else None)
+                    label=None if method in named else f"measured {method}")
+            named.add(method)
     ax.axhline(0, color="k", lw=0.5)
     ax.axvline(0, color="k", lw=0.5)
     for zeta in record["by_damping_ratio"]:
