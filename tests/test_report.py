@@ -155,8 +155,7 @@ def test_every_method_has_its_own_colour_and_keeps_it_on_the_plotly_pages(site, 
     from steplab.integrators import INTEGRATORS
     from steplab.studies.plotting import colour
 
-    fixed_step = [name for name, method in INTEGRATORS.items() if method.kind == "fixed-step"]
-    colours = {name: colour(name) for name in fixed_step}
+    colours = {name: colour(name) for name in INTEGRATORS}  # fixed-step methods, references, exact
     assert len(set(colours.values())) == len(colours), f"methods sharing a colour: {colours}"
     # the zoomable error-against-dt page draws each method in its static figures' colour
     record = json.loads((results / "truncation.json").read_text())
