@@ -21,8 +21,8 @@ from .records import write_atomic  # noqa: E402
 #: takes the next in registry order, so no two share one; any other name (a reference drawn under
 #: a name of its own) one of those left, by a stable checksum of the name (not Python's hash(),
 #: which is salted per process), so a figure is the same every run
-SPARE_COLOURS = ("darkgoldenrod", "navy", "crimson", "teal", "indigo", "magenta", "sienna", "deeppink",
-                 "slateblue", "olivedrab")
+SPARE_COLOURS = ("darkgoldenrod", "navy", "crimson", "teal", "magenta", "gold", "darkslategray", "sienna",
+                 "deepskyblue", "olivedrab")
 SPARE_MARKERS = ("h", "p", "d", "<", ">", "8", "H")
 
 
