@@ -109,9 +109,15 @@ def site(tmp_path_factory):
 
 
 def test_the_site_builds_strictly_with_a_page_per_study(site):
+    from steplab.integrators import INTEGRATORS
+
     for name in STUDIES:
         assert (site / DOCS_STUDIES / f"{name}.html").is_file()
     assert "restitution" in (site / "search" / "search_index.json").read_text()
+    # the integrators page is the registry's: a section per method, RK4's tableau (b = 1/6, 1/3, ...)
+    page = (site / "integrators.html").read_text()
+    assert all(f'id="{name}"' in page for name in INTEGRATORS)
+    assert "<td>b</td>\n<td>0.166667</td>\n<td>0.333333</td>" in page
 
 
 @pytest.fixture(scope="module")
