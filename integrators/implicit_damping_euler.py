@@ -34,7 +34,7 @@ class ImplicitDampingEuler(Stepper):
     #: linearly implicit: one solve with the damping Jacobian, no Newton iteration
     implicit = True
     scheme = "linearly implicit"
-    style = ("tab:olive", "h")
+    style = ("tab:gray", "h")
     stability_note = "2 undamped; 2 sqrt(1 + zeta^2) + 2 zeta damped"
 
     def step(self, model, t, y, dt, carry):

@@ -57,7 +57,7 @@ class ExponentialDampingEuler(Stepper):
     #: it needs the damping Jacobian and its matrix exponential, as an implicit method its solve
     implicit = True
     scheme = "exponential"
-    style = ("tab:pink", "8")
+    style = ("black", "8")
     stability_note = "2 undamped; the root of (omega dt)^2 = 2 (1 + exp(2 zeta omega dt)) damped"
 
     def step(self, model, t, y, dt, carry):

@@ -82,6 +82,16 @@ class ExplicitRungeKutta(Stepper):
 
     tableau: ClassVar[ButcherTableau]
 
+    def __new__(cls, *args, **kwargs):
+        # a method is a class whose class data is its tableau, not an instance given one: say so
+        # to whoever writes the natural ExplicitRungeKutta(tableau=t)
+        fields = [f.name for f in dataclasses.fields(cls)] if dataclasses.is_dataclass(cls) else []
+        if len(args) > len(fields) or set(kwargs) - set(fields):
+            raise TypeError(f"{cls.__name__}() takes no tableau: a Runge-Kutta method is a subclass with "
+                            "the tableau as class data, `class MyMethod(ExplicitRungeKutta): name = 'my-method'; "
+                            "order = 2; evaluations = 2; tableau = ButcherTableau(...)`, then MyMethod()")
+        return super().__new__(cls)
+
     def step(self, model, t, y, dt, carry):
         return rk_step(model.vector_field, t, y, dt, self.tableau), carry
 

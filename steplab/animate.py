@@ -26,8 +26,13 @@ MIN_DRAWN_RADIUS = 0.012
 #: panel's own (a run that diverged to 1e30 m): then the window is capped, and a body outside
 #: it is drawn on the edge, in red
 MAX_SHARED_ZOOM = 1000.0
-#: pixels per inch of the written frames (the figure is 5.2 x 6.4 inches per panel)
+#: pixels per inch of the written frames
 DPI = 100
+#: inches: a scene panel's largest width and height (the other side follows the window's aspect
+#: ratio, so an equal-aspect panel fills its figure with no empty band), the energy panel's height
+PANEL_WIDTH, PANEL_HEIGHT, ENERGY_HEIGHT = 5.2, 5.0, 1.7
+#: at most this many labelled ticks per axis (more crowd into each other on a 5-inch panel)
+MAX_TICKS = 5
 FORMATS = (".gif", ".mp4")
 
 
@@ -75,6 +80,7 @@ def animate(runs: list[tuple[str, object]], model, out: str | Path, fps: int = 3
     import matplotlib.pyplot as plt
     from matplotlib.collections import LineCollection, PatchCollection
     from matplotlib.patches import Circle
+    from matplotlib.ticker import MaxNLocator
 
     from steplab.core.records import write_with
     from steplab.physics import CentralGravity, Springs
@@ -99,8 +105,10 @@ def animate(runs: list[tuple[str, object]], model, out: str | Path, fps: int = 3
     changes, unit = energy_changes([np.array([float(model.energy(y)) for y in traj.y]) for _, traj in runs])
 
     frames = min(MAX_FRAMES, max(len(traj.t) for _, traj in runs))
-    fig, grid = plt.subplots(2, len(runs), figsize=(5.2 * len(runs), 6.4), squeeze=False, dpi=DPI,
-                             gridspec_kw={"height_ratios": [3, 1]}, sharex="row", sharey="row")
+    width, height = panel_size(hi - lo)
+    fig, grid = plt.subplots(2, len(runs), figsize=((width + 1.1) * len(runs), height + ENERGY_HEIGHT + 1.3),
+                             squeeze=False, dpi=DPI, gridspec_kw={"height_ratios": [height, ENERGY_HEIGHT]},
+                             sharex="row", sharey="row")
     panels = []
     for col, (label, traj) in enumerate(runs):
         ax, eax = grid[0][col], grid[1][col]
@@ -125,7 +133,9 @@ def animate(runs: list[tuple[str, object]], model, out: str | Path, fps: int = 3
         eax.axhline(0.0, color="0.85", lw=0.8, zorder=0)
         marker, = eax.plot([], [], "o", color="tab:red", ms=4, animated=True)
         eax.set_xlabel("time t (s)")
-        eax.set_ylabel(f"energy change ({unit})")
+        eax.set_ylabel(f"energy change\n({unit})", fontsize=9)
+        for axis in (ax.xaxis, ax.yaxis, eax.xaxis):
+            axis.set_major_locator(MaxNLocator(MAX_TICKS))
         picks = np.linspace(0, len(traj.t) - 1, frames).round().astype(int)
         panels.append((traj, picks, lines, circles, clock, marker, changes[col]))
     _energy_scale(grid[1][0], changes)
@@ -220,6 +230,18 @@ def _energy_scale(eax, changes) -> None:
     if len(sizes) > 1 and max(sizes) > 30 * min(sizes):
         # the linear part, |change| < the smallest run's, gets as much height as three decades
         eax.set_yscale("symlog", linthresh=min(sizes), linscale=3)
+        # a labelled tick every few decades, not every one (16 decades crowd into an inch)
+        decades = np.arange(np.ceil(np.log10(min(sizes))), np.floor(np.log10(max(sizes))) + 1)
+        decades = decades[::max(1, int(np.ceil(len(decades) / (MAX_TICKS - 1))))]
+        lows = [-10.0**d for d in decades[::-1]] if min(np.nanmin(c) for c in changes) < 0 else []
+        eax.set_yticks(lows + [0.0] + [10.0**d for d in decades])
+
+
+def panel_size(span) -> tuple[float, float]:
+    """Width and height (inches) of a scene panel that shows ``span`` (metres, 2) at equal aspect."""
+    aspect = float(span[1] / span[0]) if span[0] > 0 else 1.0
+    width = min(PANEL_WIDTH, PANEL_HEIGHT / aspect)
+    return width, max(1.5, width * aspect)
 
 
 def _window(q, pad):

@@ -91,10 +91,19 @@ def check_stability_limit(dt_found, scene: str = "soft-cube", integrator: str = 
     lo, hi = sorted([row.dt_max_damped, row.dt_max])
     value = _number(dt_found)
     ok = value is not None and lo * (1 - LIMIT_TOLERANCE) <= value <= hi * (1 + LIMIT_TOLERANCE)
-    shown = "nothing" if value is None else f"{value:.4g} s"
-    return _verdict(ok, f"{shown}, between steplab check's damped ({lo:.4g} s) and undamped ({hi:.4g} s) limits",
-                    f"you found {shown}; steplab check predicts between {lo:.4g} s and {hi:.4g} s: bisect on dt, "
-                    "calling a run stable when it finishes without DivergenceError")
+    if ok:
+        return _verdict(True, f"{value:.4g} s, between steplab check's damped ({lo:.4g} s) and undamped "
+                        f"({hi:.4g} s) limits", "")
+    # a hint guides the experiment; it never prints the interval, which is the answer
+    if value is None:
+        hint = ("no dt yet: start from a dt that runs (the scene's) and one that diverges, and bisect "
+                "between them, calling a run stable when it finishes without DivergenceError")
+    elif value < lo:
+        hint = f"{value:.4g} s runs, but so do larger steps: the limit is higher; keep bisecting upwards"
+    else:
+        hint = (f"{value:.4g} s is past the limit: over enough steps a run there diverges (try more steps, "
+                "or a smaller dt)")
+    return _verdict(False, "", hint)
 
 
 def check_tunnelling_speed(speed, scene: str = "tunnelling") -> bool:

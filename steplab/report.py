@@ -14,6 +14,7 @@ also come as zoomable Plotly pages (:mod:`steplab.report_figures`).
 
 from __future__ import annotations
 
+import html
 import json
 import re
 from pathlib import Path
@@ -30,8 +31,15 @@ from steplab.studies.tables import format_value, markdown_table
 ERRATA_TABLES = ("misprints", "lecture_errors")
 #: where the copied figures go, inside the site
 FIGURES = "figures"
-#: the paper's text, whose numbers the study pages list (in a checkout; absent, they are left out)
-PAPER_TEMPLATE = Path(__file__).resolve().parent.parent / "paper" / "paper.template.md"
+#: the paper (in a checkout; absent, what the pages take from it is left out): its template, whose
+#: numbers the study pages list; its rendered text, whose figure captions they reuse; and its
+#: committed figures and numbers, which the documentation's study pages show where no records exist
+PAPER = Path(__file__).resolve().parent.parent / "paper"
+PAPER_TEMPLATE = PAPER / "paper.template.md"
+#: a figure of the paper: ``![caption](figures/NAME)``, the caption's numbers already filled in
+PAPER_FIGURE = re.compile(r"!\[([^\]]+)\]\(figures/([^)\s]+)\)")
+#: the width of a figure's thumbnail on an index, in CSS pixels
+THUMBNAIL_WIDTH = 320
 
 
 class ReportError(ValueError):
@@ -89,30 +97,69 @@ def _summary_lines(study, record) -> str:
     return "\n".join(f"- {label}: {value}" for label, value in rows) + "\n" if rows else ""
 
 
-def index_page(studies: list, bench: dict | None) -> str:
-    text = "# steplab results\n\n" + _nav("index.html")
+def index_page(studies: list, bench: dict | None, suffix: str = ".html") -> str:
+    """The index: each study's title, its first figure as a thumbnail linking to the full size, and
+    its summary. ``suffix``: how a study page is linked (``.md`` inside the documentation)."""
+    text = "# steplab results\n\n" + (_nav("index.html") if suffix == ".html" else "")
     text += "Every study of the results folder, with the summary `steplab reproduce` prints.\n\n"
+    known = paper_captions()
     for study, record in studies:
         quick = " (quick run)" if _is_quick(study, record) else ""
-        text += f"## [{study.name}]({study.name}.html): {record['title']}{quick}\n\n"
+        text += f"## [{study.name}]({study.name}{suffix}): {record['title']}{quick}\n\n"
+        figures = _pngs(record)
+        if figures:
+            text += thumbnail(figures[0], caption(study.name, figures[0], known)) + "\n\n"
         text += _summary_lines(study, record) + "\n"
-    text += "## [Errata](errata.html)\n\nThe lecture's errors the studies found.\n\n"
+    text += f"## [Errata](errata{suffix})\n\nThe lecture's errors the studies found.\n\n"
     if bench is not None:
-        text += "## [Bench](bench.html)\n\nsteplab timed against its peers (`steplab bench`).\n\n"
+        text += f"## [Bench](bench{suffix})\n\nsteplab timed against its peers (`steplab bench`).\n\n"
     return text
 
 
-def study_page(study, record: dict, results: Path, interactive=()) -> str:
-    text = f"# {record['title']}\n\n" + _nav("") + f"Study `{study.name}`; record `{study.name}.json`.\n\n"
+def paper_captions(paper: Path = PAPER) -> dict[str, str]:
+    """Figure file name -> the caption the paper gives it (what the figure shows, with the paper's
+    numbers); {} without the paper."""
+    path = Path(paper) / "paper.md"
+    if not path.exists():
+        return {}
+    return {name: " ".join(text.split()) for text, name in PAPER_FIGURE.findall(path.read_text())}
+
+
+def caption(study: str, figure: str, known: dict[str, str]) -> str:
+    """What ``figure`` shows: the paper's caption, or for a figure the paper does not show, its
+    study and the name the study gave it."""
+    if figure in known:
+        return known[figure]
+    what = Path(figure).stem.removeprefix(study).strip("_").replace("_", " ").replace("-", " ")
+    return f"The {study.replace('_', ' ')} study: {what or 'its figure'}."
+
+
+def thumbnail(figure: str, text: str) -> str:
+    """A small copy of ``figure`` linking to the full size (raw HTML: Markdown has no image width)."""
+    alt = html.escape(text)
+    return (f'<a href="{FIGURES}/{figure}"><img src="{FIGURES}/{figure}" alt="{alt}" title="{alt}" '
+            f'width="{THUMBNAIL_WIDTH}"></a>')
+
+
+def _figure(figure: str, text: str) -> str:
+    # the figure full size, a link to the file itself (to zoom in the browser), the caption below
+    return f"[![{text}]({FIGURES}/{figure})]({FIGURES}/{figure})\n\n*{text}*\n\n"
+
+
+def study_page(study, record: dict, results: Path, interactive=(), nav: bool = True) -> str:
+    """A study's page: summary, figures full size with captions, tables, quoted numbers, provenance.
+    ``nav``: the report's links between pages (the documentation has its own navigation)."""
+    text = f"# {record['title']}\n\n" + (_nav("") if nav else "")
+    text += f"Study `{study.name}`; record `{study.name}.json`.\n\n"
     summary = _summary_lines(study, record)
     if summary:
         text += "## Summary\n\n" + summary + "\n"
     figures = _pngs(record)
     if figures:
         text += "## Figures\n\n"
+        known = paper_captions()
         for figure in figures:
-            what = Path(figure).stem.removeprefix(f"{study.name}_").replace("_", " ")
-            text += f"![{study.name}, figure: {what}]({FIGURES}/{figure})\n\n"
+            text += _figure(figure, caption(study.name, figure, known))
     if interactive:  # (title, link) of zoomable versions (steplab/report_figures.py)
         text += "Zoomable versions (drag to zoom, double-click to reset): " + ", ".join(
             f"[{title}]({link})" for title, link in interactive) + ".\n\n"
@@ -129,6 +176,11 @@ def study_page(study, record: dict, results: Path, interactive=()) -> str:
 def quoted_numbers(name: str, record: dict, template: Path = PAPER_TEMPLATE) -> str:
     """The values of ``record`` the paper's text quotes (``{{name/...}}``), from this record, as the
     paper prints them, each with the words before it; "" without the template or any."""
+    return _quoted(name, lambda path: lookup({name: record}, path), template)
+
+
+def _quoted(name: str, value_of, template: Path) -> str:
+    # value_of(path) -> the value at a placeholder's path (PaperError: not there)
     if not Path(template).exists():
         return ""
     text = Path(template).read_text()
@@ -138,7 +190,7 @@ def quoted_numbers(name: str, record: dict, template: Path = PAPER_TEMPLATE) -> 
         if path.split("/")[0] != name:
             continue
         try:
-            value = format_value(lookup({name: record}, path), spec)
+            value = format_value(value_of(path), spec)
         except PaperError:  # a quick run's record lacks what only the full run has
             value = "not in this record"
         before = PLACEHOLDER.sub("…", text[max(0, match.start() - 90):match.start()])
@@ -147,15 +199,16 @@ def quoted_numbers(name: str, record: dict, template: Path = PAPER_TEMPLATE) -> 
     return markdown_table(["record path", "value", "where the paper quotes it"], rows) if rows else ""
 
 
-def errata_page(studies: list) -> str:
-    text = "# Errata: the lecture's errors\n\n" + _nav("errata.html")
+def errata_page(studies: list, suffix: str = ".html") -> str:
+    """The lecture's errors the studies' records list; ``suffix`` as for :func:`index_page`."""
+    text = "# Errata: the lecture's errors\n\n" + (_nav("errata.html") if suffix == ".html" else "")
     text += "What the studies found wrong in the lecture, each with the evidence steplab computed.\n\n"
     found = False
     for study, record in studies:
         for table in study.tables:
             if table.name in ERRATA_TABLES:
                 found = True
-                text += f"## [{study.name}]({study.name}.html): {table.name.replace('_', ' ')}\n\n"
+                text += f"## [{study.name}]({study.name}{suffix}): {table.name.replace('_', ' ')}\n\n"
                 text += _draw(table, record) + "\n\n"
     if not found:
         text += "None of the studies in this results folder checks the lecture (truncation, restitution " \
@@ -163,8 +216,8 @@ def errata_page(studies: list) -> str:
     return text
 
 
-def bench_page(bench: dict) -> str:
-    text = "# Bench: steplab against its peers\n\n" + _nav("") + _draw(BENCH_TABLE, bench) + "\n\n"
+def bench_page(bench: dict, nav: bool = True) -> str:
+    text = "# Bench: steplab against its peers\n\n" + (_nav("") if nav else "") + _draw(BENCH_TABLE, bench) + "\n\n"
     engines = collision_markdown(bench)
     if engines:
         text += "## The engines: ball pits against MuJoCo and pybullet\n" + "\n".join(engines) + "\n\n"
@@ -201,6 +254,95 @@ def _is_quick(study, record: dict) -> bool:
 
 def _pngs(record: dict) -> list[str]:
     return [name for name in record.get("figures", []) if name.endswith(".png")]
+
+
+# --- the documentation site's study pages ---------------------------------------------
+
+
+#: where the documentation's study pages go, inside docs/ (the figures in ``studies/figures/``)
+DOCS_STUDIES = "studies"
+
+
+def docs_pages(results: Path | None, paper: Path = PAPER) -> dict[str, bytes]:
+    """The study pages of the documentation site (mkdocs, docs/hooks/generate.py): path inside
+    docs/ -> content. One page per registered study, a results index with thumbnails, the errata
+    and the bench.
+
+    From the records in ``results`` where it holds any: the pages ``steplab report`` writes, as
+    Markdown. Otherwise (a fresh clone) from the paper's committed figures and numbers
+    (``paper/figures``, ``paper/data/numbers.json``), each page saying so and how to see your own.
+    """
+    records = load_records(results) if results is not None and any(Path(results).glob("*.json")) else {}
+    studies = [(STUDIES[name], records[name]) for name in STUDIES if name in records]
+    if not studies:
+        return _paper_pages(Path(paper))
+    pages = {"results.md": index_page(studies, records.get("bench"), suffix=".md")}
+    for study, record in studies:
+        pages[f"{study.name}.md"] = study_page(study, record, results, nav=False)
+        for figure in _pngs(record):
+            pages[f"{FIGURES}/{figure}"] = (Path(results) / figure).read_bytes()
+    pages["errata.md"] = errata_page(studies, suffix=".md")
+    bench = records.get("bench")
+    pages["bench.md"] = (bench_page(bench, nav=False) if bench is not None else
+                         "# Bench: steplab against its peers\n\nThis results folder has no `bench.json`: "
+                         "`steplab bench --json results/bench.json` writes it.\n")
+    missing = [s.name for s in STUDIES.values() if s.name not in records]
+    for name in missing:
+        pages[f"{name}.md"] = f"# {STUDIES[name].title}\n\nThe results folder has no `{name}.json`: " \
+                              f"`steplab study {name}` computes it.\n"
+    return {f"{DOCS_STUDIES}/{path}": text.encode() if isinstance(text, str) else text
+            for path, text in pages.items()}
+
+
+#: the notice on every study page built from the paper rather than from records
+FROM_THE_PAPER = ("!!! note \"The paper's results\"\n    No results records were found when this site was built, "
+                  "so this page shows the figures and numbers of the paper (`paper/figures/`, "
+                  "`paper/data/numbers.json`). Run `steplab reproduce` (or `steplab study NAME`) and "
+                  "build the site again to see your own.\n\n")
+
+
+def _paper_pages(paper: Path) -> dict[str, bytes]:
+    # the paper's numbers: {"values": {path: value}, "tables": {name: slice}} (steplab.paper.collect)
+    from steplab.paper import paper_tables
+
+    numbers = json.loads((paper / "data" / "numbers.json").read_text())
+    tables = paper_tables()
+    known = paper_captions(paper)
+    figures = sorted(p.name for p in (paper / "figures").glob("*.png"))
+    pages, index = {}, "# steplab results\n\n" + FROM_THE_PAPER
+    for study in STUDIES.values():
+        mine = [f for f in figures if re.match(rf"{re.escape(study.name)}(_|\.png)", f)]
+        text = f"# {study.title}\n\n" + FROM_THE_PAPER + f"Study `{study.name}`; record `{study.name}.json`.\n\n"
+        index += f"## [{study.name}]({study.name}.md): {study.title}\n\n"
+        if mine:
+            index += thumbnail(mine[0], caption(study.name, mine[0], known)) + "\n\n"
+            text += "## Figures\n\n" + "".join(_figure(f, caption(study.name, f, known)) for f in mine)
+            pages.update({f"{FIGURES}/{f}": (paper / "figures" / f).read_bytes() for f in mine})
+        drawn = [(name, tables[name][1].draw(part)) for name, part in numbers["tables"].items()
+                 if name in tables and study.name in tables[name][0]]
+        if drawn:
+            text += "## Tables\n\n" + "".join(f"### {name.replace('_', ' ')}\n\n{markdown}\n\n"
+                                               for name, markdown in drawn)
+
+        def value_of(path):
+            if path not in numbers["values"]:
+                raise PaperError(path)
+            return numbers["values"][path]
+
+        quoted = _quoted(study.name, value_of, paper / "paper.template.md")
+        if quoted:
+            text += "## Numbers the paper quotes\n\n" + quoted + "\n"
+        pages[f"{study.name}.md"] = text
+    errata = [(name, tables[name][1].draw(numbers["tables"][name])) for name in ERRATA_TABLES
+              if name in numbers["tables"]]
+    pages["errata.md"] = "# Errata: the lecture's errors\n\n" + FROM_THE_PAPER + "".join(
+        f"## {name.replace('_', ' ')}\n\n{markdown}\n\n" for name, markdown in errata)
+    pages["bench.md"] = "# Bench: steplab against its peers\n\n" + FROM_THE_PAPER + (
+        BENCH_TABLE.draw(numbers["tables"]["bench"]) + "\n" if "bench" in numbers["tables"] else "")
+    pages["results.md"] = index + "## [Errata](errata.md)\n\nThe lecture's errors the studies found.\n\n" \
+        "## [Bench](bench.md)\n\nsteplab timed against its peers (`steplab bench`).\n"
+    return {f"{DOCS_STUDIES}/{path}": text.encode() if isinstance(text, str) else text
+            for path, text in pages.items()}
 
 
 def main_summary(paths: list[Path]) -> str:

@@ -6,13 +6,16 @@ record: the truncation study's global error against dt, one figure per problem, 
 work-precision study's error against wall time, one per scene. Hovering names a point's
 method, dt and error; drag to zoom, double-click to go back. Each figure is a page of its
 own beside the site's pages, sharing one copy of plotly.min.js (written by Plotly next to
-them, so the site needs no network).
+them, so the site needs no network). Every method is drawn in the colour the static figures give
+it (:func:`steplab.studies.plotting.colour`).
 """
 
 from __future__ import annotations
 
 from collections import defaultdict
 from pathlib import Path
+
+from steplab.studies.plotting import colour  # each method in its colour of the static figures
 
 #: where the interactive pages go, inside the site
 INTERACTIVE = "interactive"
@@ -64,6 +67,7 @@ def _error_against_dt(record: dict):
             points = [p for p in curve["points"] if p["error"] and p["error"] > 0]
             fig.add_trace(go.Scatter(x=[p["dt"] for p in points], y=[p["error"] for p in points],
                                      mode="lines+markers", name=curve["integrator"],
+                                     marker_color=colour(curve["integrator"]), line_color=colour(curve["integrator"]),
                                      hovertemplate="dt = %{x:.3g} s<br>error = %{y:.3g} m"))
         out.append((f"truncation_{problem}", f"error against dt, {title}", fig))
     return out
@@ -83,6 +87,7 @@ def _work_precision(record: dict):
             points = sorted(points, key=lambda p: p["seconds"])
             fig.add_trace(go.Scatter(
                 x=[p["seconds"] for p in points], y=[p["error"] for p in points], mode="lines+markers", name=method,
+                marker_color=colour(method), line_color=colour(method),
                 text=[f"dt = {p['dt']:.3g} s" if p.get("dt") else "adaptive" for p in points],
                 hovertemplate="%{text}<br>time = %{x:.3g} s<br>error = %{y:.3g}"))
         out.append((f"work_precision_{scene}", f"work against precision, {scene}", fig))

@@ -16,11 +16,26 @@ from steplab.integrators import UnknownIntegratorError, get_integrator  # noqa: 
 
 from steplab.core.records import write_atomic  # noqa: E402
 
-#: colours and markers for a method that states no ``style`` (a plugin, a test stepper):
-#: the ones steplab's own methods leave free, picked by a stable checksum of the name
-#: (not Python's hash(), which is salted per process), so a figure is the same every run
-SPARE_COLOURS = ("tab:gray", "tab:cyan", "black", "darkgoldenrod", "navy", "crimson", "teal")
+#: colours and markers for a method that states no ``style`` (the references, a plugin, a test
+#: stepper): ones steplab's own methods (tab10 and black, one each) leave free. A registered method
+#: takes the next in registry order, so no two share one; any other name (a reference drawn under
+#: a name of its own) one of those left, by a stable checksum of the name (not Python's hash(),
+#: which is salted per process), so a figure is the same every run
+SPARE_COLOURS = ("darkgoldenrod", "navy", "crimson", "teal", "magenta", "gold", "darkslategray", "sienna",
+                 "deepskyblue", "olivedrab")
 SPARE_MARKERS = ("h", "p", "d", "<", ">", "8", "H")
+
+
+def _spare(name: str) -> tuple[str, str]:
+    from steplab.integrators import INTEGRATORS
+
+    unstyled = [n for n, method in INTEGRATORS.items() if method.style is None]
+    if name in unstyled:
+        k = unstyled.index(name)
+        return SPARE_COLOURS[k % len(SPARE_COLOURS)], SPARE_MARKERS[k % len(SPARE_MARKERS)]
+    free = SPARE_COLOURS[len(unstyled):] or SPARE_COLOURS
+    k = zlib.crc32(name.encode())
+    return free[k % len(free)], SPARE_MARKERS[k // len(free) % len(SPARE_MARKERS)]
 
 
 def style(name: str) -> dict:
@@ -32,12 +47,13 @@ def style(name: str) -> dict:
         colour_marker = get_integrator(name).style
     except UnknownIntegratorError:  # not an integrator (a reference drawn under another name)
         colour_marker = None
-    if colour_marker is None:
-        k = zlib.crc32(name.encode())
-        colour = SPARE_COLOURS[k % len(SPARE_COLOURS)]
-        colour_marker = colour, SPARE_MARKERS[k // len(SPARE_COLOURS) % len(SPARE_MARKERS)]
-    colour, marker = colour_marker
+    colour, marker = colour_marker or _spare(name)
     return {"color": colour, "marker": marker, "label": name}
+
+
+def colour(name: str) -> str:
+    """Method ``name``'s colour as ``#rrggbb``: the one matplotlib draws it in, for the Plotly pages."""
+    return matplotlib.colors.to_hex(style(name)["color"])
 
 
 def save_figure(fig, out: Path, stem: str) -> list[str]:

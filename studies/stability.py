@@ -213,7 +213,7 @@ def plot(record: dict, out) -> list[str]:
     plt = plotting.plt
     figures = []
 
-    fig, ax = plt.subplots(figsize=(7.5, 6.5))
+    fig, ax = plt.subplots(figsize=(10, 6.5))
     x, y = np.meshgrid(np.linspace(-4.5, 2.5, 400), np.linspace(-3.5, 3.5, 400))
     z = x + 1j * y  # the grid avoids z = 1, the pole of implicit Euler's R
     for methods in stability_regions(record["parameters"]["integrators"]):
@@ -227,7 +227,9 @@ def plot(record: dict, out) -> list[str]:
         ax.contour(x, y, r, levels=[1], colors=[colour], linewidths=1.5)
         label = f"|R(z)| = 1: {name}" + (" (stable outside)" if outside else "")
         ax.plot([], [], color=colour, lw=2, label=label)
-    # measured thresholds: on the imaginary axis (undamped) and on the damped ray
+    # measured thresholds: on the imaginary axis (undamped) and on the damped ray; each method
+    # named once, where it first appears (a method unstable undamped has only its damped marker)
+    named = set()
     for zeta, result in record["by_damping_ratio"].items():
         mu = complex(-float(zeta), np.sqrt(1 - float(zeta) ** 2))
         for method, value in result["measured"].items():
@@ -237,7 +239,8 @@ def plot(record: dict, out) -> list[str]:
             style = plotting.style(method)
             ax.plot(point.real, point.imag, linestyle="none", ms=8, mfc="none", mew=1.5,
                     color=style["color"], marker=style["marker"],
-                    label=f"measured {method}" if zeta == "0" else None)
+                    label=None if method in named else f"measured {method}")
+            named.add(method)
     ax.axhline(0, color="k", lw=0.5)
     ax.axvline(0, color="k", lw=0.5)
     for zeta in record["by_damping_ratio"]:
@@ -251,7 +254,8 @@ def plot(record: dict, out) -> list[str]:
     ax.set_ylim(-3.5, 3.5)
     ax.set_title("Stability regions |R(z)| <= 1 (shaded) and measured limits\n"
                  "markers: largest stable omega dt on the oscillator, undamped (imaginary axis) and damped")
-    ax.legend(fontsize=7, loc="lower left", ncol=2)
+    # beside the axes: inside, it covered RK4's contour
+    ax.legend(fontsize=7, loc="upper left", bbox_to_anchor=(1.02, 1.0), borderaxespad=0)
     figures += plotting.save_figure(fig, out, "stability_regions")
 
     fig, axes = plt.subplots(1, 2, figsize=(13, 5), sharey=True)

@@ -155,7 +155,8 @@ def plot(record: dict, out) -> list[str]:
                              record["slopes"])
     left.set_xlabel("spring stiffness k (N/m)")
     left.set_title("Largest stable dt against the stiffness k\n(soft cube: 8 x 1 kg, a spring between every pair)")
-    left.legend(fontsize=7, loc="lower left")
+    # below the axes: inside, it covered the measured limits and the 1/60 s line
+    left.legend(fontsize=7, loc="upper center", bbox_to_anchor=(0.5, -0.2), ncol=2, frameon=False)
 
     damping = record["implicit_euler_damping"]
     y = [r["omega_dt"] for r in damping["rows"]]

@@ -221,7 +221,10 @@ def plot(record: dict, out) -> list[str]:
             ax.grid(True, which="major", alpha=0.3)
             ax.invert_xaxis()
         axes[0][0].set_ylabel("global position error at t_end (m)")
-        axes[0][0].legend(fontsize=7, loc="upper right", title="fitted slope (float64)", title_fontsize=7)
+        # below the panels: inside, it covered the first-order curves at small dt
+        handles, labels = axes[0][0].get_legend_handles_labels()
+        fig.legend(handles, labels, fontsize=7, loc="upper center", bbox_to_anchor=(0.5, 0.0), ncol=4,
+                   title="fitted slope (float64)", title_fontsize=7, frameon=False)
         fig.suptitle(f"Global error against time step: {curves[0]['title']}\n"
                      "truncation error falls as dt^order; accumulated round-off rises at small dt", y=1.0)
         fig.tight_layout()

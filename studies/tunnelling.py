@@ -319,7 +319,7 @@ def plot(record: dict, out) -> list[str]:
     r = params["radius"]
 
     # 1. miss rate against v dt / (w + 2r); right: the fraction stopped, where the models part
-    fig, (ax, stop) = plt.subplots(1, 2, figsize=(12.4, 5.2), width_ratios=(1.25, 1))
+    fig, (ax, stop) = plt.subplots(1, 2, figsize=(12.4, 6.4), width_ratios=(1.25, 1))
     grid = np.geomspace(min(params["ratios"]), max(params["ratios"]), 600)
     lecture = LECTURE_BISECTIONS
     curves = [(f"{lecture} bisections (model)", [bisection_miss_rate(x, lecture) for x in grid], "-", "k"),
@@ -365,12 +365,17 @@ def plot(record: dict, out) -> list[str]:
     ax.set_ylabel(f"fraction of shots through the wall ({params['trials']} stratified random phases)")
     ax.set_ylim(-0.03, 1.03)
     ax.set_title("Tunnelling: overlap testing misses as modelled, swept testing never", fontsize=11)
-    ax.legend(fontsize=7, loc="upper left")
+    # below the axes, in two columns: inside, it would cover the measured points
+    ax.legend(fontsize=7, loc="upper center", bbox_to_anchor=(0.5, -0.13), ncol=2, frameon=False)
     ax.grid(True, which="major", alpha=0.3)
-    for x, text, side in ((2.0 ** (lecture - 1), "2^(k-1): the bracket v dt / 2^k\nreaches the wall's middle ",
-                           "right"), (2.0**lecture, " 2^k: as if\n no bisection", "left")):
+    # each line tagged at the top, what it marks said in the empty lower left (the data falls
+    # from the top left to the lower right, so labels there would cover points or leave the axes)
+    for x, tag in ((2.0 ** (lecture - 1), "2^(k-1)"), (2.0**lecture, "2^k")):
         stop.axvline(x, color="gray", ls="--", lw=0.8)
-        stop.text(x, 0.5, text, color="gray", fontsize=7, va="top", ha=side)
+        stop.text(x / 1.04, 1.3, tag, color="gray", fontsize=7, va="top", ha="right")
+    stop.text(0.03, 0.03, "dashed lines, v dt / (w + 2r) =\n2^(k-1): the bracket v dt / 2^k reaches the wall's "
+              "middle\n2^k: every shot as if without bisection", transform=stop.transAxes, color="gray",
+              fontsize=7, va="bottom", ha="left")
     stop.set_xlim(0.3, max(params["ratios"]) * 1.1)
     stop.set_ylim(min(0.5 / params["trials"], 0.25 / max(params["ratios"])), 1.5)
     stop.set_xlabel("v dt / (w + 2r)")

@@ -176,11 +176,8 @@ def plot(record: dict, out) -> list[str]:
                 if not mp:
                     continue
                 style = plotting.style(method)
-                if method.startswith(("diffrax", "scipy")):
-                    style.update(linestyle="--", marker={"diffrax-tsit5": "1", "diffrax-dopri8": "2",
-                                                         "scipy-dop853": "3", "scipy-rk45": "4"}[method],
-                                 color={"diffrax-tsit5": "black", "diffrax-dopri8": "dimgray",
-                                        "scipy-dop853": "tab:cyan", "scipy-rk45": "darkgoldenrod"}[method])
+                if method.startswith(("diffrax", "scipy")):  # the adaptive references, dashed, in their own colours
+                    style.update(linestyle="--")
                 ax.loglog([p[cost] for p in mp], [p["error"] for p in mp], ms=5, lw=1, **style)
             front = sorted((p for p in pts if p.get(f"pareto_{cost}") and p["error"] > 0), key=lambda p: p[cost])
             ax.loglog([p[cost] for p in front], [p["error"] for p in front], color="k", lw=5, alpha=0.15,
@@ -189,7 +186,10 @@ def plot(record: dict, out) -> list[str]:
             ax.grid(True, alpha=0.3)
         axes[0].set_ylabel("final position error (m)")
         axes[0].set_ylim(top=10.0)  # larger errors mean the method failed outright
-        axes[0].legend(fontsize=7, ncol=2)
+        # below the panels: inside, it covered the cheapest runs' points
+        handles, labels = axes[0].get_legend_handles_labels()
+        fig.legend(handles, labels, fontsize=7, loc="upper center", bbox_to_anchor=(0.5, 0.0), ncol=6,
+                   frameon=False)
         fig.suptitle(f"Work against precision: {scene} (fixed-step methods over dt, adaptive over rtol; "
                      "errors above 10 m are off the chart)")
         fig.tight_layout()

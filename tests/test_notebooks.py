@@ -67,10 +67,26 @@ def test_checks_accept_the_closed_forms_and_say_not_yet_otherwise(capsys):
     # the soft cube's limits, 2 / omega_max from its stiffest mode, bracket what bisection finds
     assert exercises.check_stability_limit(2 / 122.181 * 0.95)
     assert not exercises.check_stability_limit(0.005)
+    assert "the limit is higher" in capsys.readouterr().out
+    assert not exercises.check_stability_limit(0.05)
+    assert "past the limit" in capsys.readouterr().out
     assert exercises.check_position_verlet(get_integrator("position-verlet"), 2.0)
     assert not exercises.check_position_verlet(get_integrator("velocity-verlet"), 2.0)
     for check in (exercises.check_bounce_height, exercises.check_tunnelling_speed, exercises.check_stability_limit):
         assert not check(None)
     assert not exercises.check_ralston(None, None) and not exercises.check_position_verlet(None, None)
     out = capsys.readouterr().out.splitlines()
-    assert len(out) == 9 and sum(line.startswith("not yet: ") for line in out) == 7
+    assert len(out) == 7 and sum(line.startswith("not yet: ") for line in out) == 6
+    # a blank answer gets guidance, not the answer: no number of the limit's interval (0.0164 s)
+    blank = next(line for line in out if line.startswith("not yet: no dt yet"))
+    assert not any(ch.isdigit() for ch in blank), blank
+
+
+def test_a_tableau_given_to_the_class_is_refused_with_the_way_that_works():
+    # notebook 2 shows the step from a tableau to a method; the natural wrong way says it
+    from steplab.integrators import ExplicitRungeKutta
+
+    midpoint = ButcherTableau(a_lower=((1 / 2,),), b=(0.0, 1.0), c=(1 / 2,))
+    with pytest.raises(TypeError, match=r"class MyMethod\(ExplicitRungeKutta\).*tableau = ButcherTableau"):
+        ExplicitRungeKutta(tableau=midpoint)
+    assert get_integrator("midpoint").tableau == midpoint  # the subclass way, as steplab's own methods

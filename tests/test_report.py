@@ -149,3 +149,16 @@ def test_a_study_page_lists_the_numbers_the_paper_quotes_from_its_record(site, r
     assert "Numbers the paper quotes" in page
     assert f"<td>{record['final_state_spread']['naive']:.2f}</td>" in page
     assert "frame_rate/final_state_spread/naive" in page
+
+
+def test_every_method_has_its_own_colour_and_keeps_it_on_the_plotly_pages(site, results):
+    from steplab.integrators import INTEGRATORS
+    from steplab.studies.plotting import colour
+
+    colours = {name: colour(name) for name in INTEGRATORS}  # fixed-step methods, references, exact
+    assert len(set(colours.values())) == len(colours), f"methods sharing a colour: {colours}"
+    # the zoomable error-against-dt page draws each method in its static figures' colour
+    record = json.loads((results / "truncation.json").read_text())
+    page = next((site / "interactive").glob("truncation_*.html")).read_text()
+    drawn = {c["integrator"] for c in record["curves"]}
+    assert drawn and all(f'"color":"{colours[m]}"' in page for m in drawn if m in colours)
