@@ -25,6 +25,7 @@ from numba import njit
 
 from .pairs import SweptSpheres, near_shapes
 from .shapes import DEFAULT_MATERIAL
+from .sphere_contacts import plane_height, row3, sphere_plane, sphere_sphere
 
 #: the speculative margin added to every swept bound, as a fraction of the median radius: a
 #: body sped up by a contact during the step can still reach this much further than its forces take it
@@ -134,8 +135,7 @@ def _reached(q, v, a, dt):
 @njit(cache=True, inline="always")
 def _reaches_plane(centers, reach, b, plane_normal, plane_offset, k):
     """Body b's swept sphere reaches plane k, n . x <= offset: n . c - offset <= reach."""
-    return (centers[b, 0] * plane_normal[k, 0] + centers[b, 1] * plane_normal[k, 1]
-            + centers[b, 2] * plane_normal[k, 2]) - plane_offset[k] <= reach[b]
+    return plane_height(row3(centers, b), row3(plane_normal, k), plane_offset[k]) <= reach[b]
 
 
 @njit(cache=True)
@@ -144,9 +144,9 @@ def _pair_and_plane_contacts(pi, pj, q, v, a, radii, inverse_masses, centers, re
     """The columns of :class:`Contacts` for the body pairs (``pi``, ``pj``; sorted) and the planes,
     in key order: body i's pairs (j ascending), then its planes (world number ascending).
 
-    A moving body's swept sphere reaches a plane n . x <= offset when n . c - offset <= reach;
-    the contact is then the sphere-plane narrow phase's (:func:`.narrow_phase.collide_sphere_plane`):
-    normal -n, separation n . q - offset - r.
+    A moving body's swept sphere reaches a plane n . x <= offset when n . c - offset <= reach.
+    The contacts are :func:`.sphere_contacts.sphere_sphere` and :func:`.sphere_contacts.sphere_plane`
+    (the narrow phase's), the separation minus their penetration depth.
     """
     n, n_planes, n_pairs = len(radii), len(plane), len(pi)
     near = np.zeros((n_planes, n), dtype=np.bool_)
@@ -165,15 +165,11 @@ def _pair_and_plane_contacts(pi, pj, q, v, a, radii, inverse_masses, centers, re
     for b in range(n):
         while p < n_pairs and pi[p] == b:
             c = pj[p]
-            d0, d1, d2 = q[c, 0] - q[b, 0], q[c, 1] - q[b, 1], q[c, 2] - q[b, 2]
-            dist = np.sqrt(d0 * d0 + d1 * d1 + d2 * d2)
-            if dist > 0:
-                n0, n1, n2 = d0 / dist, d1 / dist, d2 / dist
-            else:  # concentric: +x by convention
-                n0, n1, n2 = 1.0, 0.0, 0.0
+            (n0, n1, n2), depth = sphere_sphere((q[c, 0] - q[b, 0], q[c, 1] - q[b, 1], q[c, 2] - q[b, 2]),
+                                                radii[b] + radii[c])
             ci[row], cj[row], shape[row], key[row] = b, c, -1, b * stride + c
             normal[row, 0], normal[row, 1], normal[row, 2] = n0, n1, n2
-            separation[row] = -(radii[b] + radii[c] - dist)
+            separation[row] = -depth
             normal_speed[row] = (v[c, 0] - v[b, 0]) * n0 + (v[c, 1] - v[b, 1]) * n1 + (v[c, 2] - v[b, 2]) * n2
             pressing[row] = (a[b, 0] - a[c, 0]) * n0 + (a[b, 1] - a[c, 1]) * n1 + (a[b, 2] - a[c, 2]) * n2
             mass[row] = 1.0 / (inverse_masses[b] + inverse_masses[c])
@@ -184,12 +180,10 @@ def _pair_and_plane_contacts(pi, pj, q, v, a, radii, inverse_masses, centers, re
         for k in range(n_planes):
             if not near[k, b]:
                 continue
-            n0, n1, n2 = -plane_normal[k, 0], -plane_normal[k, 1], -plane_normal[k, 2]
-            height = (q[b, 0] * plane_normal[k, 0] + q[b, 1] * plane_normal[k, 1]
-                      + q[b, 2] * plane_normal[k, 2]) - plane_offset[k]
+            (n0, n1, n2), depth, _ = sphere_plane(row3(q, b), radii[b], row3(plane_normal, k), plane_offset[k])
             ci[row], cj[row], shape[row], key[row] = b, -1, plane[k], b * stride + n + plane[k]
             normal[row, 0], normal[row, 1], normal[row, 2] = n0, n1, n2
-            separation[row] = -(radii[b] - height)
+            separation[row] = -depth
             normal_speed[row] = -(v[b, 0] * n0 + v[b, 1] * n1 + v[b, 2] * n2)
             pressing[row] = a[b, 0] * n0 + a[b, 1] * n1 + a[b, 2] * n2
             mass[row] = 1.0 / inverse_masses[b]

@@ -37,7 +37,7 @@ import numpy as np
 from .contact_buffer import Contacts, Materials, find_contacts, newly_hit, previous_rows, speculative_margin, warm_start
 from .events import CollisionLog, ImpactBlock, cancel_triggers
 from .sequential_impulses import finish, step_members, step_members_parallel, substep
-from .step import RESTING_STEPS
+from .resting import rest_speed
 from .world import CollisionWorld
 
 #: the semi-implicit Euler the solver's substeps are
@@ -108,7 +108,7 @@ class SolverStep:
     def _start(self, t, dt, q0, v0, a, contacts) -> StepStart:
         s = self.settings
         h = dt / s.substeps
-        threshold = self.world.rest_speed + RESTING_STEPS * np.maximum(contacts.pressing, 0.0) * dt
+        threshold = rest_speed(self.world.rest_speed, contacts.pressing, dt)
         old = self._previous
         previous = previous_rows(old.contacts.key, contacts.key)
         pn, pt = warm_start(previous, old.pn, old.pt, contacts.normal)

@@ -88,28 +88,11 @@ from .impact_cap import ImpactCapError
 from .impact_queue import ImpactQueue
 from .pairs import BodyPairs, ShapePairs, candidates, changed_candidates
 from .response import normal_speed, resolve
-from .resting import settle
-from .retest import retest_spheres_and_planes
+from .resting import RESTING_STEPS, rest_speed, settle
+from .retest import Bodies, Planes, Split, retest_spheres_and_planes
 
 #: bodies closer than this many rounding units of the largest coordinate are touching
 SLOP_ULPS = 100
-#: an impact slower than what the forces pressing the pair together add over this many
-#: steps does not bounce (eps = 0): it ends the endless series of ever smaller bounces
-#: (Zeno's) of a body coming to rest, which an energy-gaining integrator (explicit Euler)
-#: would otherwise sustain as a jitter of about g dt^2
-RESTING_STEPS = 2
-
-
-def rest_speed(world, pressing, dt):
-    """Approach speeds at or below this are resting contacts, not bounces (m/s).
-
-    ``pressing`` is the relative acceleration pushing the pair together along the normal;
-    ``world.rest_speed`` is a floor for pairs nothing presses together (a row of touching
-    balls passing on round-off-sized speeds back and forth).
-    """
-    return world.rest_speed + RESTING_STEPS * np.maximum(pressing, 0.0) * dt
-
-
 def contact_slop(q) -> float:
     """The gap below which bodies count as touching: a few hundred rounding errors, m."""
     return SLOP_ULPS * float(np.finfo(q.dtype).eps) * max(1.0, float(np.max(np.abs(q))))
@@ -151,15 +134,16 @@ class CollisionStep:
         #: spheres, planes, swept testing and constant forces: the changed pairs' narrow phase compiled
         self.compiled_retest = (self.world.detector == "swept" and self.field is not None
                                 and len(planes) == len(self.world.shapes))
-        self.plane_normals = np.array([p.normal for p in planes], dtype=float).reshape(-1, 3)
-        self.plane_offsets = np.array([p.offset for p in planes], dtype=float)
-        self.plane_triggers = np.array([p.trigger for p in planes], dtype=bool)
+        self.planes = Planes(np.array([p.normal for p in planes], dtype=float).reshape(-1, 3),
+                             np.array([p.offset for p in planes], dtype=float),
+                             np.array([p.trigger for p in planes], dtype=bool))
         #: the loop this run uses: "auto" is "incremental" where it agrees with "full" to round-off
         self.event_loop = self.world.event_loop
         if self.event_loop == "auto":
             exact = self.field is not None and rest_of_step_is_unchanged(self.integrator)
             self.event_loop = "incremental" if exact else "full"
         self._active = np.ones(len(self.radii), bool)  # bodies not removed (removal is for good)
+        self._bodies = Bodies(self.inverse_masses, self._active, self.field)
         self._is_changed = np.zeros(len(self.radii), bool)  # scratch: the bodies of one re-test
 
     def __call__(self, t, y, dt, carry):
@@ -228,10 +212,8 @@ class CollisionStep:
             active[list(self.log.removed)] = False
         is_changed[moved] = True
         i, j, in_contact, speed, normal, rest, s, watch = retest_spheres_and_planes(
-            grid.h, grid.centers, grid.reach, grid.head, grid.next, grid.cell, grid.large, grid.large_list,
-            grid.n_large[0], self.inverse_masses, active, moved, is_changed, chords.y_from, chords.y_end,
-            chords.t_from, chords.t_end, t, self.radii, slop, self.field, self.world.rest_speed, RESTING_STEPS,
-            dt, self.plane_normals, self.plane_offsets, self.plane_triggers)
+            grid.arrays, chords.arrays, self._bodies, self.planes, Split(t, dt, slop, self.world.rest_speed), moved,
+            is_changed)
         is_changed[moved] = False
         js = j.tolist()  # the body pairs come first, then one run per plane
         n = len(js)
@@ -307,7 +289,7 @@ class CollisionStep:
             if self.compiled_retest:  # spheres and planes under constant forces: one kernel
                 j = int(impact.pairs.j[k]) if isinstance(impact.pairs, BodyPairs) else -1 - impact.pairs.index
                 contact = _PairContact(*impact_terms(y_hit, int(impact.pairs.i[k]), j, self.radii, self.field,
-                                                     self.plane_normals, self.plane_offsets))
+                                                     self.planes))
             else:
                 contact = impact.pairs.subset([k]).contact(self.radii, y_hit[0])
             event = self._event(impact, y_hit, t, h, dt, self._accelerations(t_hit, chords), contact)
@@ -380,7 +362,7 @@ class CollisionStep:
             return
         a = accelerations() if accelerations is not None else np.asarray(self.model.acceleration(t, y[0], y[1]))
         for pairs, start in zip(groups, starts):
-            start.rest_speed = rest_speed(self.world, normal_speed(a[pairs.i], pairs.velocity_b(a), start.normal), dt)
+            start.rest_speed = rest_speed(self.world.rest_speed, normal_speed(a[pairs.i], pairs.velocity_b(a), start.normal), dt)
 
     def _next_collision(self, groups, starts, t, h, dt, y, y_end, ignored):
         """The earliest collision the prologues accept; cancelled ones are logged and skipped."""
@@ -416,7 +398,7 @@ class CollisionStep:
         a = accelerations() if accelerations is not None else np.asarray(model.acceleration(t_hit, y_hit[0], y_hit[1]))
         pressing = float(normal_speed(a[body], pair.velocity_b(a)[0], normal))
         kind = "impact"
-        if speed <= rest_speed(world, pressing, dt):
+        if speed <= rest_speed(world.rest_speed, pressing, dt):
             kind, restitution = "resting", 0.0  # a resting contact, not a bounce
         return Collision(kind=kind, t=float(t_hit), body=body, other=other, body_name=model.names[body],
                          other_name=other_name, normal=np.asarray(normal, dtype=float), impact_speed=speed,
@@ -438,7 +420,7 @@ class CollisionStep:
             restitution, friction = world.properties(body, pairs.shape)
         speed = contact.speed
         kind = "impact"
-        if speed <= rest_speed(world, contact.pressing, dt):
+        if speed <= rest_speed(world.rest_speed, contact.pressing, dt):
             kind, restitution = "resting", 0.0  # a resting contact, not a bounce
         return Collision(kind=kind, t=float(t_hit), body=body, other=other, body_name=names[body],
                          other_name=other_name, normal=contact.normal[0], impact_speed=speed,
