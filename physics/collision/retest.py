@@ -23,8 +23,15 @@ from numba import njit
 from .changed_pairs import _query
 from .chords import state_at
 from .resting import rest_speed
-from .sphere_contacts import dot3, plane_height, row3, sphere_plane, sphere_plane_entry, sphere_sphere, \
-    sphere_sphere_entry
+from .sphere_contacts import (
+    dot3,
+    plane_height,
+    row3,
+    sphere_plane,
+    sphere_plane_entry,
+    sphere_sphere,
+    sphere_sphere_entry,
+)
 
 
 class Bodies(NamedTuple):

@@ -36,8 +36,8 @@ import numpy as np
 
 from .contact_buffer import Contacts, Materials, find_contacts, newly_hit, previous_rows, speculative_margin, warm_start
 from .events import CollisionLog, ImpactBlock, cancel_triggers
-from .sequential_impulses import finish, step_members, step_members_parallel, substep
 from .resting import rest_speed
+from .sequential_impulses import finish, step_members, step_members_parallel, substep
 from .world import CollisionWorld
 
 #: the semi-implicit Euler the solver's substeps are

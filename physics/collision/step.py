@@ -88,7 +88,7 @@ from .impact_cap import ImpactCapError
 from .impact_queue import ImpactQueue
 from .pairs import BodyPairs, ShapePairs, candidates, changed_candidates
 from .response import normal_speed, resolve
-from .resting import RESTING_STEPS, rest_speed, settle
+from .resting import rest_speed, settle
 from .retest import Bodies, Planes, Split, retest_spheres_and_planes
 
 #: bodies closer than this many rounding units of the largest coordinate are touching
@@ -362,7 +362,8 @@ class CollisionStep:
             return
         a = accelerations() if accelerations is not None else np.asarray(self.model.acceleration(t, y[0], y[1]))
         for pairs, start in zip(groups, starts):
-            start.rest_speed = rest_speed(self.world.rest_speed, normal_speed(a[pairs.i], pairs.velocity_b(a), start.normal), dt)
+            pressing = normal_speed(a[pairs.i], pairs.velocity_b(a), start.normal)
+            start.rest_speed = rest_speed(self.world.rest_speed, pressing, dt)
 
     def _next_collision(self, groups, starts, t, h, dt, y, y_end, ignored):
         """The earliest collision the prologues accept; cancelled ones are logged and skipped."""
