@@ -35,9 +35,19 @@ import dataclasses
 import numpy as np
 
 from . import sequential_impulses as si
-from .contact_buffer import Contacts, Materials, find_contacts, newly_hit, previous_rows, speculative_margin, warm_start
+from .contact_buffer import (
+    BodyState,
+    Contacts,
+    Materials,
+    find_contacts,
+    newly_hit,
+    previous_rows,
+    speculative_margin,
+    warm_start,
+)
 from .events import CollisionLog, ImpactBlock, cancel_triggers
 from .resting import rest_speed
+from .step import ConstantField
 from .world import CollisionWorld
 
 #: the semi-implicit Euler the solver's substeps are
@@ -98,8 +108,11 @@ class SolverStep:
         """Forces, contacts and warm start: everything the kernel needs for the step from ``t``."""
         q0, v0 = np.ascontiguousarray(y[0], dtype=float), np.ascontiguousarray(y[1], dtype=float)
         a = self.field if self.field is not None else np.asarray(self.model.acceleration(t, q0, v0), dtype=float)
-        contacts = find_contacts(self.world, self.materials, q0, v0, a, self.radii, self.inverse_masses, dt,
-                                 self.log.removed, self.margin)
+        # where the forces alone take each body in the step: the scene's integrator's step under
+        # the accelerations at its start (semi-implicit Euler: q + dt (v + dt a))
+        y_forces, _ = self.integrator.step(ConstantField(a), t, np.stack([q0, v0]), dt, None)
+        contacts = find_contacts(self.world, self.materials, BodyState(q0, v0, a, self.radii, self.inverse_masses),
+                                 np.ascontiguousarray(y_forces[0]), self.log.removed, self.margin)
         if self._cancelled:
             self._cancelled &= set(contacts.key.tolist())  # pairs no longer in contact are free again
             contacts = contacts.subset(~np.isin(contacts.key, list(self._cancelled)))

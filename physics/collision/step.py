@@ -254,7 +254,7 @@ class CollisionStep:
         """
         integrator = self.integrator
         if self.field is not None and not integrator.implicit:
-            rows = _ConstantField(self.field[moved])
+            rows = ConstantField(self.field[moved])
             y = chords.now[:, moved]
             return np.asarray(integrator.step(rows, t, y, h, integrator.init(rows, t, y))[0])
         everyone = np.arange(len(self.radii))
@@ -496,7 +496,7 @@ def rest_of_step_is_unchanged(integrator) -> bool:
     """
     if integrator.implicit:
         return False
-    model = _ConstantField(np.array([[0.3, -0.7, -9.81]]))
+    model = ConstantField(np.array([[0.3, -0.7, -9.81]]))
     y0, dt, s = np.array([[[0.1, 0.2, 0.3]], [[1.0, -2.0, 0.5]]]), 0.01, 0.375
     try:
         y1 = np.asarray(integrator.step(model, 0.0, y0, dt, integrator.init(model, 0.0, y0))[0])
@@ -507,7 +507,7 @@ def rest_of_step_is_unchanged(integrator) -> bool:
     return bool(np.allclose(y2, y1, rtol=1e-12, atol=1e-15))
 
 
-class _ConstantField:
+class ConstantField:
     """The model seen by some bodies when every force is constant: a(t, q, v) = their rows of the field."""
 
     xp = np
