@@ -39,6 +39,7 @@ from numba import njit
 
 from .jacobian_blocks import BodyJacobian as BodyJacobian
 from .jacobian_blocks import PairJacobian as PairJacobian
+from .sparse_kernels import NewtonTerms, has_kernel, pair_groups
 
 
 @njit(cache=True)
@@ -249,7 +250,8 @@ class _CompiledPairs:
     def add(self, data, slots, coefficient_q, coefficient_v):
         with_force = self.force is not None
         force = self.force if with_force else np.zeros_like(self.q)
-        self.group.add(force, data, slots, self.q, self.v, coefficient_q, coefficient_v, self.definite, with_force)
+        self.group.add(force, data, slots, self.q, self.v, NewtonTerms(float(coefficient_q), float(coefficient_v),
+                                                                      bool(self.definite), with_force, True))
 
 
 def block_pattern(model, blocks, free_only: bool):
@@ -340,8 +342,6 @@ def newton_system(model, t, q, v, h: float, definite: bool = False):
 
 def _newton_system(model, t, q, v, h, definite, compiled, with_acceleration):
     _require_numpy(model, "implicit Euler's sparse Newton matrix")
-    from .sparse_kernels import has_kernel, pair_groups
-
     q, v = np.ascontiguousarray(q, dtype=float), np.ascontiguousarray(v, dtype=float)
     force = np.zeros_like(q) if with_acceleration and compiled else None
     blocks = [_CompiledPairs(group, q, v, definite, force) for group in (pair_groups(model) if compiled else ())]
@@ -369,8 +369,6 @@ def acceleration(model, t, q, v):
     the bench's cloth; a model with a reactive force gets ``model.acceleration`` itself.
     """
     _require_numpy(model, "the compiled acceleration")
-    from .sparse_kernels import pair_groups
-
     q, v = np.ascontiguousarray(q, dtype=float), np.ascontiguousarray(v, dtype=float)
     if model.reactive_forces:
         return np.array(model.acceleration(t, q, v), dtype=float)
@@ -387,8 +385,6 @@ def _acceleration(model, t, q, v, pair_force):
     sums it (in ``pair_force``'s place); where a reactive force needs the sum of all the
     others, a copy of the model's own. Either way an array of its own, the caller's to change.
     """
-    from .sparse_kernels import has_kernel
-
     if model.reactive_forces or pair_force is None:
         return np.array(model.acceleration(t, q, v), dtype=float)
     for f in model.varying_forces:
