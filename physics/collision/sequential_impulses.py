@@ -124,13 +124,14 @@ def _separation(dq, k, i, j, normal, s0):
     return s0[k] + d0 * normal[k, 0] + d1 * normal[k, 1] + d2 * normal[k, 2]
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def _sweep(bodies, contacts, c0, c1, sub, use_bias):
     """One Gauss-Seidel sweep over contacts c0..c1: the normal impulse, then friction."""
     v, dq, inverse_mass = bodies.v, bodies.dq, bodies.inverse_mass
     ci, cj, normal, s0, mass, friction, pn, pt = (contacts.i, contacts.j, contacts.normal, contacts.s0, contacts.mass,
                                                   contacts.friction, contacts.pn, contacts.pt)
-    inv_h = 1.0 / sub.h
+    inv_h, bias_rate, slop, push_speed = 1.0 / sub.h, sub.bias_rate, sub.slop, sub.push_speed
+    mass_scale, impulse_scale = sub.mass_scale, sub.impulse_scale
     for k in range(c0, c1):
         i, j = ci[k], cj[k]
         wi = inverse_mass[i]
@@ -143,8 +144,8 @@ def _sweep(bodies, contacts, c0, c1, sub, use_bias):
         if s > 0.0:
             bias = s * inv_h  # speculative: may close the gap in this substep, not more
         elif use_bias:
-            bias = max(sub.bias_rate * min(s + sub.slop, 0.0), -sub.push_speed)
-            scale, leak = sub.mass_scale, sub.impulse_scale
+            bias = max(bias_rate * min(s + slop, 0.0), -push_speed)
+            scale, leak = mass_scale, impulse_scale
         else:
             bias = 0.0
         dp = -mass[k] * scale * (vn + bias) - leak * pn[k]
@@ -193,9 +194,10 @@ def substep(bodies, contacts, b0, b1, c0, c1, sub):
             dq[b, a] += h * v[b, a]
     for _ in range(sub.iterations):
         _sweep(bodies, contacts, c0, c1, sub, False)
+    total, most = contacts.total, contacts.most
     for k in range(c0, c1):
-        contacts.total[k] += pn[k]
-        contacts.most[k] = max(contacts.most[k], pn[k])
+        total[k] += pn[k]
+        most[k] = max(most[k], pn[k])
 
 
 @njit(cache=True)
