@@ -35,7 +35,7 @@ from steplab.physics.collision.shapes import Sphere
 CALLERS = [
     (narrow_phase, ["sphere_sphere_rows", "sphere_plane_rows"]),
     (contact_buffer, ["sphere_sphere", "sphere_plane", "plane_height"]),
-    (retest, ["sphere_sphere", "sphere_plane", "plane_height", "sphere_sphere_entry", "sphere_plane_entry",
+    (retest, ["sphere_sphere", "sphere_plane", "plane_height", "sphere_sphere_entry", "sphere_plane_entry_of",
               "rest_speed", "state_at"]),
     (compiled_response, ["sphere_sphere", "sphere_plane"]),
     (time_of_impact, ["first_entry", "sphere_plane_entry", "sphere_sphere_entry_rows"]),
@@ -46,11 +46,11 @@ CALLERS = [
 
 
 #: where each definition lives
-DEFINITIONS = {**{name: sphere_contacts for name in ("sphere_sphere", "sphere_plane", "plane_height", "first_entry",
-                                                     "sphere_sphere_entry", "sphere_plane_entry", "sphere_sphere_rows",
-                                                     "sphere_plane_rows", "sphere_sphere_entry_rows")},
-               "rest_speed": resting, "impulse_rows": compiled_response, "resolve_rows": compiled_response,
-               "state_at": chords}
+DEFINITIONS = {
+    **{name: sphere_contacts for name in (
+        "sphere_sphere", "sphere_plane", "plane_height", "first_entry", "sphere_sphere_entry", "sphere_plane_entry",
+        "sphere_plane_entry_of", "sphere_sphere_rows", "sphere_plane_rows", "sphere_sphere_entry_rows")},
+    "rest_speed": resting, "impulse_rows": compiled_response, "resolve_rows": compiled_response, "state_at": chords}
 
 
 @pytest.mark.parametrize("module, names", CALLERS, ids=[m.__name__.rsplit(".", 1)[1] for m, _ in CALLERS])

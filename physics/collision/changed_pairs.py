@@ -39,16 +39,15 @@ MAX_CELL_INDEX = 2.0**50
 
 
 class GridArrays(NamedTuple):
-    """A :class:`SweptGrid`'s arrays, as its kernels take them (changed in place, ``h`` fixed)."""
+    """A :class:`SweptGrid`'s arrays, as its query reads them (changed in place, ``h`` fixed); passed
+    as a plain tuple and unpacked in this order (:class:`.chords.ChordArrays` says why)."""
 
     h: float  # cell edge, m
     centers: np.ndarray  # (N, 3) swept-sphere centres, shared with the chords
     reach: np.ndarray  # (N,) swept-sphere radii
     head: np.ndarray  # (buckets,) first body of each bucket, -1: empty
     next: np.ndarray  # (N,) next body in the bucket
-    prev: np.ndarray  # (N,) previous body in the bucket
     cell: np.ndarray  # (N, 3) the cell of each body's centre
-    bucket: np.ndarray  # (N,) the bucket of each body, -1: none (large)
     large: np.ndarray  # (N,) bool: on the large list
     large_list: np.ndarray  # (N,) the large bodies, the first n_large[0]
     n_large: np.ndarray  # (1,)
@@ -78,14 +77,16 @@ class SweptGrid:
         buckets = 1
         while buckets < BUCKETS_PER_BODY * max(n, 1):
             buckets *= 2
-        self.arrays = GridArrays(self.h, centers, reach, np.full(buckets, -1, np.int64), np.full(n, -1, np.int64),
-                                 np.full(n, -1, np.int64), np.zeros((n, 3), np.int64), np.full(n, -1, np.int64),
-                                 np.zeros(n, np.bool_), np.zeros(n, np.int64), np.zeros(1, np.int64))
-        _place(self.arrays, np.arange(n))
+        self.arrays = tuple(GridArrays(self.h, centers, reach, np.full(buckets, -1, np.int64),
+                                       np.full(n, -1, np.int64), np.zeros((n, 3), np.int64), np.zeros(n, np.bool_),
+                                       np.zeros(n, np.int64), np.zeros(1, np.int64)))
+        #: what filing a body again needs besides: the previous body in its bucket, and the bucket
+        self.links = (np.full(n, -1, np.int64), np.full(n, -1, np.int64))
+        _place(self.arrays, self.links, np.arange(n))
 
     def moved(self, bodies) -> None:
         """``bodies`` have new swept spheres (already in ``centers`` and ``reach``): file them again."""
-        _place(self.arrays, bodies)
+        _place(self.arrays, self.links, bodies)
 
     def pairs(self, inverse_masses, active, changed, is_changed):
         """Pairs (i < j), sorted, of a body in ``changed`` with any body whose swept spheres overlap."""
@@ -106,9 +107,10 @@ def _hash(x, y, z, mask):
 
 
 @njit(cache=True)
-def _place(grid, bodies):
+def _place(grid, links, bodies):
     """File ``bodies`` again: each in the bucket of its centre's cell, or on the large list."""
-    h, centers, reach, head, nxt, prv, cell, bucket, large, large_list, n_large = grid
+    h, centers, reach, head, nxt, cell, large, large_list, n_large = grid
+    prv, bucket = links
     mask = head.shape[0] - 1
     for b in bodies:
         if bucket[b] >= 0:  # unlink from its bucket
@@ -140,8 +142,7 @@ def _place(grid, bodies):
 @njit(cache=True)
 def _query(grid, inverse_masses, active, changed, is_changed):
     """:meth:`SweptGrid.pairs`, compiled."""
-    h, centers, reach, head, nxt, cell, large, large_list = (grid.h, grid.centers, grid.reach, grid.head, grid.next,
-                                                             grid.cell, grid.large, grid.large_list)
+    h, centers, reach, head, nxt, cell, large, large_list, n_large = grid
     n = centers.shape[0]
     mask = head.shape[0] - 1
     out = np.empty((16, 2), dtype=np.int64)
@@ -170,21 +171,22 @@ def _query(grid, inverse_masses, active, changed, is_changed):
                             if cell[b, 0] == x and cell[b, 1] == y and cell[b, 2] == z:
                                 k, out = _take(a, b, grid, inverse_masses, active, is_changed, k, out)
                             b = nxt[b]
-        for p in range(grid.n_large[0]):
+        for p in range(n_large[0]):
             b = large_list[p]
             if large[b]:
                 k, out = _take(a, b, grid, inverse_masses, active, is_changed, k, out)
     return sort_pairs(out, k, n)
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def _take(a, b, grid, inverse_masses, active, is_changed, k, out):
     """Append the pair (a, b) when it is a new candidate: b active, once per pair, movable, overlapping."""
     if b == a or not active[b] or (is_changed[b] and b < a):
         return k, out
     if inverse_masses[a] == 0.0 and inverse_masses[b] == 0.0:
         return k, out  # two immovable bodies: nothing can respond
-    if not spheres_overlap(grid.centers, grid.reach, a, b):
+    _, centers, reach, _, _, _, _, _, _ = grid
+    if not spheres_overlap(centers, reach, a, b):
         return k, out
     out, k = append_pair(out, k, a, b)
     return k, out

@@ -13,7 +13,7 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-from .sphere_contacts import dot3, row3, sphere_plane, sphere_sphere
+from .sphere_contacts import dot3, row3, row3_of, sphere_plane, sphere_sphere
 
 
 @njit(cache=True, inline="always")
@@ -63,7 +63,7 @@ def resolve_pair(y, i, j, inverse_masses, normal, depth, restitution, friction):
     push = (depth if (depth > 0 and inv_sum > 0) else 0.0) / (inv_sum if inv_sum > 0 else 1.0)
     for k in range(3):
         y[0, i, k] = y[0, i, k] - normal[k] * (push * inv_a)
-    v_b = row3(y[1], j) if j >= 0 else (0.0, 0.0, 0.0)
+    v_b = row3_of(y, 1, j) if j >= 0 else (0.0, 0.0, 0.0)
     v_rel = (y[1, i, 0] - v_b[0], y[1, i, 1] - v_b[1], y[1, i, 2] - v_b[2])
     lam = np.empty(3)
     lam[0], lam[1], lam[2] = impulse_of(v_rel, inv_sum, (normal[0], normal[1], normal[2]), restitution, friction)
@@ -90,20 +90,21 @@ def impact_terms(y, i, j, radii, accelerations, planes):
     """The contact and approach of one pair at its impact, as the NumPy path computes them.
 
     Body ``i`` against body ``j`` (:func:`.sphere_contacts.sphere_sphere`) or, for ``j < 0``,
-    the plane ``-1 - j`` of ``planes`` (a :class:`.retest.Planes`;
+    the plane ``-1 - j`` of ``planes`` (a :class:`.retest.Planes`, as a tuple;
     :func:`.sphere_contacts.sphere_plane`), in state ``y`` (2, N, 3); the approach speed and
     the pressing acceleration are :func:`.response.normal_speed` of the velocities and of the
     ``accelerations`` along the normal. Returns ``(normal (3,), depth, speed, pressing)``.
     """
     normal = np.empty(3)
-    q_a, v_a, a_a = row3(y[0], i), row3(y[1], i), row3(accelerations, i)
+    q_a, v_a, a_a = row3_of(y, 0, i), row3_of(y, 1, i), row3(accelerations, i)
     if j >= 0:
-        q_b, v_b, a_b = row3(y[0], j), row3(y[1], j), row3(accelerations, j)
+        q_b, v_b, a_b = row3_of(y, 0, j), row3_of(y, 1, j), row3(accelerations, j)
         n, depth = sphere_sphere((q_b[0] - q_a[0], q_b[1] - q_a[1], q_b[2] - q_a[2]), radii[i] + radii[j])
     else:
         plane = -1 - j
         v_b = a_b = (0.0, 0.0, 0.0)
-        n, depth, _ = sphere_plane(q_a, radii[i], row3(planes.normals, plane), planes.offsets[plane])
+        normals, offsets, _ = planes
+        n, depth, _ = sphere_plane(q_a, radii[i], row3(normals, plane), offsets[plane])
     normal[0], normal[1], normal[2] = n
     speed = dot3((v_a[0] - v_b[0], v_a[1] - v_b[1], v_a[2] - v_b[2]), n)
     pressing = dot3((a_a[0] - a_b[0], a_a[1] - a_b[1], a_a[2] - a_b[2]), n)

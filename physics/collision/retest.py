@@ -7,7 +7,7 @@ constant forces) one kernel does all of it per changed body: its candidate partn
 chords of :mod:`.chords`), its contact (:func:`.sphere_contacts.sphere_sphere`,
 :func:`.sphere_contacts.sphere_plane`), its approach speed and rest speed
 (:func:`.resting.rest_speed`) and its time of impact
-(:func:`.sphere_contacts.sphere_sphere_entry`, :func:`.sphere_contacts.sphere_plane_entry`).
+(:func:`.sphere_contacts.sphere_sphere_entry`, :func:`.sphere_contacts.sphere_plane_entry_of`).
 Those are the kernels the NumPy path calls too, so the numbers are its bit for bit
 (tests/test_event_loop.py compares the two loops). Other shapes, overlap testing and
 state-dependent forces take the NumPy path.
@@ -27,16 +27,21 @@ from .sphere_contacts import (
     dot3,
     plane_height,
     row3,
+    row3_of,
     sphere_plane,
-    sphere_plane_entry,
+    sphere_plane_entry_of,
     sphere_sphere,
     sphere_sphere_entry,
 )
+
+# Bodies, Planes and Split reach the kernel as plain tuples, unpacked there in their order
+# (:class:`.chords.ChordArrays` says why)
 
 
 class Bodies(NamedTuple):
     """What the re-test reads of the bodies, (N,) or (N, 3)."""
 
+    radii: np.ndarray
     inverse_masses: np.ndarray
     active: np.ndarray  # bool: not removed from the world
     accelerations: np.ndarray  # (N, 3), constant over the step
@@ -64,14 +69,18 @@ def retest_spheres_and_planes(grid, chords, bodies, planes, split, changed, is_c
     """Every pair of a changed body, tested on the sub-step from ``split.t``.
 
     ``grid`` a :class:`.changed_pairs.GridArrays`, ``chords`` a :class:`.chords.ChordArrays`,
+    ``bodies``, ``planes``, ``split`` the structures above (all as plain tuples),
     ``changed`` the changed bodies (ascending) and ``is_changed`` (N,) bool marking them.
     Returns ``(i, j, in_contact, speed, normal, rest, s, watch)`` per pair, ``j >= 0`` a
     body and ``j = -1 - k`` the plane ``k``: body pairs first (lexicographic), then the
     plane pairs by plane and body: the NumPy path's groups.
     """
-    pairs = _query(grid, bodies.inverse_masses, bodies.active, changed, is_changed)
-    normals, offsets, radii, y_end, acc = planes.normals, planes.offsets, chords.radii, chords.y_end, \
-        bodies.accelerations
+    radii, inverse_masses, active, acc = bodies
+    normals, offsets, triggers = planes
+    t, dt, slop, rest_floor = split
+    y_end = chords[1]
+    _, centers, reach, _, _, _, _, _, _ = grid
+    pairs = _query(grid, inverse_masses, active, changed, is_changed)
     n_planes = normals.shape[0]
     m = pairs.shape[0] + n_planes * changed.shape[0]
     i_out = np.empty(m, np.int64)
@@ -81,8 +90,8 @@ def retest_spheres_and_planes(grid, chords, bodies, planes, split, changed, is_c
     k = pairs.shape[0]
     for s_ in range(n_planes):  # planes the changed bodies' swept spheres reach
         for a in changed:
-            if bodies.active[a] and bodies.inverse_masses[a] > 0:
-                if plane_height(row3(grid.centers, a), row3(normals, s_), offsets[s_]) <= grid.reach[a]:
+            if active[a] and inverse_masses[a] > 0:
+                if plane_height(row3(centers, a), row3(normals, s_), offsets[s_]) <= reach[a]:
                     i_out[k], j_out[k] = a, -1 - s_
                     k += 1
     i_out, j_out = i_out[:k], j_out[:k]
@@ -92,29 +101,25 @@ def retest_spheres_and_planes(grid, chords, bodies, planes, split, changed, is_c
     rest = np.empty(k)
     s = np.empty(k)
     watch = np.zeros(k, np.bool_)
-    ya = np.empty((2, 3))
-    yb = np.empty((2, 3))
     for p in range(k):
         a, b = i_out[p], j_out[p]
-        state_at(chords, a, split.t, -1.0, ya)
-        qa, va = row3(ya, 0), row3(ya, 1)
+        qa, va = state_at(chords, a, t, -1.0)
         if b >= 0:
-            state_at(chords, b, split.t, -1.0, yb)
-            qb, vb = row3(yb, 0), row3(yb, 1)
+            qb, vb = state_at(chords, b, t, -1.0)
             n, depth = sphere_sphere((qb[0] - qa[0], qb[1] - qa[1], qb[2] - qa[2]), radii[a] + radii[b])
-            end_b, acc_b = row3(y_end[1], b), row3(acc, b)
+            end_b, acc_b = row3_of(y_end, 1, b), row3(acc, b)
             trigger = False
         else:
             plane = -1 - b
             qb = vb = end_b = acc_b = (0.0, 0.0, 0.0)  # a plane: at rest
             n, depth, _ = sphere_plane(qa, radii[a], row3(normals, plane), offsets[plane])
-            trigger = planes.triggers[plane]
-        end_a, acc_a = row3(y_end[1], a), row3(acc, a)
+            trigger = triggers[plane]
+        end_a, acc_a = row3_of(y_end, 1, a), row3(acc, a)
         normal[p, 0], normal[p, 1], normal[p, 2] = n
-        in_contact[p] = depth >= -split.slop
+        in_contact[p] = depth >= -slop
         speed[p] = dot3((va[0] - vb[0], va[1] - vb[1], va[2] - vb[2]), n)
         pressing = dot3((acc_a[0] - acc_b[0], acc_a[1] - acc_b[1], acc_a[2] - acc_b[2]), n)
-        rest[p] = rest_speed(split.rest_floor, pressing, split.dt)
+        rest[p] = rest_speed(rest_floor, pressing, dt)
         if in_contact[p]:
             if speed[p] > rest[p]:
                 s[p] = np.inf if trigger else 0.0
@@ -124,13 +129,13 @@ def retest_spheres_and_planes(grid, chords, bodies, planes, split, changed, is_c
                                                   n) > rest[p]
             continue
         if b >= 0:
-            ea, eb = row3(y_end[0], a), row3(y_end[0], b)
+            ea, eb = row3_of(y_end, 0, a), row3_of(y_end, 0, b)
             s[p] = sphere_sphere_entry((qa[0] - qb[0], qa[1] - qb[1], qa[2] - qb[2]),
                                        ((ea[0] - qa[0]) - (eb[0] - qb[0]), (ea[1] - qa[1]) - (eb[1] - qb[1]),
                                         (ea[2] - qa[2]) - (eb[2] - qb[2])), radii[a] + radii[b])
         else:  # the height above the plane, less r, is linear along the chord
             plane = -1 - b
             h0 = plane_height(qa, row3(normals, plane), offsets[plane]) - radii[a]
-            h1 = plane_height(row3(y_end[0], a), row3(normals, plane), offsets[plane]) - radii[a]
-            s[p] = sphere_plane_entry(h0, h1)
+            h1 = plane_height(row3_of(y_end, 0, a), row3(normals, plane), offsets[plane]) - radii[a]
+            s[p] = sphere_plane_entry_of(h0, h1)
     return i_out, j_out, in_contact, speed, normal, rest, s, watch

@@ -29,6 +29,12 @@ def row3(x, k):
 
 
 @njit(cache=True, inline="always")
+def row3_of(x, d, k):
+    """Row (d, k) of a (2, N, 3) state as a 3-tuple (d = 0: positions, 1: velocities)."""
+    return x[d, k, 0], x[d, k, 1], x[d, k, 2]
+
+
+@njit(cache=True, inline="always")
 def sphere_sphere(d, radius_sum):
     """Two spheres whose centres are ``d = c_b - c_a`` apart: ``(normal, penetration_depth)``.
 
@@ -61,13 +67,13 @@ def sphere_plane(c, radius, plane_normal, offset):
     return normal, radius - height, height
 
 
-@vectorize(["float64(float64, float64, float64)"], cache=True)
-def first_entry(a, b, c):
+@njit(cache=True, inline="always")
+def first_entry_of(a, b, c):
     """First root in [0, 1] of a s^2 + 2 b s + c = 0 for a point starting outside (c > 0).
 
     The rationalised root s = c / (-b + sqrt(b^2 - a c)), free of the cancellation in
     (-b - sqrt(b^2 - a c)) / a; ``inf`` when the point moves away (b >= 0), misses
-    (negative discriminant) or arrives after the step. A ufunc: elementwise on arrays.
+    (negative discriminant) or arrives after the step.
     """
     disc = b * b - a * c
     if c > 0 and b < 0 and disc >= 0:
@@ -77,33 +83,45 @@ def first_entry(a, b, c):
     return np.inf
 
 
+@vectorize(["float64(float64, float64, float64)"], cache=True)
+def first_entry(a, b, c):
+    """:func:`first_entry_of` as a ufunc: elementwise on arrays (the NumPy paths)."""
+    return first_entry_of(a, b, c)
+
+
 @njit(cache=True, inline="always")
 def sphere_sphere_entry(start, chord, radius_sum):
     """Fraction of the step at which two spheres first touch, their centres moving linearly.
 
     ``start`` = c_a - c_b at the start, ``chord`` = (move of a) - (move of b); |start + s chord|
-    = r_a + r_b is a s^2 + 2 b s + c = 0 (:func:`first_entry`). Already touching (c <= 0),
+    = r_a + r_b is a s^2 + 2 b s + c = 0 (:func:`first_entry_of`). Already touching (c <= 0),
     the impact is now (0) if they approach (b < 0), else none (inf).
     """
     a, b = dot3(chord, chord), dot3(start, chord)
     c = dot3(start, start) - radius_sum * radius_sum
     if c <= 0:
         return 0.0 if b < 0 else np.inf
-    return first_entry(a, b, c)
+    return first_entry_of(a, b, c)
 
 
-@vectorize(["float64(float64, float64)"], cache=True)
-def sphere_plane_entry(h0, h1):
+@njit(cache=True, inline="always")
+def sphere_plane_entry_of(h0, h1):
     """Fraction of the step at which a sphere reaches a plane: its height less r goes h0 -> h1 linearly.
 
     Crossing zero (h0 > 0 >= h1) at s = h0 / (h0 - h1). Already touching (h0 <= 0), now (0)
-    if it moves in (h1 < h0), else none (inf). A ufunc: elementwise on arrays.
+    if it moves in (h1 < h0), else none (inf).
     """
     if h0 <= 0:
         return 0.0 if h1 < h0 else np.inf
     if h1 <= 0:
         return h0 / (h0 - h1)
     return np.inf
+
+
+@vectorize(["float64(float64, float64)"], cache=True)
+def sphere_plane_entry(h0, h1):
+    """:func:`sphere_plane_entry_of` as a ufunc: elementwise on arrays (the NumPy paths)."""
+    return sphere_plane_entry_of(h0, h1)
 
 
 # --- the NumPy paths' vectorised forms: the kernels above, row by row ----------------------

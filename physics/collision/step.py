@@ -89,7 +89,7 @@ from .impact_queue import ImpactQueue
 from .pairs import BodyPairs, ShapePairs, candidates, changed_candidates
 from .response import normal_speed, resolve
 from .resting import rest_speed, settle
-from .retest import Bodies, Planes, Split, retest_spheres_and_planes
+from .retest import Bodies, Planes, retest_spheres_and_planes
 
 #: bodies closer than this many rounding units of the largest coordinate are touching
 SLOP_ULPS = 100
@@ -134,16 +134,16 @@ class CollisionStep:
         #: spheres, planes, swept testing and constant forces: the changed pairs' narrow phase compiled
         self.compiled_retest = (self.world.detector == "swept" and self.field is not None
                                 and len(planes) == len(self.world.shapes))
-        self.planes = Planes(np.array([p.normal for p in planes], dtype=float).reshape(-1, 3),
-                             np.array([p.offset for p in planes], dtype=float),
-                             np.array([p.trigger for p in planes], dtype=bool))
+        self.planes = tuple(Planes(np.array([p.normal for p in planes], dtype=float).reshape(-1, 3),
+                                   np.array([p.offset for p in planes], dtype=float),
+                                   np.array([p.trigger for p in planes], dtype=bool)))
         #: the loop this run uses: "auto" is "incremental" where it agrees with "full" to round-off
         self.event_loop = self.world.event_loop
         if self.event_loop == "auto":
             exact = self.field is not None and rest_of_step_is_unchanged(self.integrator)
             self.event_loop = "incremental" if exact else "full"
         self._active = np.ones(len(self.radii), bool)  # bodies not removed (removal is for good)
-        self._bodies = Bodies(self.inverse_masses, self._active, self.field)
+        self._bodies = tuple(Bodies(self.radii, self.inverse_masses, self._active, self.field))
         self._is_changed = np.zeros(len(self.radii), bool)  # scratch: the bodies of one re-test
 
     def __call__(self, t, y, dt, carry):
@@ -212,8 +212,8 @@ class CollisionStep:
             active[list(self.log.removed)] = False
         is_changed[moved] = True
         i, j, in_contact, speed, normal, rest, s, watch = retest_spheres_and_planes(
-            grid.arrays, chords.arrays, self._bodies, self.planes, Split(t, dt, slop, self.world.rest_speed), moved,
-            is_changed)
+            grid.arrays, chords.arrays, self._bodies, self.planes, (t, dt, slop, self.world.rest_speed),  # a Split
+            moved, is_changed)
         is_changed[moved] = False
         js = j.tolist()  # the body pairs come first, then one run per plane
         n = len(js)
