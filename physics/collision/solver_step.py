@@ -263,10 +263,10 @@ def solve_members(starts, settings, bodies, inverse_mass, accel, parallel=False)
     residual = np.zeros(len(starts))
     soft = np.array([start.softness for start in starts])
     members = si.Members(bodies, contacts, np.array([start.dt for start in starts]),
-                      np.array([s.substeps for s in settings]), np.array([s.iterations for s in settings]),
-                      np.ascontiguousarray(soft[:, 0]), np.ascontiguousarray(soft[:, 1]),
-                      np.ascontiguousarray(soft[:, 2]), np.array([s.push_speed for s in settings]),
-                      np.array([s.slop for s in settings]))
+                         np.array([s.substeps for s in settings]), np.array([s.iterations for s in settings]),
+                         np.ascontiguousarray(soft[:, 0]), np.ascontiguousarray(soft[:, 1]),
+                         np.ascontiguousarray(soft[:, 2]), np.array([s.push_speed for s in settings]),
+                         np.array([s.slop for s in settings]))
     (si.step_members_parallel if parallel else si.step_members)(
         si.BodyColumns(q, v, np.zeros_like(q), inverse_mass, accel), columns, members, residual)
     pn, pt, total = columns.pn, columns.pt, columns.total
@@ -281,7 +281,7 @@ def solve_members(starts, settings, bodies, inverse_mass, accel, parallel=False)
 def _contact_columns(c: Contacts, threshold, pn, pt) -> si.ContactColumns:
     """The solver kernels' contact constraints: ``c``'s columns, the warm start (pn, pt; changed in place)."""
     return si.ContactColumns(c.i, c.j, c.normal, c.separation, c.normal_speed, c.mass, c.friction, c.restitution,
-                          threshold, pn, pt, np.zeros(len(pn)), np.zeros(len(pn)))
+                             threshold, pn, pt, np.zeros(len(pn)), np.zeros(len(pn)))
 
 
 @dataclasses.dataclass(frozen=True)

@@ -93,6 +93,8 @@ from .retest import Bodies, Planes, retest_spheres_and_planes
 
 #: bodies closer than this many rounding units of the largest coordinate are touching
 SLOP_ULPS = 100
+
+
 def contact_slop(q) -> float:
     """The gap below which bodies count as touching: a few hundred rounding errors, m."""
     return SLOP_ULPS * float(np.finfo(q.dtype).eps) * max(1.0, float(np.max(np.abs(q))))
