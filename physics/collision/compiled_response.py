@@ -13,7 +13,7 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-from .sphere_contacts import dot3, row3, row3_of, sphere_plane, sphere_sphere
+from .sphere_contacts import dot3, row3, row3_of, sphere_plane, sphere_sphere, sub3
 
 
 @njit(cache=True, inline="always")
@@ -64,7 +64,7 @@ def resolve_pair(y, i, j, inverse_masses, normal, depth, restitution, friction):
     for k in range(3):
         y[0, i, k] = y[0, i, k] - normal[k] * (push * inv_a)
     v_b = row3_of(y, 1, j) if j >= 0 else (0.0, 0.0, 0.0)
-    v_rel = (y[1, i, 0] - v_b[0], y[1, i, 1] - v_b[1], y[1, i, 2] - v_b[2])
+    v_rel = sub3(row3_of(y, 1, i), v_b)
     lam = np.empty(3)
     lam[0], lam[1], lam[2] = impulse_of(v_rel, inv_sum, (normal[0], normal[1], normal[2]), restitution, friction)
     for k in range(3):
@@ -99,13 +99,13 @@ def impact_terms(y, i, j, radii, accelerations, planes):
     q_a, v_a, a_a = row3_of(y, 0, i), row3_of(y, 1, i), row3(accelerations, i)
     if j >= 0:
         q_b, v_b, a_b = row3_of(y, 0, j), row3_of(y, 1, j), row3(accelerations, j)
-        n, depth = sphere_sphere((q_b[0] - q_a[0], q_b[1] - q_a[1], q_b[2] - q_a[2]), radii[i] + radii[j])
+        n, depth = sphere_sphere(sub3(q_b, q_a), radii[i] + radii[j])
     else:
         plane = -1 - j
         v_b = a_b = (0.0, 0.0, 0.0)
         normals, offsets, _ = planes
         n, depth, _ = sphere_plane(q_a, radii[i], row3(normals, plane), offsets[plane])
     normal[0], normal[1], normal[2] = n
-    speed = dot3((v_a[0] - v_b[0], v_a[1] - v_b[1], v_a[2] - v_b[2]), n)
-    pressing = dot3((a_a[0] - a_b[0], a_a[1] - a_b[1], a_a[2] - a_b[2]), n)
+    speed = dot3(sub3(v_a, v_b), n)
+    pressing = dot3(sub3(a_a, a_b), n)
     return normal, depth, speed, pressing

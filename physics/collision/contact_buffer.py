@@ -26,7 +26,7 @@ from numba import njit
 
 from .pairs import SweptSpheres, near_shapes
 from .shapes import DEFAULT_MATERIAL
-from .sphere_contacts import plane_height, row3, sphere_plane, sphere_sphere
+from .sphere_contacts import plane_height, row3, sphere_plane, sphere_sphere, sub3
 
 #: the speculative margin added to every swept bound, as a fraction of the median radius: a
 #: body sped up by a contact during the step can still reach this much further than its forces take it
@@ -183,8 +183,7 @@ def _pair_and_plane_contacts(pi, pj, bodies, swept, planes, materials, stride):
     for b in range(n):
         while p < n_pairs and pi[p] == b:
             c = pj[p]
-            (n0, n1, n2), depth = sphere_sphere((q[c, 0] - q[b, 0], q[c, 1] - q[b, 1], q[c, 2] - q[b, 2]),
-                                                radii[b] + radii[c])
+            (n0, n1, n2), depth = sphere_sphere(sub3(row3(q, c), row3(q, b)), radii[b] + radii[c])
             ci[row], cj[row], shape[row], key[row] = b, c, -1, b * stride + c
             normal[row, 0], normal[row, 1], normal[row, 2] = n0, n1, n2
             separation[row] = -depth

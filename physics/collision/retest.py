@@ -32,6 +32,7 @@ from .sphere_contacts import (
     sphere_plane_entry_of,
     sphere_sphere,
     sphere_sphere_entry,
+    sub3,
 )
 
 # Bodies, Planes and Split reach the kernel as plain tuples, unpacked there in their order
@@ -106,7 +107,7 @@ def retest_spheres_and_planes(grid, chords, bodies, planes, split, changed, is_c
         qa, va = state_at(chords, a, t, -1.0)
         if b >= 0:
             qb, vb = state_at(chords, b, t, -1.0)
-            n, depth = sphere_sphere((qb[0] - qa[0], qb[1] - qa[1], qb[2] - qa[2]), radii[a] + radii[b])
+            n, depth = sphere_sphere(sub3(qb, qa), radii[a] + radii[b])
             end_b, acc_b = row3_of(y_end, 1, b), row3(acc, b)
             trigger = False
         else:
@@ -117,22 +118,19 @@ def retest_spheres_and_planes(grid, chords, bodies, planes, split, changed, is_c
         end_a, acc_a = row3_of(y_end, 1, a), row3(acc, a)
         normal[p, 0], normal[p, 1], normal[p, 2] = n
         in_contact[p] = depth >= -slop
-        speed[p] = dot3((va[0] - vb[0], va[1] - vb[1], va[2] - vb[2]), n)
-        pressing = dot3((acc_a[0] - acc_b[0], acc_a[1] - acc_b[1], acc_a[2] - acc_b[2]), n)
+        speed[p] = dot3(sub3(va, vb), n)
+        pressing = dot3(sub3(acc_a, acc_b), n)
         rest[p] = rest_speed(rest_floor, pressing, dt)
         if in_contact[p]:
             if speed[p] > rest[p]:
                 s[p] = np.inf if trigger else 0.0
             else:  # resting: watched when its approach ends the step faster than its rest speed
                 s[p] = np.inf
-                watch[p] = (not trigger) and dot3((end_a[0] - end_b[0], end_a[1] - end_b[1], end_a[2] - end_b[2]),
-                                                  n) > rest[p]
+                watch[p] = (not trigger) and dot3(sub3(end_a, end_b), n) > rest[p]
             continue
         if b >= 0:
             ea, eb = row3_of(y_end, 0, a), row3_of(y_end, 0, b)
-            s[p] = sphere_sphere_entry((qa[0] - qb[0], qa[1] - qb[1], qa[2] - qb[2]),
-                                       ((ea[0] - qa[0]) - (eb[0] - qb[0]), (ea[1] - qa[1]) - (eb[1] - qb[1]),
-                                        (ea[2] - qa[2]) - (eb[2] - qb[2])), radii[a] + radii[b])
+            s[p] = sphere_sphere_entry(sub3(qa, qb), sub3(sub3(ea, qa), sub3(eb, qb)), radii[a] + radii[b])
         else:  # the height above the plane, less r, is linear along the chord
             plane = -1 - b
             h0 = plane_height(qa, row3(normals, plane), offsets[plane]) - radii[a]

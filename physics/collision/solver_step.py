@@ -110,7 +110,7 @@ class SolverStep:
         a = self.field if self.field is not None else np.asarray(self.model.acceleration(t, q0, v0), dtype=float)
         # where the forces alone take each body in the step: the scene's integrator's step under
         # the accelerations at its start (semi-implicit Euler: q + dt (v + dt a))
-        y_forces, _ = self.integrator.step(ConstantField(a), t, np.stack([q0, v0]), dt, None)
+        y_forces, _ = self.integrator.step(ConstantField(a), t, np.asarray(y, dtype=float), dt, None)
         contacts = find_contacts(self.world, self.materials, BodyState(q0, v0, a, self.radii, self.inverse_masses),
                                  np.ascontiguousarray(y_forces[0]), self.log.removed, self.margin)
         if self._cancelled:

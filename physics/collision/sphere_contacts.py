@@ -13,13 +13,19 @@ numbers bit for bit.
 from __future__ import annotations
 
 import numpy as np
-from numba import njit, vectorize
+from numba import njit
 
 
 @njit(cache=True, inline="always")
 def dot3(x, y):
     """x . y, added left to right as NumPy's ``(x * y).sum(axis=-1)`` adds three products."""
     return x[0] * y[0] + x[1] * y[1] + x[2] * y[2]
+
+
+@njit(cache=True, inline="always")
+def sub3(x, y):
+    """x - y, component by component."""
+    return x[0] - y[0], x[1] - y[1], x[2] - y[2]
 
 
 @njit(cache=True, inline="always")
@@ -83,12 +89,6 @@ def first_entry_of(a, b, c):
     return np.inf
 
 
-@vectorize(["float64(float64, float64, float64)"], cache=True)
-def first_entry(a, b, c):
-    """:func:`first_entry_of` as a ufunc: elementwise on arrays (the NumPy paths)."""
-    return first_entry_of(a, b, c)
-
-
 @njit(cache=True, inline="always")
 def sphere_sphere_entry(start, chord, radius_sum):
     """Fraction of the step at which two spheres first touch, their centres moving linearly.
@@ -118,12 +118,6 @@ def sphere_plane_entry_of(h0, h1):
     return np.inf
 
 
-@vectorize(["float64(float64, float64)"], cache=True)
-def sphere_plane_entry(h0, h1):
-    """:func:`sphere_plane_entry_of` as a ufunc: elementwise on arrays (the NumPy paths)."""
-    return sphere_plane_entry_of(h0, h1)
-
-
 # --- the NumPy paths' vectorised forms: the kernels above, row by row ----------------------
 
 
@@ -146,6 +140,24 @@ def sphere_plane_rows(c, radius, plane_normal, offset):
         (normal[k, 0], normal[k, 1], normal[k, 2]), depth[k], height[k] = sphere_plane(
             (c[k, 0], c[k, 1], c[k, 2]), radius[k], n, offset)
     return normal, depth, height
+
+
+@njit(cache=True)
+def first_entry_rows(a, b, c):
+    """:func:`first_entry_of` of each element: a, b, c (K,) -> s (K,)."""
+    s = np.empty(len(a))
+    for k in range(len(a)):
+        s[k] = first_entry_of(a[k], b[k], c[k])
+    return s
+
+
+@njit(cache=True)
+def sphere_plane_entry_rows(h0, h1):
+    """:func:`sphere_plane_entry_of` of each element: h0, h1 (K,) -> s (K,)."""
+    s = np.empty(len(h0))
+    for k in range(len(h0)):
+        s[k] = sphere_plane_entry_of(h0[k], h1[k])
+    return s
 
 
 @njit(cache=True)

@@ -53,13 +53,25 @@ import numpy as np
 
 from .narrow_phase import collide
 from .shapes import Box, OrientedBox, Plane, Shape, Sphere
-from .sphere_contacts import first_entry, sphere_plane_entry, sphere_sphere_entry_rows
+from .sphere_contacts import first_entry_rows, sphere_plane_entry_rows, sphere_sphere_entry_rows
 
 NO_IMPACT = np.inf
 
 
 def _dot(x, y):
     return (x * y).sum(axis=-1)
+
+
+def _elementwise(rows, *args):
+    """``rows`` (a compiled kernel on (K,) arrays) on the broadcast ``args``, in their shape."""
+    args = np.broadcast_arrays(*(np.asarray(x, dtype=float) for x in args))
+    return rows(*(np.ascontiguousarray(x.reshape(-1)) for x in args)).reshape(args[0].shape)
+
+
+def _first_entry(a, b, c):
+    """First root in [0, 1] of a t^2 + 2 b t + c = 0 for a point starting outside (c > 0), else inf
+    (:func:`.sphere_contacts.first_entry_of`, elementwise)."""
+    return _elementwise(first_entry_rows, a, b, c)
 
 
 def sphere_sphere(p1, p2, q1, q2, r_p, r_q):
@@ -86,7 +98,7 @@ def sphere_plane(p1, p2, radius, plane: Plane):
     """The centre's height above the plane, less r, is linear along the chord: h0 + s (h1 - h0)."""
     h0 = _dot(p1, plane.normal) - plane.offset - radius
     h1 = _dot(p2, plane.normal) - plane.offset - radius
-    return sphere_plane_entry(h0, h1)  # elementwise (:func:`.sphere_contacts.sphere_plane_entry`)
+    return _elementwise(sphere_plane_entry_rows, h0, h1)  # :func:`.sphere_contacts.sphere_plane_entry_of`
 
 
 def _slab_entry(origin, d, lo, hi):
@@ -131,14 +143,14 @@ def _aabb_entry(p1, p2, radius, lo, hi):
         rel = p1 - start
         rel_across, d_across = rel.copy(), d.copy()
         rel_across[:, k], d_across[:, k] = 0.0, 0.0
-        s = first_entry(_dot(d_across, d_across), _dot(rel_across, d_across),
+        s = _first_entry(_dot(d_across, d_across), _dot(rel_across, d_across),
                          _dot(rel_across, rel_across) - radius**2)
         along = rel[:, k] + np.where(np.isfinite(s), s, 0.0) * d[:, k]
         times.append(np.where((along >= 0) & (along <= length), s, NO_IMPACT))
     # eight corner spheres
     for corner in corners:
         rel = p1 - corner
-        times.append(first_entry(_dot(d, d), _dot(rel, d), _dot(rel, rel) - radius**2))
+        times.append(_first_entry(_dot(d, d), _dot(rel, d), _dot(rel, rel) - radius**2))
     return np.min(np.stack(times), axis=0)
 
 
