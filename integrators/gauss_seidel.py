@@ -31,11 +31,11 @@ from steplab.physics.symmetric_blocks import times, transposed_times
 
 
 @njit(cache=True, inline="always")
-def _scatter_row(blocks, above_ptr, hi, n, k, x0, x1, x2, out, sign):  # pragma: no cover - compiled
-    """out_hi += sign C^T x for each pair (k, hi) of row k: row k's part in the rows after it."""
+def _scatter_row(blocks, above_ptr, hi, n, k, x, out, sign):  # pragma: no cover - compiled
+    """out_hi += sign C^T x for each pair (k, hi) of row k (x a 3-tuple): row k's part in the rows after it."""
     for u in range(above_ptr[k], above_ptr[k + 1]):
         b = 3 * hi[u]
-        c0, c1, c2 = transposed_times(blocks, n + u, x0, x1, x2)
+        c0, c1, c2 = transposed_times(blocks, n + u, x[0], x[1], x[2])
         out[b] += sign * c0  # sign is +-1: exact, so a - c and a + (-1) c round alike
         out[b + 1] += sign * c1
         out[b + 2] += sign * c2
@@ -55,7 +55,7 @@ def forward_sweep(blocks, above_ptr, hi, inverse, r, z, work):  # pragma: no cov
         t0, t1, t2 = times(inverse, k, work[a], work[a + 1], work[a + 2])
         z[a], z[a + 1], z[a + 2] = t0, t1, t2
         rz += r[a] * t0 + r[a + 1] * t1 + r[a + 2] * t2
-        _scatter_row(blocks, above_ptr, hi, n, k, t0, t1, t2, work, -1.0)
+        _scatter_row(blocks, above_ptr, hi, n, k, (t0, t1, t2), work, -1.0)
     return rz
 
 
@@ -92,7 +92,7 @@ def transformed_product(blocks, above_ptr, hi, inverse, p, q, t, work):  # pragm
     for k in range(n):
         a = 3 * k
         s0, s1, s2 = times(inverse, k, rest[a], rest[a + 1], rest[a + 2])
-        _scatter_row(blocks, above_ptr, hi, n, k, s0, s1, s2, rest, -1.0)
+        _scatter_row(blocks, above_ptr, hi, n, k, (s0, s1, s2), rest, -1.0)
         q[a], q[a + 1], q[a + 2] = s0 + t[a], s1 + t[a + 1], s2 + t[a + 2]
         curvature += p[a] * q[a] + p[a + 1] * q[a + 1] + p[a + 2] * q[a + 2]
     return curvature
@@ -105,7 +105,7 @@ def residual_norm(blocks, above_ptr, hi, r, dr, work):  # pragma: no cover - com
     work[:] = dr
     for k in range(n):
         a = 3 * k
-        _scatter_row(blocks, above_ptr, hi, n, k, r[a], r[a + 1], r[a + 2], work, 1.0)
+        _scatter_row(blocks, above_ptr, hi, n, k, (r[a], r[a + 1], r[a + 2]), work, 1.0)
     total = 0.0
     for i in range(work.size):
         total += work[i] * work[i]

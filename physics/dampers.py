@@ -9,6 +9,7 @@ import numpy as np
 
 from ._array import dot, norm, rows, safe_unit, scatter_pair_blocks, scatter_pairs
 from .force import Force
+from .jacobian_blocks import PairJacobian
 from .scene_toml import REQUIRED
 
 
@@ -70,8 +71,6 @@ class Dampers(Force):
         (not symmetric, and indefinite) is left out, as Baraff and Witkin do with their
         damping forces (1998, section 5).
         """
-        from .sparse_jacobian import PairJacobian
-
         d, length, u = self._terms(xp, q, v)
         c = self.damping[:, None, None]
         ddT = d[:, :, None] * d[:, None, :]

@@ -37,37 +37,9 @@ import weakref
 import numpy as np
 from numba import njit
 
-
-@dataclasses.dataclass(frozen=True)
-class PairJacobian:
-    """The Jacobian of a pair force, one 3x3 block per pair.
-
-    Parameters
-    ----------
-    i, j : int ndarray, shape (P,)
-        The two bodies of each pair.
-    dq, dv : ndarray, shape (P, 3, 3), or None
-        ``d f_i / d q_j`` and ``d f_i / d v_j``; None where identically zero.
-    """
-
-    i: np.ndarray
-    j: np.ndarray
-    dq: np.ndarray | None
-    dv: np.ndarray | None
-
-
-@dataclasses.dataclass(frozen=True)
-class BodyJacobian:
-    """The Jacobian of a per-body force (F_i depends on q_i, v_i only): one 3x3 block per body.
-
-    Parameters
-    ----------
-    dq, dv : ndarray, shape (N, 3, 3), or None
-        ``d F_i / d q_i`` and ``d F_i / d v_i``; None where identically zero.
-    """
-
-    dq: np.ndarray | None
-    dv: np.ndarray | None
+from .jacobian_blocks import BodyJacobian as BodyJacobian
+from .jacobian_blocks import PairJacobian as PairJacobian
+from .sparse_kernels import NewtonTerms, has_kernel, pair_groups
 
 
 @njit(cache=True)
@@ -278,7 +250,8 @@ class _CompiledPairs:
     def add(self, data, slots, coefficient_q, coefficient_v):
         with_force = self.force is not None
         force = self.force if with_force else np.zeros_like(self.q)
-        self.group.add(force, data, slots, self.q, self.v, coefficient_q, coefficient_v, self.definite, with_force)
+        self.group.add(force, data, slots, self.q, self.v, NewtonTerms(float(coefficient_q), float(coefficient_v),
+                                                                      bool(self.definite), with_force, True))
 
 
 def block_pattern(model, blocks, free_only: bool):
@@ -369,8 +342,6 @@ def newton_system(model, t, q, v, h: float, definite: bool = False):
 
 def _newton_system(model, t, q, v, h, definite, compiled, with_acceleration):
     _require_numpy(model, "implicit Euler's sparse Newton matrix")
-    from .sparse_kernels import has_kernel, pair_groups
-
     q, v = np.ascontiguousarray(q, dtype=float), np.ascontiguousarray(v, dtype=float)
     force = np.zeros_like(q) if with_acceleration and compiled else None
     blocks = [_CompiledPairs(group, q, v, definite, force) for group in (pair_groups(model) if compiled else ())]
@@ -398,8 +369,6 @@ def acceleration(model, t, q, v):
     the bench's cloth; a model with a reactive force gets ``model.acceleration`` itself.
     """
     _require_numpy(model, "the compiled acceleration")
-    from .sparse_kernels import pair_groups
-
     q, v = np.ascontiguousarray(q, dtype=float), np.ascontiguousarray(v, dtype=float)
     if model.reactive_forces:
         return np.array(model.acceleration(t, q, v), dtype=float)
@@ -416,8 +385,6 @@ def _acceleration(model, t, q, v, pair_force):
     sums it (in ``pair_force``'s place); where a reactive force needs the sum of all the
     others, a copy of the model's own. Either way an array of its own, the caller's to change.
     """
-    from .sparse_kernels import has_kernel
-
     if model.reactive_forces or pair_force is None:
         return np.array(model.acceleration(t, q, v), dtype=float)
     for f in model.varying_forces:

@@ -24,6 +24,7 @@ from __future__ import annotations
 
 import dataclasses
 import weakref
+from typing import NamedTuple
 
 import numpy as np
 from numba import njit
@@ -32,10 +33,31 @@ from .dampers import Dampers
 from .springs import Springs
 
 
+class PairColumns(NamedTuple):
+    """A group's pairs (P,) and their springs' and dampers' constants (size 0: none of that kind)."""
+
+    i: np.ndarray
+    j: np.ndarray
+    stiffness: np.ndarray  # k, N/m
+    rest_length: np.ndarray  # L, m
+    damping: np.ndarray  # c, N s/m
+
+
+class NewtonTerms(NamedTuple):
+    """What one pass adds: the blocks' coefficients in the Newton matrix, and which parts."""
+
+    coefficient_q: float  # of the position blocks (-h^2)
+    coefficient_v: float  # of the velocity blocks (-h)
+    definite: bool  # the positive semidefinite parts only
+    with_force: bool
+    with_blocks: bool
+
+
 @njit(cache=True, inline="always")
-def _add(data, slots, p, s00, s11, s22, s01, s02, s12):  # pragma: no cover - compiled
-    # the symmetric block S (its six entries): +S at the pair's stored block, -S at (i, i)
-    # and (j, j); a slot of -1 is a block outside the matrix
+def _add(data, slots, p, s):  # pragma: no cover - compiled
+    # the symmetric block S (its six entries s = (s00, s11, s22, s01, s02, s12)): +S at the
+    # pair's stored block, -S at (i, i) and (j, j); a slot of -1 is a block outside the matrix
+    s00, s11, s22, s01, s02, s12 = s
     for k in range(3):
         slot = slots[p, k]
         if slot < 0:
@@ -54,8 +76,7 @@ def _add(data, slots, p, s00, s11, s22, s01, s02, s12):  # pragma: no cover - co
 
 
 @njit(cache=True)
-def _pair_system(force, data, slots, q, v, i, j, stiffness, rest_length, damping, coefficient_q, coefficient_v,
-                 definite, with_force, with_blocks):  # pragma: no cover - compiled
+def _pair_system(pairs, q, v, terms, force, data, slots):  # pragma: no cover - compiled
     # Springs where stiffness is given (size > 0), dampers where damping is. With d the
     # unit vector from i to j, l the length, u = v_j - v_i:
     #   force on i (-it on j): [k (l - L) + c (d . u)] d
@@ -63,6 +84,8 @@ def _pair_system(force, data, slots, q, v, i, j, stiffness, rest_length, damping
     #   damper blocks: d f_i / d v_j = c d d^T, and the symmetric part of d f_i / d q_j,
     #   c [(d . u) (I - d d^T) + (d w^T + w d^T) / 2] / l with w = u - (d . u) d (definite: none)
     # all in one symmetric S = a d d^T + b I + e (d w^T + w d^T) / 2.
+    i, j, stiffness, rest_length, damping = pairs
+    coefficient_q, coefficient_v, definite, with_force, with_blocks = terms
     springs, dampers = stiffness.size > 0, damping.size > 0
     for p in range(i.size):
         bi, bj = i[p], j[p]
@@ -102,9 +125,9 @@ def _pair_system(force, data, slots, q, v, i, j, stiffness, rest_length, damping
             force[bj, 2] -= s * d2
         if not with_blocks:
             continue
-        _add(data, slots, p, a * d0 * d0 + b + e * d0 * w0, a * d1 * d1 + b + e * d1 * w1,
-             a * d2 * d2 + b + e * d2 * w2, a * d0 * d1 + 0.5 * e * (d0 * w1 + w0 * d1),
-             a * d0 * d2 + 0.5 * e * (d0 * w2 + w0 * d2), a * d1 * d2 + 0.5 * e * (d1 * w2 + w1 * d2))
+        _add(data, slots, p, (a * d0 * d0 + b + e * d0 * w0, a * d1 * d1 + b + e * d1 * w1,
+                              a * d2 * d2 + b + e * d2 * w2, a * d0 * d1 + 0.5 * e * (d0 * w1 + w0 * d1),
+                              a * d0 * d2 + 0.5 * e * (d0 * w2 + w0 * d2), a * d1 * d2 + 0.5 * e * (d1 * w2 + w1 * d2)))
 
 
 _NONE = np.zeros(0)
@@ -127,22 +150,21 @@ class PairGroup:
     def j(self):
         return (self.springs or self.dampers).j
 
-    def add(self, force, data, slots, q, v, coefficient_q: float, coefficient_v: float, definite: bool,
-            with_force: bool) -> None:
-        """Add the group's Newton blocks into ``data`` and, ``with_force``, its forces into ``force`` (N, 3)."""
-        self._run(force, data, slots, q, v, coefficient_q, coefficient_v, definite, with_force, True)
+    @property
+    def columns(self) -> PairColumns:
+        springs, dampers = self.springs, self.dampers
+        return PairColumns(np.asarray(self.i), np.asarray(self.j),
+                           _NONE if springs is None else np.asarray(springs.stiffness, float),
+                           _NONE if springs is None else np.asarray(springs.rest_length, float),
+                           _NONE if dampers is None else np.asarray(dampers.damping, float))
+
+    def add(self, force, data, slots, q, v, terms: NewtonTerms) -> None:
+        """Add the group's Newton blocks into ``data`` and, ``terms.with_force``, its forces into ``force`` (N, 3)."""
+        _pair_system(self.columns, q, v, terms, force, data, slots)
 
     def add_forces(self, force, q, v) -> None:
         """Add the group's forces into ``force`` (N, 3), without any blocks."""
-        self._run(force, _NO_BLOCKS, _NO_SLOTS, q, v, 0.0, 0.0, False, True, False)
-
-    def _run(self, force, data, slots, q, v, coefficient_q, coefficient_v, definite, with_force, with_blocks):
-        springs, dampers = self.springs, self.dampers
-        _pair_system(force, data, slots, q, v, np.asarray(self.i), np.asarray(self.j),
-                     _NONE if springs is None else np.asarray(springs.stiffness, float),
-                     _NONE if springs is None else np.asarray(springs.rest_length, float),
-                     _NONE if dampers is None else np.asarray(dampers.damping, float),
-                     float(coefficient_q), float(coefficient_v), bool(definite), bool(with_force), bool(with_blocks))
+        _pair_system(self.columns, q, v, NewtonTerms(0.0, 0.0, False, True, False), force, _NO_BLOCKS, _NO_SLOTS)
 
 
 def has_kernel(force) -> bool:

@@ -9,6 +9,7 @@ import numpy as np
 
 from ._array import norm, rows, safe_unit, scatter_pair_blocks, scatter_pairs
 from .force import Force
+from .jacobian_blocks import PairJacobian
 from .scene_toml import REQUIRED
 
 
@@ -76,8 +77,6 @@ class Springs(Force):
         l < L (a compressed spring buckles sideways), is left out, so that every block is
         positive semidefinite (Choi and Ko, "Stable but responsive cloth", 2002).
         """
-        from .sparse_jacobian import PairJacobian
-
         # f_i = k (l - L) d with d = delta / l, delta = q_j - q_i: the axial term k d d^T and
         # the geometric stiffness k (1 - L / l) (I - d d^T)
         d, length = self._geometry(xp, q)

@@ -302,7 +302,7 @@ def test_contacts_are_the_narrow_phases_in_key_order():
     # The compiled pass (body pairs and planes) and the shapes' narrow phase, against a brute
     # force over every swept sphere and the narrow phase's functions, contact by contact.
     from steplab.physics.collision import OrientedBox, rotation_matrix
-    from steplab.physics.collision.contact_buffer import Materials, find_contacts
+    from steplab.physics.collision.contact_buffer import BodyState, Materials, find_contacts
     from steplab.physics.collision.narrow_phase import collide, collide_sphere_sphere
     from steplab.physics.collision.shapes import Sphere
 
@@ -316,9 +316,8 @@ def test_contacts_are_the_narrow_phases_in_key_order():
               Plane(np.array([-0.6, 0.0, 0.8]), 0.5),
               OrientedBox(np.array([0.6, 0.5, 0.0]), np.array([0.3, 0.2, 0.1]), rotation_matrix([1, 1, 0], 30.0)))
     world = CollisionWorld(shapes=shapes, pair_properties=PairProperties(0.7, 0.3), method="solver")
-    c = find_contacts(world, Materials.of(world, n), q, v, a, radii, inverse_masses, dt, margin=margin)
-
     q1 = q + dt * (v + dt * a)
+    c = find_contacts(world, Materials.of(world, n), BodyState(q, v, a, radii, inverse_masses), q1, margin=margin)
     centre, reach = 0.5 * (q + q1), radii + 0.5 * np.linalg.norm(q1 - q, axis=1) + margin
     expected = []  # (key, normal, separation, approach speed) in key order
     stride = n + len(shapes)

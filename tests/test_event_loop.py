@@ -143,16 +143,31 @@ def test_the_compiled_retest_gives_the_numpy_numbers_bit_for_bit():
 @settings(max_examples=30)
 @given(seed=st.integers(0, 2**16), eps=st.floats(0, 1), friction=st.sampled_from([0.0, 0.3, 5.0]),
        static=st.booleans())
-def test_the_compiled_response_gives_the_numpy_numbers_bit_for_bit(seed, eps, friction, static):
+def test_the_compiled_response_moves_apart_and_applies_equation_4(seed, eps, friction, static):
+    # resolve_pair (what the event loop calls; response.resolve runs it pair by pair) against
+    # the lecture's collision step written out here: apart by depth in proportion to 1/m,
+    # then Lambda = -(1 + eps) v_n / (1/m_i + 1/m_j) n with Coulomb friction on the slide
     from steplab.physics.collision.compiled_response import resolve_pair
-    from steplab.physics.collision.response import resolve
 
     rng = np.random.default_rng(seed)
-    y, inverse_masses = rng.normal(size=(2, 3, 3)), rng.uniform(0, 2, 3)
+    y, inverse_masses = rng.normal(size=(2, 3, 3)), rng.uniform(0.1, 2, 3)
     normal, depth = rng.normal(size=3), float(rng.uniform(-0.01, 0.01))
     normal /= np.linalg.norm(normal)
-    y_numpy, y_compiled = y.copy(), y.copy()
-    lam = resolve(y_numpy, np.array([0]), None if static else np.array([2]), inverse_masses, normal[None],
-                  np.array([depth]), eps, friction)
-    lam_compiled = resolve_pair(y_compiled, 0, -1 if static else 2, inverse_masses, normal, depth, eps, friction)
-    assert np.array_equal(lam[0], lam_compiled) and np.array_equal(y_numpy, y_compiled)
+    j = -1 if static else 2
+    w_i, w_j = inverse_masses[0], 0.0 if static else inverse_masses[2]
+    v_rel = y[1, 0] - (0.0 if static else y[1, 2])
+    v_n = v_rel @ normal
+    lam_s = -(1 + eps) * v_n / (w_i + w_j) if v_n > 0 else 0.0
+    v_t = v_rel - v_n * normal
+    slide = min(np.linalg.norm(v_t) / (w_i + w_j), friction * abs(lam_s)) if v_n > 0 else 0.0
+    expected = lam_s * normal - slide * v_t / np.linalg.norm(v_t)
+    push = max(depth, 0.0) / (w_i + w_j)
+    y_expected = y.copy()
+    y_expected[0, 0] -= push * w_i * normal
+    y_expected[1, 0] += expected * w_i
+    if not static:
+        y_expected[0, 2] += push * w_j * normal
+        y_expected[1, 2] -= expected * w_j
+    lam = resolve_pair(y, 0, j, inverse_masses, normal, depth, eps, friction)
+    np.testing.assert_allclose(lam, expected, rtol=1e-12, atol=1e-14)
+    np.testing.assert_allclose(y, y_expected, rtol=1e-12, atol=1e-14)

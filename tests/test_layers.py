@@ -76,10 +76,6 @@ def test_the_check_sees_an_upward_import(tmp_path):
 
 # --- no import cycles ---------------------------------------------------------------------
 
-#: the cycle another branch removes (springs/dampers, sparse_jacobian and sparse_kernels, issue 24);
-#: the lead deletes this entry when merging it
-KNOWN_CYCLES = ({"steplab.physics.dampers", "steplab.physics.sparse_jacobian", "steplab.physics.sparse_kernels",
-                 "steplab.physics.springs"},)
 
 
 def modules() -> dict[str, Path]:
@@ -127,7 +123,7 @@ def cycles(graph: dict[str, set[str]]) -> list[set[str]]:
 
 
 def test_no_import_cycle_among_steplab_modules():
-    found = [c for c in cycles(import_graph(modules())) if c not in KNOWN_CYCLES]
+    found = cycles(import_graph(modules()))
     assert not found, [sorted(c) for c in found]
 
 

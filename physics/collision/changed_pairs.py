@@ -20,6 +20,8 @@ machine.
 
 from __future__ import annotations
 
+from typing import NamedTuple
+
 import numpy as np
 from numba import njit
 
@@ -34,6 +36,21 @@ BUCKETS_PER_BODY = 2
 ROUNDING = 1e-12
 #: cell indices stay below 2^50 (exact in float64; far bodies share the outermost cells)
 MAX_CELL_INDEX = 2.0**50
+
+
+class GridArrays(NamedTuple):
+    """A :class:`SweptGrid`'s arrays, as its query reads them (changed in place, ``h`` fixed); passed
+    as a plain tuple and unpacked in this order (:class:`.chords.ChordArrays` says why)."""
+
+    h: float  # cell edge, m
+    centers: np.ndarray  # (N, 3) swept-sphere centres, shared with the chords
+    reach: np.ndarray  # (N,) swept-sphere radii
+    head: np.ndarray  # (buckets,) first body of each bucket, -1: empty
+    next: np.ndarray  # (N,) next body in the bucket
+    cell: np.ndarray  # (N, 3) the cell of each body's centre
+    large: np.ndarray  # (N,) bool: on the large list
+    large_list: np.ndarray  # (N,) the large bodies, the first n_large[0]
+    n_large: np.ndarray  # (1,)
 
 
 class SweptGrid:
@@ -60,26 +77,20 @@ class SweptGrid:
         buckets = 1
         while buckets < BUCKETS_PER_BODY * max(n, 1):
             buckets *= 2
-        self.head = np.full(buckets, -1, np.int64)
-        self.next = np.full(n, -1, np.int64)
-        self.prev = np.full(n, -1, np.int64)
-        self.cell = np.zeros((n, 3), np.int64)
-        self.bucket = np.full(n, -1, np.int64)
-        self.large = np.zeros(n, np.bool_)
-        self.large_list = np.zeros(n, np.int64)
-        self.n_large = np.zeros(1, np.int64)
-        _place(self.h, centers, reach, np.arange(n), self.head, self.next, self.prev, self.cell, self.bucket,
-               self.large, self.large_list, self.n_large)
+        self.arrays = tuple(GridArrays(self.h, centers, reach, np.full(buckets, -1, np.int64),
+                                       np.full(n, -1, np.int64), np.zeros((n, 3), np.int64), np.zeros(n, np.bool_),
+                                       np.zeros(n, np.int64), np.zeros(1, np.int64)))
+        #: what filing a body again needs besides: the previous body in its bucket, and the bucket
+        self.links = (np.full(n, -1, np.int64), np.full(n, -1, np.int64))
+        _place(self.arrays, self.links, np.arange(n))
 
     def moved(self, bodies) -> None:
         """``bodies`` have new swept spheres (already in ``centers`` and ``reach``): file them again."""
-        _place(self.h, self.centers, self.reach, bodies, self.head, self.next, self.prev, self.cell, self.bucket,
-               self.large, self.large_list, self.n_large)
+        _place(self.arrays, self.links, bodies)
 
     def pairs(self, inverse_masses, active, changed, is_changed):
         """Pairs (i < j), sorted, of a body in ``changed`` with any body whose swept spheres overlap."""
-        return _query(self.h, self.centers, self.reach, self.head, self.next, self.cell, self.large,
-                      self.large_list, self.n_large[0], inverse_masses, active, changed, is_changed)
+        return _query(self.arrays, inverse_masses, active, changed, is_changed)
 
 
 @njit(cache=True, inline="always")
@@ -96,7 +107,10 @@ def _hash(x, y, z, mask):
 
 
 @njit(cache=True)
-def _place(h, centers, reach, bodies, head, nxt, prv, cell, bucket, large, large_list, n_large):
+def _place(grid, links, bodies):
+    """File ``bodies`` again: each in the bucket of its centre's cell, or on the large list."""
+    h, centers, reach, head, nxt, cell, large, large_list, n_large = grid
+    prv, bucket = links
     mask = head.shape[0] - 1
     for b in bodies:
         if bucket[b] >= 0:  # unlink from its bucket
@@ -126,8 +140,9 @@ def _place(h, centers, reach, bodies, head, nxt, prv, cell, bucket, large, large
 
 
 @njit(cache=True)
-def _query(h, centers, reach, head, nxt, cell, large, large_list, n_large, inverse_masses, active, changed,
-           is_changed):
+def _query(grid, inverse_masses, active, changed, is_changed):
+    """:meth:`SweptGrid.pairs`, compiled."""
+    h, centers, reach, head, nxt, cell, large, large_list, n_large = grid
     n = centers.shape[0]
     mask = head.shape[0] - 1
     out = np.empty((16, 2), dtype=np.int64)
@@ -146,7 +161,7 @@ def _query(h, centers, reach, head, nxt, cell, large, large_list, n_large, inver
         if (hi[0] - lo[0] + 1) * (hi[1] - lo[1] + 1) * (hi[2] - lo[2] + 1) > n:
             for b in range(n):
                 if not large[b]:
-                    k, out = _take(a, b, centers, reach, inverse_masses, active, is_changed, k, out)
+                    k, out = _take(a, b, grid, inverse_masses, active, is_changed, k, out)
         else:
             for x in range(lo[0], hi[0] + 1):
                 for y in range(lo[1], hi[1] + 1):
@@ -154,22 +169,23 @@ def _query(h, centers, reach, head, nxt, cell, large, large_list, n_large, inver
                         b = head[_hash(x, y, z, mask)]
                         while b >= 0:
                             if cell[b, 0] == x and cell[b, 1] == y and cell[b, 2] == z:
-                                k, out = _take(a, b, centers, reach, inverse_masses, active, is_changed, k, out)
+                                k, out = _take(a, b, grid, inverse_masses, active, is_changed, k, out)
                             b = nxt[b]
-        for p in range(n_large):
+        for p in range(n_large[0]):
             b = large_list[p]
             if large[b]:
-                k, out = _take(a, b, centers, reach, inverse_masses, active, is_changed, k, out)
+                k, out = _take(a, b, grid, inverse_masses, active, is_changed, k, out)
     return sort_pairs(out, k, n)
 
 
-@njit(cache=True)
-def _take(a, b, centers, reach, inverse_masses, active, is_changed, k, out):
+@njit(cache=True, inline="always")
+def _take(a, b, grid, inverse_masses, active, is_changed, k, out):
     """Append the pair (a, b) when it is a new candidate: b active, once per pair, movable, overlapping."""
     if b == a or not active[b] or (is_changed[b] and b < a):
         return k, out
     if inverse_masses[a] == 0.0 and inverse_masses[b] == 0.0:
         return k, out  # two immovable bodies: nothing can respond
+    _, centers, reach, _, _, _, _, _, _ = grid
     if not spheres_overlap(centers, reach, a, b):
         return k, out
     out, k = append_pair(out, k, a, b)

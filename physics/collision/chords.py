@@ -15,8 +15,26 @@ an unchanged chord, and a changed body's bounds are replaced by its new chord's.
 
 from __future__ import annotations
 
+from typing import NamedTuple
+
 import numpy as np
 from numba import njit
+
+
+class ChordArrays(NamedTuple):
+    """The chords, as the kernels take them: (2, N, 3) states from ``y_from`` at ``t_from`` (N,)
+    to ``y_end`` at ``t_end`` (changed in place as chords restart).
+
+    Passed as a plain tuple (``tuple(ChordArrays(...))``) and unpacked in this order: Numba
+    types a plain tuple argument in C, a NamedTuple in Python (about 1 us a call, and the
+    event loop makes several calls per impact). Like every structure of the per-impact
+    kernels it holds only what they read: each array passed costs its unboxing, per call.
+    """
+
+    y_from: np.ndarray
+    y_end: np.ndarray
+    t_from: np.ndarray
+    t_end: float
 
 
 class Chords:
@@ -41,6 +59,7 @@ class Chords:
         self.t_end = t_end
         self.radii = radii
         self.centers, self.reach = swept_bounds(y[0], y_end[0], radii, margin)
+        self.arrays = tuple(ChordArrays(self.y_from, y_end, self.t_from, float(t_end)))
 
     def at(self, bodies, t, t_sub=None, s=None) -> np.ndarray:
         """Write the states of ``bodies`` at time ``t`` into :attr:`now` and return it.
@@ -50,16 +69,15 @@ class Chords:
         """
         bodies = np.asarray(bodies, dtype=np.int64)
         if t_sub is None:
-            _at(self.y_from, self.y_end, self.t_from, float(self.t_end), self.now, bodies, float(t), False, 0.0, 0.0)
+            _at(self.arrays, self.now, bodies, float(t), False, 0.0, 0.0)
         else:
-            _at(self.y_from, self.y_end, self.t_from, float(self.t_end), self.now, bodies, float(t), True,
-                float(t_sub), float(s))
+            _at(self.arrays, self.now, bodies, float(t), True, float(t_sub), float(s))
         return self.now
 
     def restart(self, bodies, t, y_rest, margin) -> None:
         """``bodies`` continue from their states in :attr:`now` at ``t`` to their new end states ``y_rest``."""
-        _restart(self.y_from, self.y_end, self.t_from, self.now, self.centers, self.reach, self.radii,
-                 np.asarray(bodies, dtype=np.int64), float(t), np.asarray(y_rest, dtype=float), float(margin))
+        _restart(self.arrays, self.now, (self.centers, self.reach, self.radii), np.asarray(bodies, dtype=np.int64),
+                 float(t), np.asarray(y_rest, dtype=float), float(margin))
 
 
 def swept_bounds(q0, q1, radii, margin):
@@ -75,32 +93,57 @@ def _swept_bounds(q0, q1, radii, margin):
     n = len(radii)
     centers, reach = np.empty((n, 3)), np.empty(n)
     for b in range(n):
-        total = 0.0
-        for k in range(3):
-            centers[b, k] = 0.5 * (q0[b, k] + q1[b, k])
-            dk = q1[b, k] - q0[b, k]
-            total += dk * dk
-        reach[b] = radii[b] + 0.5 * np.sqrt(total) + margin
+        _bound(centers, reach, b, (q0[b, 0], q0[b, 1], q0[b, 2]), (q1[b, 0], q1[b, 1], q1[b, 2]), radii[b], margin)
     return centers, reach
 
 
+@njit(cache=True, inline="always")
+def _bound(centers, reach, b, start, end, radius, margin):
+    """Body b's swept sphere of the chord start -> end: centre the middle, reach r + |chord| / 2 + margin."""
+    total = 0.0
+    for k in range(3):
+        centers[b, k] = 0.5 * (start[k] + end[k])
+        dk = end[k] - start[k]
+        total += dk * dk
+    reach[b] = radius + 0.5 * np.sqrt(total) + margin
+
+
+@njit(cache=True, inline="always")
+def state_at(chords, b, t, f_sub):
+    """Body ``b``'s state at ``t`` on its chord, ``(q, v)`` as 3-tuples: linear in time from
+    ``y_from`` to ``y_end``; ``f_sub`` >= 0 is the fraction to take instead (the detector's own number)."""
+    y_from, y_end, t_from, t_end = chords
+    length = t_end - t_from[b]
+    f = (t - t_from[b]) / length if length > 0 else 0.0
+    if f_sub >= 0:
+        f = f_sub
+    return _along(y_from, y_end, 0, b, f), _along(y_from, y_end, 1, b, f)
+
+
+@njit(cache=True, inline="always")
+def _along(y_from, y_end, d, b, f):
+    """y0 + f (y1 - y0) for row (d, b) of the chords' states, a 3-tuple."""
+    return (y_from[d, b, 0] + f * (y_end[d, b, 0] - y_from[d, b, 0]),
+            y_from[d, b, 1] + f * (y_end[d, b, 1] - y_from[d, b, 1]),
+            y_from[d, b, 2] + f * (y_end[d, b, 2] - y_from[d, b, 2]))
+
+
 @njit(cache=True)
-def _at(y_from, y_end, t_from, t_end, now, bodies, t, has_sub, t_sub, s):
+def _at(chords, now, bodies, t, has_sub, t_sub, s):
     """:meth:`Chords.at`, compiled: the NumPy expressions element by element (the same numbers)."""
+    t_from = chords[2]
     for b in bodies:
-        length = t_end - t_from[b]
-        f = (t - t_from[b]) / length if length > 0 else 0.0
-        if has_sub and t_from[b] == t_sub:
-            f = s
-        for d in range(2):
-            for k in range(3):
-                y0 = y_from[d, b, k]
-                now[d, b, k] = y0 + f * (y_end[d, b, k] - y0)
+        q, v = state_at(chords, b, t, s if has_sub and t_from[b] == t_sub else -1.0)
+        now[0, b, 0], now[0, b, 1], now[0, b, 2] = q
+        now[1, b, 0], now[1, b, 1], now[1, b, 2] = v
 
 
 @njit(cache=True)
-def _restart(y_from, y_end, t_from, now, centers, reach, radii, bodies, t, y_rest, margin):
-    """:meth:`Chords.restart`, compiled: the same assignments and :func:`swept_bounds` row by row."""
+def _restart(chords, now, bounds, bodies, t, y_rest, margin):
+    """:meth:`Chords.restart`, compiled: the same assignments and :func:`swept_bounds` row by row;
+    ``bounds`` = (centers, reach, radii) of the swept spheres."""
+    y_from, y_end, t_from, _ = chords
+    centers, reach, radii = bounds
     for p in range(bodies.shape[0]):
         b = bodies[p]
         for d in range(2):
@@ -108,9 +151,5 @@ def _restart(y_from, y_end, t_from, now, centers, reach, radii, bodies, t, y_res
                 y_from[d, b, k] = now[d, b, k]
                 y_end[d, b, k] = y_rest[d, p, k]
         t_from[b] = t
-        total = 0.0
-        for k in range(3):
-            centers[b, k] = 0.5 * (y_from[0, b, k] + y_rest[0, p, k])
-            dk = y_rest[0, p, k] - y_from[0, b, k]
-            total += dk * dk
-        reach[b] = radii[b] + 0.5 * np.sqrt(total) + margin
+        _bound(centers, reach, b, (y_from[0, b, 0], y_from[0, b, 1], y_from[0, b, 2]),
+               (y_rest[0, p, 0], y_rest[0, p, 1], y_rest[0, p, 2]), radii[b], margin)

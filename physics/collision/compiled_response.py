@@ -1,17 +1,52 @@
-"""The response to one collision, compiled: :func:`.response.resolve` for a single pair.
+"""The response to a collision, compiled: the one definition of the lecture's impulse.
 
-The incremental event loop resolves one pair per collision, thousands of times per
-step in a crowded scene; :func:`.response.resolve` is vectorised over pairs and pays
-NumPy's per-call cost on arrays of one row. This kernel is the same arithmetic for
-one pair, written out in NumPy's order of operations and compiled without
-``fastmath``, so its numbers are the NumPy function's bit for bit
-(tests/test_event_loop.py).
+The incremental event loop resolves one pair per collision, thousands of times per step
+in a crowded scene, through :func:`resolve_pair`; the NumPy functions of
+:mod:`.response` (:func:`.response.impulse`, :func:`.response.resolve`) run these same
+kernels row by row, so both paths have the same numbers bit for bit
+(tests/test_event_loop.py, tests/test_collisions.py). Compiled without ``fastmath``:
+the order of operations is the order written.
 """
 
 from __future__ import annotations
 
 import numpy as np
 from numba import njit
+
+from .sphere_contacts import dot3, row3, row3_of, sphere_plane, sphere_sphere, sub3
+
+
+@njit(cache=True, inline="always")
+def impulse_of(v_rel, inverse_sum, normal, restitution, friction):
+    """The impulse Lambda on body A, a 3-tuple (:func:`.response.impulse` for one pair).
+
+    ``v_rel`` = V_A- - V_B-, ``inverse_sum`` = 1/m_A + 1/m_B. Equation 4 along the normal,
+    Lambda_s = -(1 + eps) v_n / (1/m_A + 1/m_B) while approaching (v_n > 0), then Coulomb
+    friction against the sliding velocity v_t: just enough to stop it, at most mu |Lambda_s|.
+    """
+    v_n = dot3(v_rel, normal)
+    approaching = v_n > 0 and inverse_sum > 0
+    safe_sum = inverse_sum if inverse_sum > 0 else 1.0
+    lambda_s = -(1 + restitution) * v_n / safe_sum if approaching else 0.0
+    lam = (lambda_s * normal[0], lambda_s * normal[1], lambda_s * normal[2])
+    if friction > 0:
+        v_t = (v_rel[0] - v_n * normal[0], v_rel[1] - v_n * normal[1], v_rel[2] - v_n * normal[2])
+        speed_t = np.sqrt(dot3(v_t, v_t))
+        stop = speed_t / safe_sum  # the tangential impulse that ends the sliding
+        j_t = min(stop, friction * abs(lambda_s)) if approaching else 0.0
+        scale = j_t / (speed_t if speed_t > 0 else 1.0)
+        lam = (lam[0] - scale * v_t[0], lam[1] - scale * v_t[1], lam[2] - scale * v_t[2])
+    return lam
+
+
+@njit(cache=True)
+def impulse_rows(v_rel, inverse_sum, normal, restitution, friction):
+    """:func:`impulse_of` of each row: v_rel, normal (K, 3); inverse_sum, restitution, friction (K,)."""
+    lam = np.empty_like(v_rel)
+    for k in range(len(v_rel)):
+        lam[k, 0], lam[k, 1], lam[k, 2] = impulse_of(row3(v_rel, k), inverse_sum[k], row3(normal, k),
+                                                     restitution[k], friction[k])
+    return lam
 
 
 @njit(cache=True)
@@ -24,30 +59,14 @@ def resolve_pair(y, i, j, inverse_masses, normal, depth, restitution, friction):
     inv_a = inverse_masses[i]
     inv_b = inverse_masses[j] if j >= 0 else 0.0
     inv_sum = inv_a + inv_b
+    # moved apart along the normal, each in proportion to its inverse mass
     push = (depth if (depth > 0 and inv_sum > 0) else 0.0) / (inv_sum if inv_sum > 0 else 1.0)
     for k in range(3):
         y[0, i, k] = y[0, i, k] - normal[k] * (push * inv_a)
-    # impulse(): the normal part with restitution, then Coulomb friction
-    v_rel = np.empty(3)
-    for k in range(3):
-        v_rel[k] = y[1, i, k] - (y[1, j, k] if j >= 0 else 0.0)
-    v_n = v_rel[0] * normal[0] + v_rel[1] * normal[1] + v_rel[2] * normal[2]
-    approaching = v_n > 0 and inv_sum > 0
-    safe_sum = inv_sum if inv_sum > 0 else 1.0
-    lambda_s = -(1 + restitution) * v_n / safe_sum if approaching else 0.0
+    v_b = row3_of(y, 1, j) if j >= 0 else (0.0, 0.0, 0.0)
+    v_rel = sub3(row3_of(y, 1, i), v_b)
     lam = np.empty(3)
-    for k in range(3):
-        lam[k] = lambda_s * normal[k]
-    if friction > 0:
-        v_t = np.empty(3)
-        for k in range(3):
-            v_t[k] = v_rel[k] - v_n * normal[k]
-        speed_t = np.sqrt(v_t[0] * v_t[0] + v_t[1] * v_t[1] + v_t[2] * v_t[2])
-        stop = speed_t / safe_sum  # the tangential impulse that ends the sliding
-        j_t = min(stop, friction * abs(lambda_s)) if approaching else 0.0
-        scale = j_t / (speed_t if speed_t > 0 else 1.0)
-        for k in range(3):
-            lam[k] = lam[k] - scale * v_t[k]
+    lam[0], lam[1], lam[2] = impulse_of(v_rel, inv_sum, (normal[0], normal[1], normal[2]), restitution, friction)
     for k in range(3):
         y[1, i, k] = y[1, i, k] + lam[k] * inv_a
     if j >= 0:
@@ -58,37 +77,35 @@ def resolve_pair(y, i, j, inverse_masses, normal, depth, restitution, friction):
 
 
 @njit(cache=True)
-def impact_terms(y, i, j, radii, accelerations, normals, offsets):
+def resolve_rows(y, i, j, inverse_masses, normal, depth, restitution, friction):
+    """:func:`resolve_pair` of each pair k (``j[k] < 0``: a static shape), in order; Lambda (K, 3)."""
+    lam = np.empty((len(i), 3))
+    for k in range(len(i)):
+        lam[k] = resolve_pair(y, i[k], j[k], inverse_masses, normal[k], depth[k], restitution[k], friction[k])
+    return lam
+
+
+@njit(cache=True)
+def impact_terms(y, i, j, radii, accelerations, planes):
     """The contact and approach of one pair at its impact, as the NumPy path computes them.
 
-    Body ``i`` against body ``j`` (:func:`.narrow_phase.collide_sphere_sphere`) or, for
-    ``j < 0``, the plane ``-1 - j`` (:func:`.narrow_phase.collide_sphere_plane`), in state
-    ``y`` (2, N, 3); the approach speed and the pressing acceleration are
-    :func:`.response.normal_speed` of the velocities and of the ``accelerations`` along
-    the normal. Returns ``(normal (3,), depth, speed, pressing)``.
+    Body ``i`` against body ``j`` (:func:`.sphere_contacts.sphere_sphere`) or, for ``j < 0``,
+    the plane ``-1 - j`` of ``planes`` (a :class:`.retest.Planes`, as a tuple;
+    :func:`.sphere_contacts.sphere_plane`), in state ``y`` (2, N, 3); the approach speed and
+    the pressing acceleration are :func:`.response.normal_speed` of the velocities and of the
+    ``accelerations`` along the normal. Returns ``(normal (3,), depth, speed, pressing)``.
     """
     normal = np.empty(3)
+    q_a, v_a, a_a = row3_of(y, 0, i), row3_of(y, 1, i), row3(accelerations, i)
     if j >= 0:
-        d0, d1, d2 = y[0, j, 0] - y[0, i, 0], y[0, j, 1] - y[0, i, 1], y[0, j, 2] - y[0, i, 2]
-        dist = np.sqrt(d0 * d0 + d1 * d1 + d2 * d2)
-        if dist > 0:
-            normal[0], normal[1], normal[2] = d0 / dist, d1 / dist, d2 / dist
-        else:
-            normal[0], normal[1], normal[2] = 1.0, 0.0, 0.0
-        depth = radii[i] + radii[j] - dist
-        w0, w1, w2 = y[1, i, 0] - y[1, j, 0], y[1, i, 1] - y[1, j, 1], y[1, i, 2] - y[1, j, 2]
-        g0 = accelerations[i, 0] - accelerations[j, 0]
-        g1 = accelerations[i, 1] - accelerations[j, 1]
-        g2 = accelerations[i, 2] - accelerations[j, 2]
+        q_b, v_b, a_b = row3_of(y, 0, j), row3_of(y, 1, j), row3(accelerations, j)
+        n, depth = sphere_sphere(sub3(q_b, q_a), radii[i] + radii[j])
     else:
         plane = -1 - j
-        height = (y[0, i, 0] * normals[plane, 0] + y[0, i, 1] * normals[plane, 1]
-                  + y[0, i, 2] * normals[plane, 2]) - offsets[plane]
-        for k in range(3):
-            normal[k] = 0.0 - normals[plane, k]
-        depth = radii[i] - height
-        w0, w1, w2 = y[1, i, 0] - 0.0, y[1, i, 1] - 0.0, y[1, i, 2] - 0.0
-        g0, g1, g2 = accelerations[i, 0] - 0.0, accelerations[i, 1] - 0.0, accelerations[i, 2] - 0.0
-    speed = w0 * normal[0] + w1 * normal[1] + w2 * normal[2]
-    pressing = g0 * normal[0] + g1 * normal[1] + g2 * normal[2]
+        v_b = a_b = (0.0, 0.0, 0.0)
+        normals, offsets, _ = planes
+        n, depth, _ = sphere_plane(q_a, radii[i], row3(normals, plane), offsets[plane])
+    normal[0], normal[1], normal[2] = n
+    speed = dot3(sub3(v_a, v_b), n)
+    pressing = dot3(sub3(a_a, a_b), n)
     return normal, depth, speed, pressing

@@ -19,21 +19,22 @@ input, and so that last step's impulses can be found again for the warm start.
 from __future__ import annotations
 
 import dataclasses
+from typing import NamedTuple
 
 import numpy as np
 from numba import njit
 
 from .pairs import SweptSpheres, near_shapes
 from .shapes import DEFAULT_MATERIAL
+from .sphere_contacts import plane_height, row3, sphere_plane, sphere_sphere, sub3
 
 #: the speculative margin added to every swept bound, as a fraction of the median radius: a
 #: body sped up by a contact during the step can still reach this much further than its forces take it
 MARGIN_OF_RADIUS = 0.25
 
 
-@dataclasses.dataclass(frozen=True)
-class Materials:
-    """Restitution and friction per contact, looked up by material numbers (vectorised)."""
+class Materials(NamedTuple):
+    """Restitution and friction per contact, looked up by material numbers (vectorised, and in the kernel)."""
 
     body: np.ndarray  # (N,) material number of each body
     shape: np.ndarray  # (S,) material number of each static shape
@@ -80,32 +81,53 @@ class Contacts:
         return Contacts(**{f.name: getattr(self, f.name)[keep] for f in dataclasses.fields(self)})
 
 
+class BodyState(NamedTuple):
+    """The bodies at the start of the step, (N, 3) or (N,)."""
+
+    q: np.ndarray  # positions, m
+    v: np.ndarray  # velocities, m/s
+    a: np.ndarray  # the forces' accelerations, m/s^2
+    radii: np.ndarray  # m
+    inverse_masses: np.ndarray  # 1/kg, 0: pinned
+
+
+class PlaneColumns(NamedTuple):
+    """The world's planes n . x <= offset: their numbers among the static shapes, (P,), (P, 3), (P,)."""
+
+    index: np.ndarray
+    normal: np.ndarray
+    offset: np.ndarray
+
+    @classmethod
+    def of(cls, shapes) -> PlaneColumns:
+        planes = [k for k, shape in enumerate(shapes) if shape.kind == "plane"]
+        return cls(np.array(planes, dtype=np.int64),
+                   np.array([shapes[k].normal for k in planes], dtype=float).reshape(-1, 3),
+                   np.array([shapes[k].offset for k in planes], dtype=float))
+
+
 def speculative_margin(radii) -> float:
     """The margin of every swept bound: :data:`MARGIN_OF_RADIUS` of the median radius, m."""
     return MARGIN_OF_RADIUS * float(np.median(radii)) if len(radii) else 0.0
 
 
-def find_contacts(world, materials: Materials, q, v, a, radii, inverse_masses, dt: float, removed=(),
+def find_contacts(world, materials: Materials, bodies: BodyState, reached, removed=(),
                   margin: float | None = None) -> Contacts:
-    """Every contact the bodies (q, v) under accelerations ``a`` may make during a step of ``dt``.
+    """Every contact the ``bodies`` may make during the step that takes them, under their forces
+    alone, to the positions ``reached`` (N, 3) (the scene's integrator's step).
 
     ``margin``: :func:`speculative_margin` of the radii unless given. Body pairs and planes,
     the contacts of piles and boxes of planes, go through one compiled pass that writes them
     in key order; other static shapes through their narrow phase, the whole then sorted by key.
     """
-    n, n_shapes = len(radii), len(world.shapes)
-    margin = speculative_margin(radii) if margin is None else margin
-    swept = SweptSpheres.of(q, _reached(q, v, a, dt), radii, inverse_masses, removed, margin)
+    n, n_shapes = len(bodies.radii), len(world.shapes)
+    margin = speculative_margin(bodies.radii) if margin is None else margin
+    swept = SweptSpheres.of(bodies.q, reached, bodies.radii, bodies.inverse_masses, removed, margin)
     pairs = swept.body_pairs(world.broadphase)
-    planes = [k for k, shape in enumerate(world.shapes) if shape.kind == "plane"]
-    plane = np.array(planes, dtype=np.int64)
-    normals = np.array([world.shapes[k].normal for k in planes], dtype=float).reshape(-1, 3)
-    offsets = np.array([world.shapes[k].offset for k in planes], dtype=float)
-    columns = _pair_and_plane_contacts(pairs.i, pairs.j, q, v, a, radii, inverse_masses, swept.centers, swept.reach,
-                                       swept.active, plane, normals, offsets, materials.shape[plane],
-                                       materials.body, materials.restitution, materials.friction, n + n_shapes)
+    columns = _pair_and_plane_contacts(pairs.i, pairs.j, bodies, swept, PlaneColumns.of(world.shapes), materials,
+                                       n + n_shapes)
     others = [k for k, shape in enumerate(world.shapes) if shape.kind != "plane"]
-    parts = [columns] + [_shape_contacts(group, materials, q, v, a, radii, inverse_masses, n + n_shapes)
+    parts = [columns] + [_shape_contacts(group, materials, bodies, n + n_shapes)
                          for group in near_shapes([world.shapes[k] for k in others], swept, others) if len(group)]
     if len(parts) == 1:  # in key order already
         return Contacts(*columns)
@@ -113,48 +135,44 @@ def find_contacts(world, materials: Materials, q, v, a, radii, inverse_masses, d
     return contacts.subset(np.argsort(contacts.key, kind="stable"))
 
 
-def _shape_contacts(group, materials: Materials, q, v, a, radii, inverse_masses, stride: int) -> tuple:
+def _shape_contacts(group, materials: Materials, bodies: BodyState, stride: int) -> tuple:
     """The columns of :class:`Contacts` for the bodies of a :class:`.pairs.ShapePairs` (its narrow phase)."""
-    i = group.i
-    contact = group.contact(radii, q)
+    i, v, a = group.i, bodies.v, bodies.a
+    contact = group.contact(bodies.radii, bodies.q)
     e = materials.restitution[materials.body[i], materials.shape[group.index]]
     mu = materials.friction[materials.body[i], materials.shape[group.index]]
     normal = np.atleast_2d(contact.normal)  # the shape is static: no velocity, no acceleration, no mass
-    return (i, np.full(len(i), -1), np.full(len(i), group.index), i * stride + len(radii) + group.index, normal,
-            -contact.penetration_depth, np.sum(-v[i] * normal, axis=1), np.sum(a[i] * normal, axis=1),
-            1.0 / inverse_masses[i], np.broadcast_to(e, i.shape), np.broadcast_to(mu, i.shape))
-
-
-@njit(cache=True)
-def _reached(q, v, a, dt):
-    """Where the forces alone take each body in the step: q + dt (v + dt a) (semi-implicit Euler)."""
-    return q + dt * (v + dt * a)
+    return (i, np.full(len(i), -1), np.full(len(i), group.index), i * stride + len(bodies.radii) + group.index,
+            normal, -contact.penetration_depth, np.sum(-v[i] * normal, axis=1), np.sum(a[i] * normal, axis=1),
+            1.0 / bodies.inverse_masses[i], np.broadcast_to(e, i.shape), np.broadcast_to(mu, i.shape))
 
 
 @njit(cache=True, inline="always")
 def _reaches_plane(centers, reach, b, plane_normal, plane_offset, k):
     """Body b's swept sphere reaches plane k, n . x <= offset: n . c - offset <= reach."""
-    return (centers[b, 0] * plane_normal[k, 0] + centers[b, 1] * plane_normal[k, 1]
-            + centers[b, 2] * plane_normal[k, 2]) - plane_offset[k] <= reach[b]
+    return plane_height(row3(centers, b), row3(plane_normal, k), plane_offset[k]) <= reach[b]
 
 
 @njit(cache=True)
-def _pair_and_plane_contacts(pi, pj, q, v, a, radii, inverse_masses, centers, reach, active, plane, plane_normal,
-                             plane_offset, plane_material, material, restitution, friction, stride):
+def _pair_and_plane_contacts(pi, pj, bodies, swept, planes, materials, stride):
     """The columns of :class:`Contacts` for the body pairs (``pi``, ``pj``; sorted) and the planes,
     in key order: body i's pairs (j ascending), then its planes (world number ascending).
 
-    A moving body's swept sphere reaches a plane n . x <= offset when n . c - offset <= reach;
-    the contact is then the sphere-plane narrow phase's (:func:`.narrow_phase.collide_sphere_plane`):
-    normal -n, separation n . q - offset - r.
+    A moving body's swept sphere (``swept``, a :class:`.pairs.SweptSpheres`) reaches a plane
+    n . x <= offset when n . c - offset <= reach. The contacts are
+    :func:`.sphere_contacts.sphere_sphere` and :func:`.sphere_contacts.sphere_plane` (the
+    narrow phase's), the separation minus their penetration depth.
     """
+    q, v, a, radii, inverse_masses = bodies
+    plane, plane_normal, plane_offset = planes
+    material, restitution, friction = materials.body, materials.restitution, materials.friction
     n, n_planes, n_pairs = len(radii), len(plane), len(pi)
     near = np.zeros((n_planes, n), dtype=np.bool_)
     count = n_pairs
     for k in range(n_planes):  # plane by plane: one vectorisable loop over the bodies
         for b in range(n):
-            near[k, b] = active[b] and inverse_masses[b] > 0 and _reaches_plane(centers, reach, b, plane_normal,
-                                                                                plane_offset, k)
+            near[k, b] = swept.active[b] and inverse_masses[b] > 0 and _reaches_plane(
+                swept.centers, swept.reach, b, plane_normal, plane_offset, k)
             count += near[k, b]
     ci, cj, shape, key = (np.empty(count, np.int64), np.empty(count, np.int64), np.empty(count, np.int64),
                           np.empty(count, np.int64))
@@ -165,15 +183,10 @@ def _pair_and_plane_contacts(pi, pj, q, v, a, radii, inverse_masses, centers, re
     for b in range(n):
         while p < n_pairs and pi[p] == b:
             c = pj[p]
-            d0, d1, d2 = q[c, 0] - q[b, 0], q[c, 1] - q[b, 1], q[c, 2] - q[b, 2]
-            dist = np.sqrt(d0 * d0 + d1 * d1 + d2 * d2)
-            if dist > 0:
-                n0, n1, n2 = d0 / dist, d1 / dist, d2 / dist
-            else:  # concentric: +x by convention
-                n0, n1, n2 = 1.0, 0.0, 0.0
+            (n0, n1, n2), depth = sphere_sphere(sub3(row3(q, c), row3(q, b)), radii[b] + radii[c])
             ci[row], cj[row], shape[row], key[row] = b, c, -1, b * stride + c
             normal[row, 0], normal[row, 1], normal[row, 2] = n0, n1, n2
-            separation[row] = -(radii[b] + radii[c] - dist)
+            separation[row] = -depth
             normal_speed[row] = (v[c, 0] - v[b, 0]) * n0 + (v[c, 1] - v[b, 1]) * n1 + (v[c, 2] - v[b, 2]) * n2
             pressing[row] = (a[b, 0] - a[c, 0]) * n0 + (a[b, 1] - a[c, 1]) * n1 + (a[b, 2] - a[c, 2]) * n2
             mass[row] = 1.0 / (inverse_masses[b] + inverse_masses[c])
@@ -184,17 +197,15 @@ def _pair_and_plane_contacts(pi, pj, q, v, a, radii, inverse_masses, centers, re
         for k in range(n_planes):
             if not near[k, b]:
                 continue
-            n0, n1, n2 = -plane_normal[k, 0], -plane_normal[k, 1], -plane_normal[k, 2]
-            height = (q[b, 0] * plane_normal[k, 0] + q[b, 1] * plane_normal[k, 1]
-                      + q[b, 2] * plane_normal[k, 2]) - plane_offset[k]
+            (n0, n1, n2), depth, _ = sphere_plane(row3(q, b), radii[b], row3(plane_normal, k), plane_offset[k])
             ci[row], cj[row], shape[row], key[row] = b, -1, plane[k], b * stride + n + plane[k]
             normal[row, 0], normal[row, 1], normal[row, 2] = n0, n1, n2
-            separation[row] = -(radii[b] - height)
+            separation[row] = -depth
             normal_speed[row] = -(v[b, 0] * n0 + v[b, 1] * n1 + v[b, 2] * n2)
             pressing[row] = a[b, 0] * n0 + a[b, 1] * n1 + a[b, 2] * n2
             mass[row] = 1.0 / inverse_masses[b]
-            e[row] = restitution[material[b], plane_material[k]]
-            mu[row] = friction[material[b], plane_material[k]]
+            e[row] = restitution[material[b], materials.shape[plane[k]]]
+            mu[row] = friction[material[b], materials.shape[plane[k]]]
             row += 1
     return ci, cj, shape, key, normal, separation, normal_speed, pressing, mass, e, mu
 

@@ -17,6 +17,7 @@ import numpy as np
 
 from .contact import Contact
 from .shapes import Box, OrientedBox, Plane, Shape, Sphere
+from .sphere_contacts import sphere_plane_rows, sphere_sphere_rows
 
 #: (kind of A, kind of B) -> test(a, b) -> Contact
 PAIR_TESTS: dict[tuple[str, str], Callable[[Shape, Shape], Contact]] = {}
@@ -45,25 +46,28 @@ def _dot(x, y):
 def collide_sphere_sphere(a: Sphere, b: Sphere) -> Contact:
     """Two spheres: the normal joins the centres (the lecture's Case B).
 
-    depth = r_a + r_b - |c_b - c_a|. Concentric spheres have no direction between them;
-    the normal is then +x by convention.
+    depth = r_a + r_b - |c_b - c_a|; concentric spheres get the normal +x by convention
+    (:func:`.sphere_contacts.sphere_sphere`, the one definition, row by row).
     """
-    d = b.center - a.center
-    dist = np.sqrt(_dot(d, d))
-    safe = np.where(dist > 0, dist, 1.0)[..., None]
-    normal = np.where((dist > 0)[..., None], d / safe, np.array([1.0, 0.0, 0.0]))
+    d = np.asarray(b.center, dtype=float) - a.center
     r_a, r_b = np.asarray(a.radius), np.asarray(b.radius)
-    return Contact.make(normal, r_a + r_b - dist, a.center + normal * r_a[..., None],
-                        b.center - normal * r_b[..., None])
+    normal, depth = sphere_sphere_rows(np.ascontiguousarray(d.reshape(-1, 3)),
+                                       np.broadcast_to(r_a + r_b, d.shape[:-1]).reshape(-1).astype(float))
+    normal, depth = normal.reshape(d.shape), depth.reshape(d.shape[:-1])
+    return Contact.make(normal, depth, a.center + normal * r_a[..., None], b.center - normal * r_b[..., None])
 
 
 def collide_sphere_plane(a: Sphere, b: Plane) -> Contact:
-    """A sphere against the half-space ``n . x <= offset``: depth = r - (n . c - offset)."""
-    n = b.normal
-    height = _dot(a.center, n) - b.offset  # signed distance of the centre above the plane
+    """A sphere against the half-space ``n . x <= offset``: depth = r - (n . c - offset), normal -n
+    (:func:`.sphere_contacts.sphere_plane`, row by row)."""
+    center = np.asarray(a.center, dtype=float)
     r = np.asarray(a.radius)
-    normal = np.zeros_like(a.center) - n
-    return Contact.make(normal, r - height, a.center - n * r[..., None], a.center - n * height[..., None])
+    normal, depth, height = sphere_plane_rows(np.ascontiguousarray(center.reshape(-1, 3)),
+                                              np.broadcast_to(r, center.shape[:-1]).reshape(-1).astype(float),
+                                              np.asarray(b.normal, dtype=float), float(b.offset))
+    normal, depth, height = normal.reshape(center.shape), depth.reshape(center.shape[:-1]), height.reshape(
+        center.shape[:-1])
+    return Contact.make(normal, depth, center - b.normal * r[..., None], center - b.normal * height[..., None])
 
 
 def _sphere_aabb(center, radius, lo, hi) -> Contact:

@@ -13,6 +13,7 @@ body (:class:`BodyPairs`, sphere-sphere) or bodies against one static shape
 from __future__ import annotations
 
 import dataclasses
+from typing import NamedTuple
 
 import numpy as np
 
@@ -108,9 +109,11 @@ def candidates(shapes, q0, q1, radii, inverse_masses, method: str, removed=(), m
     return [g for g in groups if len(g)]
 
 
-@dataclasses.dataclass(frozen=True)
-class SweptSpheres:
-    """Each body's bounding sphere over a sub-step (``centers``, ``reach``), and which bodies take part."""
+class SweptSpheres(NamedTuple):
+    """Each body's bounding sphere over a sub-step (``centers``, ``reach``), and which bodies take part.
+
+    A NamedTuple of arrays, so the compiled kernels take it whole (:mod:`.contact_buffer`).
+    """
 
     centers: np.ndarray
     reach: np.ndarray

@@ -29,6 +29,7 @@ import dataclasses
 
 import numpy as np
 
+from .compiled_response import impulse_rows, resolve_rows
 from .shapes import DEFAULT_MATERIAL
 
 
@@ -62,20 +63,18 @@ def impulse(v_a, v_b, inverse_mass_a, inverse_mass_b, normal, restitution, frict
     Lambda : array, shape (K, 3) or (3,)
         N s. Zero for pairs that are not approaching.
     """
-    v_rel = v_a - v_b
-    v_n = _dot(v_rel, normal)
-    inverse_sum = np.asarray(inverse_mass_a) + inverse_mass_b
-    approaching = (v_n > 0) & (inverse_sum > 0)
-    safe_sum = np.where(inverse_sum > 0, inverse_sum, 1.0)
-    lambda_s = np.where(approaching, -(1 + np.asarray(restitution)) * v_n / safe_sum, 0.0)
-    total = lambda_s[..., None] * normal
-    if np.any(np.asarray(friction) > 0):
-        v_t = v_rel - v_n[..., None] * normal
-        speed_t = np.sqrt(_dot(v_t, v_t))
-        stop = speed_t / safe_sum  # the tangential impulse that ends the sliding
-        j_t = np.where(approaching, np.minimum(stop, np.asarray(friction) * np.abs(lambda_s)), 0.0)
-        total = total - (j_t / np.where(speed_t > 0, speed_t, 1.0))[..., None] * v_t
-    return total
+    v_rel = np.asarray(v_a, dtype=float) - v_b
+    normal = np.asarray(normal, dtype=float)
+    inverse_sum = np.asarray(inverse_mass_a, dtype=float) + inverse_mass_b
+    shape = np.broadcast_shapes(v_rel.shape, normal.shape, inverse_sum.shape + (3,),
+                                np.shape(restitution) + (3,), np.shape(friction) + (3,))
+
+    def rows(x, tail=()):
+        return np.ascontiguousarray(np.broadcast_to(x, shape[:-1] + tail).reshape((-1,) + tail), dtype=float)
+
+    # the one definition, compiled (:func:`.compiled_response.impulse_of`), row by row
+    return impulse_rows(rows(v_rel, (3,)), rows(inverse_sum), rows(normal, (3,)), rows(restitution),
+                        rows(friction)).reshape(shape)
 
 
 @dataclasses.dataclass(frozen=True)
@@ -113,15 +112,14 @@ def resolve(y, i, j, inverse_masses, normal, depth, restitution, friction=0.0):
         Unit normal from i towards j.
     depth : array, shape (K,)
     """
-    inv_a = inverse_masses[i]
-    inv_b = inverse_masses[j] if j is not None else np.zeros_like(inv_a)
-    inv_sum = inv_a + inv_b
-    push = np.where((depth > 0) & (inv_sum > 0), depth, 0.0) / np.where(inv_sum > 0, inv_sum, 1.0)
-    y[0, i] -= normal * (push * inv_a)[:, None]
-    v_b = y[1, j] if j is not None else np.zeros_like(y[1, i])
-    lam = impulse(y[1, i], v_b, inv_a, inv_b, normal, restitution, friction)
-    y[1, i] += lam * inv_a[:, None]
-    if j is not None:
-        y[0, j] += normal * (push * inv_b)[:, None]
-        y[1, j] -= lam * inv_b[:, None]
-    return lam
+    i = np.asarray(i, dtype=np.int64)
+    j = np.full(len(i), -1, np.int64) if j is None else np.asarray(j, dtype=np.int64)
+
+    def rows(x):
+        return np.ascontiguousarray(np.broadcast_to(x, i.shape), dtype=float)
+
+    # pair by pair with the compiled kernel (:func:`.compiled_response.resolve_pair`): the
+    # bodies are distinct, so the order does not matter
+    return resolve_rows(y, i, j, np.asarray(inverse_masses, dtype=float),
+                        np.ascontiguousarray(np.broadcast_to(normal, i.shape + (3,)), dtype=float), rows(depth),
+                        rows(restitution), rows(friction))

@@ -22,9 +22,29 @@ Bodies touching several surfaces (a ball in a corner, a stack) are settled by up
 from __future__ import annotations
 
 import numpy as np
+from numba import njit
 
 from .pairs import BodyPairs
 from .response import normal_speed, resolve
+
+#: an impact slower than what the forces pressing the pair together add over this many
+#: steps does not bounce (eps = 0): it ends the endless series of ever smaller bounces
+#: (Zeno's) of a body coming to rest, which an energy-gaining integrator (explicit Euler)
+#: would otherwise sustain as a jitter of about g dt^2
+RESTING_STEPS = 2
+
+
+@njit(cache=True)
+def rest_speed(floor, pressing, dt):
+    """Approach speeds at or below this are resting contacts, not bounces (m/s).
+
+    ``pressing`` is the relative acceleration pushing the pair together along the normal;
+    ``floor`` (the world's ``rest_speed``) is a floor for pairs nothing presses together (a row of touching
+    balls passing on round-off-sized speeds back and forth). Compiled, it is the one definition the
+    event loop's NumPy path (on arrays), its re-test and the contact solver (on numbers) call.
+    """
+    return floor + RESTING_STEPS * np.maximum(pressing, 0.0) * dt
+
 
 #: passes over the contacts; each pass settles every contact once, one after the other
 RESTING_PASSES = 4

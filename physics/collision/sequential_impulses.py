@@ -30,8 +30,68 @@ effective mass is m_n as well).
 
 from __future__ import annotations
 
+from typing import NamedTuple
+
 import numpy as np
 from numba import njit, prange
+
+
+class BodyColumns(NamedTuple):
+    """The bodies of every member, joined: (N, 3) or (N,), changed in place."""
+
+    q: np.ndarray  # positions, m
+    v: np.ndarray  # velocities, m/s
+    dq: np.ndarray  # the move since the start of the step, m (zeros at the start)
+    inverse_mass: np.ndarray  # 1/m, 1/kg; 0 for a pinned body
+    accel: np.ndarray  # the forces' accelerations, m/s^2
+
+
+class ContactColumns(NamedTuple):
+    """The contact constraints of every member, joined (Box2D's ``b2ContactConstraint`` array), (C,) or (C, 3).
+
+    ``pn``, ``pt`` (the impulses, warm-started), ``total`` and ``most`` are changed in place.
+    """
+
+    i: np.ndarray  # body i
+    j: np.ndarray  # body j, -1: a static shape
+    normal: np.ndarray  # from i towards j
+    s0: np.ndarray  # separation at the start of the step, m (negative: penetration)
+    vn0: np.ndarray  # v_n at the start of the step, m/s
+    mass: np.ndarray  # the effective mass m_n, kg
+    friction: np.ndarray  # mu
+    restitution: np.ndarray  # eps
+    threshold: np.ndarray  # approach speeds at or below this do not bounce, m/s
+    pn: np.ndarray  # normal impulse of the last substep, N s
+    pt: np.ndarray  # tangential impulse of the last substep, N s
+    total: np.ndarray  # the step's normal impulse, N s
+    most: np.ndarray  # the largest substep impulse of the step, N s (zeros at the start)
+
+
+class Members(NamedTuple):
+    """Per member m: its bodies ``bodies[m]:bodies[m + 1]``, contacts likewise, and its step and settings."""
+
+    bodies: np.ndarray
+    contacts: np.ndarray
+    dt: np.ndarray
+    substeps: np.ndarray
+    iterations: np.ndarray
+    bias_rate: np.ndarray
+    mass_scale: np.ndarray
+    impulse_scale: np.ndarray
+    push_speed: np.ndarray
+    slop: np.ndarray
+
+
+class Substep(NamedTuple):
+    """One member's step context (Box2D's ``b2StepContext``): the substep and the correction's settings."""
+
+    h: float  # the substep, s
+    iterations: int
+    bias_rate: float  # 1/s (:mod:`.solver_settings`)
+    mass_scale: float
+    impulse_scale: float
+    push_speed: float  # m/s, the largest push-out speed
+    slop: float  # m
 
 
 @njit(cache=True, inline="always")
@@ -64,10 +124,14 @@ def _separation(dq, k, i, j, normal, s0):
     return s0[k] + d0 * normal[k, 0] + d1 * normal[k, 1] + d2 * normal[k, 2]
 
 
-@njit(cache=True)
-def _sweep(v, dq, inverse_mass, ci, cj, normal, s0, mass, friction, pn, pt, c0, c1,
-           inv_h, use_bias, bias_rate, mass_scale, impulse_scale, push_speed, slop):
+@njit(cache=True, inline="always")
+def _sweep(bodies, contacts, c0, c1, sub, use_bias):
     """One Gauss-Seidel sweep over contacts c0..c1: the normal impulse, then friction."""
+    v, dq, inverse_mass = bodies.v, bodies.dq, bodies.inverse_mass
+    ci, cj, normal, s0, mass, friction, pn, pt = (contacts.i, contacts.j, contacts.normal, contacts.s0, contacts.mass,
+                                                  contacts.friction, contacts.pn, contacts.pt)
+    inv_h, bias_rate, slop, push_speed = 1.0 / sub.h, sub.bias_rate, sub.slop, sub.push_speed
+    mass_scale, impulse_scale = sub.mass_scale, sub.impulse_scale
     for k in range(c0, c1):
         i, j = ci[k], cj[k]
         wi = inverse_mass[i]
@@ -107,10 +171,11 @@ def _sweep(v, dq, inverse_mass, ci, cj, normal, s0, mass, friction, pn, pt, c0, 
 
 
 @njit(cache=True)
-def substep(q, v, dq, inverse_mass, accel, ci, cj, normal, s0, mass, friction, pn, pt, total, most,
-            b0, b1, c0, c1, h, iterations, bias_rate, mass_scale, impulse_scale, push_speed, slop):
-    """One substep of h for bodies b0..b1 and contacts c0..c1 (accelerations ``accel`` (N, 3))."""
-    inv_h = 1.0 / h
+def substep(bodies, contacts, b0, b1, c0, c1, sub):
+    """One substep of ``sub.h`` for bodies b0..b1 and contacts c0..c1."""
+    q, v, dq, inverse_mass, accel = bodies
+    ci, cj, normal, pn, pt = contacts.i, contacts.j, contacts.normal, contacts.pn, contacts.pt
+    h = sub.h
     for b in range(b0, b1):
         if inverse_mass[b] > 0.0:
             v[b, 0] += h * accel[b, 0]
@@ -121,24 +186,22 @@ def substep(q, v, dq, inverse_mass, accel, ci, cj, normal, s0, mass, friction, p
         wj = inverse_mass[j] if j >= 0 else 0.0
         _apply(v, i, j, inverse_mass[i], wj, pn[k] * normal[k, 0] + pt[k, 0], pn[k] * normal[k, 1] + pt[k, 1],
                pn[k] * normal[k, 2] + pt[k, 2])
-    for _ in range(iterations):
-        _sweep(v, dq, inverse_mass, ci, cj, normal, s0, mass, friction, pn, pt, c0, c1,
-               inv_h, True, bias_rate, mass_scale, impulse_scale, push_speed, slop)
+    for _ in range(sub.iterations):
+        _sweep(bodies, contacts, c0, c1, sub, True)
     for b in range(b0, b1):
         for a in range(3):
             q[b, a] += h * v[b, a]
             dq[b, a] += h * v[b, a]
-    for _ in range(iterations):
-        _sweep(v, dq, inverse_mass, ci, cj, normal, s0, mass, friction, pn, pt, c0, c1,
-               inv_h, False, bias_rate, mass_scale, impulse_scale, push_speed, slop)
+    for _ in range(sub.iterations):
+        _sweep(bodies, contacts, c0, c1, sub, False)
+    total, most = contacts.total, contacts.most
     for k in range(c0, c1):
         total[k] += pn[k]
         most[k] = max(most[k], pn[k])
 
 
 @njit(cache=True)
-def finish(v, dq, inverse_mass, ci, cj, normal, s0, vn0, mass, restitution, threshold, pn, total, most,
-           c0, c1, h, iterations):
+def finish(bodies, contacts, c0, c1, sub):
     """The end of a step: the largest residual, then the restitution pass; returns the residual.
 
     The residual of contact k is |min(v_n + max(s, 0) / h, P / m_n)| (m/s), the natural
@@ -149,7 +212,11 @@ def finish(v, dq, inverse_mass, ci, cj, normal, s0, vn0, mass, restitution, thre
     accumulated total (the last substep's plus this) kept >= 0. That is the lecture's
     equation 3 on the velocities at the start of the step, as Box2D applies it.
     """
-    inv_h = 1.0 / h
+    v, dq, inverse_mass = bodies.v, bodies.dq, bodies.inverse_mass
+    ci, cj, normal, s0, vn0, mass, restitution, threshold, pn = (
+        contacts.i, contacts.j, contacts.normal, contacts.s0, contacts.vn0, contacts.mass, contacts.restitution,
+        contacts.threshold, contacts.pn)
+    inv_h = 1.0 / sub.h
     residual = 0.0
     for k in range(c0, c1):
         i, j = ci[k], cj[k]
@@ -158,9 +225,9 @@ def finish(v, dq, inverse_mass, ci, cj, normal, s0, vn0, mass, restitution, thre
         s = _separation(dq, k, i, j, normal, s0)
         residual = max(residual, abs(min(vn + max(s, 0.0) * inv_h, pn[k] / mass[k])))
     extra = np.zeros(c1 - c0)
-    for _ in range(iterations):
+    for _ in range(sub.iterations):
         for k in range(c0, c1):
-            if vn0[k] >= -threshold[k] or most[k] <= 0.0:
+            if vn0[k] >= -threshold[k] or contacts.most[k] <= 0.0:
                 continue
             i, j = ci[k], cj[k]
             wj = inverse_mass[j] if j >= 0 else 0.0
@@ -172,26 +239,20 @@ def finish(v, dq, inverse_mass, ci, cj, normal, s0, vn0, mass, restitution, thre
             extra[k - c0] += dp
             _apply(v, ci[k], j, inverse_mass[i], wj, dp * normal[k, 0], dp * normal[k, 1], dp * normal[k, 2])
     for k in range(c0, c1):
-        total[k] += extra[k - c0]
+        contacts.total[k] += extra[k - c0]
     return residual
 
 
-def _step_members(q, v, inverse_mass, accel, ci, cj, normal, s0, vn0, mass, friction, restitution, threshold,
-                 pn, pt, total, bodies, contacts, dt, substeps, iterations, bias_rate, mass_scale, impulse_scale,
-                 push_speed, slop, residual):
-    """A whole step of every member m (bodies ``bodies[m]:bodies[m+1]``, contacts likewise) under
-    constant accelerations; each member has its own dt and settings."""
-    dq = np.zeros_like(q)
-    most = np.zeros(len(pn))
-    for m in prange(len(dt)):
-        b0, b1, c0, c1 = bodies[m], bodies[m + 1], contacts[m], contacts[m + 1]
-        h = dt[m] / substeps[m]
-        for _ in range(substeps[m]):
-            substep(q, v, dq, inverse_mass, accel, ci, cj, normal, s0, mass, friction, pn, pt, total, most,
-                    b0, b1, c0, c1, h, iterations[m], bias_rate[m], mass_scale[m], impulse_scale[m],
-                    push_speed[m], slop[m])
-        residual[m] = finish(v, dq, inverse_mass, ci, cj, normal, s0, vn0, mass, restitution, threshold, pn,
-                             total, most, c0, c1, h, iterations[m])
+def _step_members(bodies, contacts, members, residual):
+    """A whole step of every member m (a :class:`Members` row) under constant accelerations, its
+    residual into ``residual[m]``; each member has its own dt and settings."""
+    for m in prange(len(members.dt)):
+        b0, b1, c0, c1 = members.bodies[m], members.bodies[m + 1], members.contacts[m], members.contacts[m + 1]
+        sub = Substep(members.dt[m] / members.substeps[m], members.iterations[m], members.bias_rate[m],
+                      members.mass_scale[m], members.impulse_scale[m], members.push_speed[m], members.slop[m])
+        for _ in range(members.substeps[m]):
+            substep(bodies, contacts, b0, b1, c0, c1, sub)
+        residual[m] = finish(bodies, contacts, c0, c1, sub)
 
 
 #: one member (a run): serial, as Gauss-Seidel is (Numba's parallel loop only slows it, 3x here)

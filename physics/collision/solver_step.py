@@ -34,10 +34,20 @@ import dataclasses
 
 import numpy as np
 
-from .contact_buffer import Contacts, Materials, find_contacts, newly_hit, previous_rows, speculative_margin, warm_start
+from . import sequential_impulses as si
+from .contact_buffer import (
+    BodyState,
+    Contacts,
+    Materials,
+    find_contacts,
+    newly_hit,
+    previous_rows,
+    speculative_margin,
+    warm_start,
+)
 from .events import CollisionLog, ImpactBlock, cancel_triggers
-from .sequential_impulses import finish, step_members, step_members_parallel, substep
-from .step import RESTING_STEPS
+from .resting import rest_speed
+from .step import ConstantField
 
 #: the semi-implicit Euler the solver's substeps are
 INTEGRATOR = "semi-implicit-euler"
@@ -97,8 +107,11 @@ class SolverStep:
         """Forces, contacts and warm start: everything the kernel needs for the step from ``t``."""
         q0, v0 = np.ascontiguousarray(y[0], dtype=float), np.ascontiguousarray(y[1], dtype=float)
         a = self.field if self.field is not None else np.asarray(self.model.acceleration(t, q0, v0), dtype=float)
-        contacts = find_contacts(self.world, self.materials, q0, v0, a, self.radii, self.inverse_masses, dt,
-                                 self.log.removed, self.margin)
+        # where the forces alone take each body in the step: the scene's integrator's step under
+        # the accelerations at its start (semi-implicit Euler: q + dt (v + dt a))
+        y_forces, _ = self.integrator.step(ConstantField(a), t, np.asarray(y, dtype=float), dt, None)
+        contacts = find_contacts(self.world, self.materials, BodyState(q0, v0, a, self.radii, self.inverse_masses),
+                                 np.ascontiguousarray(y_forces[0]), self.log.removed, self.margin)
         if self._cancelled:
             self._cancelled &= set(contacts.key.tolist())  # pairs no longer in contact are free again
             contacts = contacts.subset(~np.isin(contacts.key, list(self._cancelled)))
@@ -107,7 +120,7 @@ class SolverStep:
     def _start(self, t, dt, q0, v0, a, contacts) -> StepStart:
         s = self.settings
         h = dt / s.substeps
-        threshold = self.world.rest_speed + RESTING_STEPS * np.maximum(contacts.pressing, 0.0) * dt
+        threshold = rest_speed(self.world.rest_speed, contacts.pressing, dt)
         old = self._previous
         previous = previous_rows(old.contacts.key, contacts.key)
         pn, pt = warm_start(previous, old.pn, old.pt, contacts.normal)
@@ -122,15 +135,15 @@ class SolverStep:
             [result] = solve_members([start], [s], np.array([0, n]), self.inverse_masses, start.a)
             return result
         q, v = start.q.copy(), start.v.copy()
-        pn, pt, total = start.pn.copy(), start.pt.copy(), np.zeros(m)
-        dq, most = np.zeros_like(q), np.zeros(m)  # forces of the state: evaluated in every substep
+        columns = _contact_columns(c, start.threshold, start.pn.copy(), start.pt.copy())
+        sub = si.Substep(h, s.iterations, bias_rate, mass_scale, impulse_scale, s.push_speed, s.slop)
+        dq = np.zeros_like(q)  # forces of the state: evaluated in every substep
         for k in range(s.substeps):
             a_k = start.a if k == 0 else np.asarray(self.model.acceleration(start.t + k * h, q, v), dtype=float)
-            substep(q, v, dq, self.inverse_masses, np.ascontiguousarray(a_k), c.i, c.j, c.normal, c.separation,
-                    c.mass, c.friction, pn, pt, total, most, 0, n, 0, m, h, s.iterations, bias_rate, mass_scale,
-                    impulse_scale, s.push_speed, s.slop)
-        residual = finish(v, dq, self.inverse_masses, c.i, c.j, c.normal, c.separation, c.normal_speed, c.mass,
-                          c.restitution, start.threshold, pn, total, most, 0, m, h, s.iterations)
+            bodies = si.BodyColumns(q, v, dq, self.inverse_masses, np.ascontiguousarray(a_k))
+            si.substep(bodies, columns, 0, n, 0, m, sub)
+        residual = si.finish(si.BodyColumns(q, v, dq, self.inverse_masses, start.a), columns, 0, m, sub)
+        pn, pt, total = columns.pn, columns.pt, columns.total
         return q, v, Solved(c, pn, pt, total, residual)
 
     def conclude(self, start: StepStart, q, v, solved) -> np.ndarray:
@@ -237,33 +250,39 @@ def solve_members(starts, settings, bodies, inverse_mass, accel, parallel=False)
     contacts = np.concatenate([[0], np.cumsum(counts)])
     shift = [bodies[m] for m in range(len(starts))]
 
-    def joined(name):
-        return np.concatenate([getattr(start.contacts, name) for start in starts])
-
-    ci = np.concatenate([start.contacts.i + shift[m] for m, start in enumerate(starts)])
-    cj = np.concatenate([np.where(start.contacts.j >= 0, start.contacts.j + shift[m], -1)
-                         for m, start in enumerate(starts)])
-    normal = np.concatenate([start.contacts.normal for start in starts]).reshape(-1, 3)
+    joined = Contacts(*[np.concatenate([getattr(start.contacts, f.name) for start in starts])
+                        for f in dataclasses.fields(Contacts)])
+    joined.i = np.concatenate([start.contacts.i + shift[m] for m, start in enumerate(starts)])
+    joined.j = np.concatenate([np.where(start.contacts.j >= 0, start.contacts.j + shift[m], -1)
+                               for m, start in enumerate(starts)])
+    joined.normal = joined.normal.reshape(-1, 3)
+    columns = _contact_columns(joined, np.concatenate([start.threshold for start in starts]),
+                               np.concatenate([start.pn for start in starts]),
+                               np.concatenate([start.pt for start in starts]).reshape(-1, 3))
     q = np.concatenate([start.q for start in starts])
     v = np.concatenate([start.v for start in starts])
-    pn = np.concatenate([start.pn for start in starts])
-    pt = np.concatenate([start.pt for start in starts]).reshape(-1, 3)
-    total = np.zeros(len(pn))
     residual = np.zeros(len(starts))
     soft = np.array([start.softness for start in starts])
-    (step_members_parallel if parallel else step_members)(
-        q, v, inverse_mass, accel, ci, cj, normal, joined("separation"), joined("normal_speed"), joined("mass"),
-        joined("friction"), joined("restitution"), np.concatenate([start.threshold for start in starts]),
-        pn, pt, total, bodies, contacts, np.array([start.dt for start in starts]),
-        np.array([s.substeps for s in settings]), np.array([s.iterations for s in settings]),
-        np.ascontiguousarray(soft[:, 0]), np.ascontiguousarray(soft[:, 1]), np.ascontiguousarray(soft[:, 2]),
-        np.array([s.push_speed for s in settings]), np.array([s.slop for s in settings]), residual)
+    members = si.Members(bodies, contacts, np.array([start.dt for start in starts]),
+                         np.array([s.substeps for s in settings]), np.array([s.iterations for s in settings]),
+                         np.ascontiguousarray(soft[:, 0]), np.ascontiguousarray(soft[:, 1]),
+                         np.ascontiguousarray(soft[:, 2]), np.array([s.push_speed for s in settings]),
+                         np.array([s.slop for s in settings]))
+    (si.step_members_parallel if parallel else si.step_members)(
+        si.BodyColumns(q, v, np.zeros_like(q), inverse_mass, accel), columns, members, residual)
+    pn, pt, total = columns.pn, columns.pt, columns.total
     results = []
     for m, start in enumerate(starts):
         b, c = slice(bodies[m], bodies[m + 1]), slice(contacts[m], contacts[m + 1])
         results.append((q[b].copy(), v[b].copy(),
                         Solved(start.contacts, pn[c].copy(), pt[c].copy(), total[c].copy(), float(residual[m]))))
     return results
+
+
+def _contact_columns(c: Contacts, threshold, pn, pt) -> si.ContactColumns:
+    """The solver kernels' contact constraints: ``c``'s columns, the warm start (pn, pt; changed in place)."""
+    return si.ContactColumns(c.i, c.j, c.normal, c.separation, c.normal_speed, c.mass, c.friction, c.restitution,
+                             threshold, pn, pt, np.zeros(len(pn)), np.zeros(len(pn)))
 
 
 @dataclasses.dataclass(frozen=True)

@@ -88,26 +88,11 @@ from .impact_cap import ImpactCapError
 from .impact_queue import ImpactQueue
 from .pairs import BodyPairs, ShapePairs, candidates, changed_candidates
 from .response import normal_speed, resolve
-from .resting import settle
-from .retest import retest_spheres_and_planes
+from .resting import rest_speed, settle
+from .retest import Bodies, Planes, retest_spheres_and_planes
 
 #: bodies closer than this many rounding units of the largest coordinate are touching
 SLOP_ULPS = 100
-#: an impact slower than what the forces pressing the pair together add over this many
-#: steps does not bounce (eps = 0): it ends the endless series of ever smaller bounces
-#: (Zeno's) of a body coming to rest, which an energy-gaining integrator (explicit Euler)
-#: would otherwise sustain as a jitter of about g dt^2
-RESTING_STEPS = 2
-
-
-def rest_speed(world, pressing, dt):
-    """Approach speeds at or below this are resting contacts, not bounces (m/s).
-
-    ``pressing`` is the relative acceleration pushing the pair together along the normal;
-    ``world.rest_speed`` is a floor for pairs nothing presses together (a row of touching
-    balls passing on round-off-sized speeds back and forth).
-    """
-    return world.rest_speed + RESTING_STEPS * np.maximum(pressing, 0.0) * dt
 
 
 def contact_slop(q) -> float:
@@ -151,15 +136,16 @@ class CollisionStep:
         #: spheres, planes, swept testing and constant forces: the changed pairs' narrow phase compiled
         self.compiled_retest = (self.world.detector == "swept" and self.field is not None
                                 and len(planes) == len(self.world.shapes))
-        self.plane_normals = np.array([p.normal for p in planes], dtype=float).reshape(-1, 3)
-        self.plane_offsets = np.array([p.offset for p in planes], dtype=float)
-        self.plane_triggers = np.array([p.trigger for p in planes], dtype=bool)
+        self.planes = tuple(Planes(np.array([p.normal for p in planes], dtype=float).reshape(-1, 3),
+                                   np.array([p.offset for p in planes], dtype=float),
+                                   np.array([p.trigger for p in planes], dtype=bool)))
         #: the loop this run uses: "auto" is "incremental" where it agrees with "full" to round-off
         self.event_loop = self.world.event_loop
         if self.event_loop == "auto":
             exact = self.field is not None and rest_of_step_is_unchanged(self.integrator)
             self.event_loop = "incremental" if exact else "full"
         self._active = np.ones(len(self.radii), bool)  # bodies not removed (removal is for good)
+        self._bodies = tuple(Bodies(self.radii, self.inverse_masses, self._active, self.field))
         self._is_changed = np.zeros(len(self.radii), bool)  # scratch: the bodies of one re-test
 
     def __call__(self, t, y, dt, carry):
@@ -228,10 +214,8 @@ class CollisionStep:
             active[list(self.log.removed)] = False
         is_changed[moved] = True
         i, j, in_contact, speed, normal, rest, s, watch = retest_spheres_and_planes(
-            grid.h, grid.centers, grid.reach, grid.head, grid.next, grid.cell, grid.large, grid.large_list,
-            grid.n_large[0], self.inverse_masses, active, moved, is_changed, chords.y_from, chords.y_end,
-            chords.t_from, chords.t_end, t, self.radii, slop, self.field, self.world.rest_speed, RESTING_STEPS,
-            dt, self.plane_normals, self.plane_offsets, self.plane_triggers)
+            grid.arrays, chords.arrays, self._bodies, self.planes, (t, dt, slop, self.world.rest_speed),  # a Split
+            moved, is_changed)
         is_changed[moved] = False
         js = j.tolist()  # the body pairs come first, then one run per plane
         n = len(js)
@@ -272,7 +256,7 @@ class CollisionStep:
         """
         integrator = self.integrator
         if self.field is not None and not integrator.implicit:
-            rows = _ConstantField(self.field[moved])
+            rows = ConstantField(self.field[moved])
             y = chords.now[:, moved]
             return np.asarray(integrator.step(rows, t, y, h, integrator.init(rows, t, y))[0])
         everyone = np.arange(len(self.radii))
@@ -307,7 +291,7 @@ class CollisionStep:
             if self.compiled_retest:  # spheres and planes under constant forces: one kernel
                 j = int(impact.pairs.j[k]) if isinstance(impact.pairs, BodyPairs) else -1 - impact.pairs.index
                 contact = _PairContact(*impact_terms(y_hit, int(impact.pairs.i[k]), j, self.radii, self.field,
-                                                     self.plane_normals, self.plane_offsets))
+                                                     self.planes))
             else:
                 contact = impact.pairs.subset([k]).contact(self.radii, y_hit[0])
             event = self._event(impact, y_hit, t, h, dt, self._accelerations(t_hit, chords), contact)
@@ -380,7 +364,8 @@ class CollisionStep:
             return
         a = accelerations() if accelerations is not None else np.asarray(self.model.acceleration(t, y[0], y[1]))
         for pairs, start in zip(groups, starts):
-            start.rest_speed = rest_speed(self.world, normal_speed(a[pairs.i], pairs.velocity_b(a), start.normal), dt)
+            pressing = normal_speed(a[pairs.i], pairs.velocity_b(a), start.normal)
+            start.rest_speed = rest_speed(self.world.rest_speed, pressing, dt)
 
     def _next_collision(self, groups, starts, t, h, dt, y, y_end, ignored):
         """The earliest collision the prologues accept; cancelled ones are logged and skipped."""
@@ -416,7 +401,7 @@ class CollisionStep:
         a = accelerations() if accelerations is not None else np.asarray(model.acceleration(t_hit, y_hit[0], y_hit[1]))
         pressing = float(normal_speed(a[body], pair.velocity_b(a)[0], normal))
         kind = "impact"
-        if speed <= rest_speed(world, pressing, dt):
+        if speed <= rest_speed(world.rest_speed, pressing, dt):
             kind, restitution = "resting", 0.0  # a resting contact, not a bounce
         return Collision(kind=kind, t=float(t_hit), body=body, other=other, body_name=model.names[body],
                          other_name=other_name, normal=np.asarray(normal, dtype=float), impact_speed=speed,
@@ -438,7 +423,7 @@ class CollisionStep:
             restitution, friction = world.properties(body, pairs.shape)
         speed = contact.speed
         kind = "impact"
-        if speed <= rest_speed(world, contact.pressing, dt):
+        if speed <= rest_speed(world.rest_speed, contact.pressing, dt):
             kind, restitution = "resting", 0.0  # a resting contact, not a bounce
         return Collision(kind=kind, t=float(t_hit), body=body, other=other, body_name=names[body],
                          other_name=other_name, normal=contact.normal[0], impact_speed=speed,
@@ -513,7 +498,7 @@ def rest_of_step_is_unchanged(integrator) -> bool:
     """
     if integrator.implicit:
         return False
-    model = _ConstantField(np.array([[0.3, -0.7, -9.81]]))
+    model = ConstantField(np.array([[0.3, -0.7, -9.81]]))
     y0, dt, s = np.array([[[0.1, 0.2, 0.3]], [[1.0, -2.0, 0.5]]]), 0.01, 0.375
     try:
         y1 = np.asarray(integrator.step(model, 0.0, y0, dt, integrator.init(model, 0.0, y0))[0])
@@ -524,7 +509,7 @@ def rest_of_step_is_unchanged(integrator) -> bool:
     return bool(np.allclose(y2, y1, rtol=1e-12, atol=1e-15))
 
 
-class _ConstantField:
+class ConstantField:
     """The model seen by some bodies when every force is constant: a(t, q, v) = their rows of the field."""
 
     xp = np

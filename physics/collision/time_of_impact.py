@@ -53,6 +53,7 @@ import numpy as np
 
 from .narrow_phase import collide
 from .shapes import Box, OrientedBox, Plane, Shape, Sphere
+from .sphere_contacts import first_entry_rows, sphere_plane_entry_rows, sphere_sphere_entry_rows
 
 NO_IMPACT = np.inf
 
@@ -61,26 +62,29 @@ def _dot(x, y):
     return (x * y).sum(axis=-1)
 
 
-def _first_entry(a, b, c):
-    """First root in [0, 1] of a t^2 + 2 b t + c = 0 for a point starting outside (c > 0).
+def _elementwise(rows, *args):
+    """``rows`` (a compiled kernel on (K,) arrays) on the broadcast ``args``, in their shape."""
+    args = np.broadcast_arrays(*(np.asarray(x, dtype=float) for x in args))
+    return rows(*(np.ascontiguousarray(x.reshape(-1)) for x in args)).reshape(args[0].shape)
 
-    ``inf`` when the point moves away (b >= 0), misses (negative discriminant) or
-    arrives after the step.
-    """
-    disc = b * b - a * c
-    ok = (c > 0) & (b < 0) & (disc >= 0)
-    with np.errstate(invalid="ignore", divide="ignore"):
-        t = c / (-b + np.sqrt(np.where(ok, disc, 0.0)))
-    return np.where(ok & (t <= 1), t, NO_IMPACT)
+
+def _first_entry(a, b, c):
+    """First root in [0, 1] of a t^2 + 2 b t + c = 0 for a point starting outside (c > 0), else inf
+    (:func:`.sphere_contacts.first_entry_of`, elementwise)."""
+    return _elementwise(first_entry_rows, a, b, c)
 
 
 def sphere_sphere(p1, p2, q1, q2, r_p, r_q):
-    """Fraction of the step at which sphere P (P1 -> P2) first touches sphere Q (Q1 -> Q2)."""
-    a_vec = np.asarray(p1) - q1
-    b_vec = (np.asarray(p2) - p1) - (np.asarray(q2) - q1)
-    reach = np.asarray(r_p) + r_q
-    a, b, c = _dot(b_vec, b_vec), _dot(a_vec, b_vec), _dot(a_vec, a_vec) - reach * reach
-    return np.where(c <= 0, np.where(b < 0, 0.0, NO_IMPACT), _first_entry(a, b, c))
+    """Fraction of the step at which sphere P (P1 -> P2) first touches sphere Q (Q1 -> Q2)
+    (:func:`.sphere_contacts.sphere_sphere_entry`, row by row)."""
+    a_vec = np.asarray(p1, dtype=float) - q1
+    b_vec = (np.asarray(p2, dtype=float) - p1) - (np.asarray(q2) - q1)
+    shape = np.broadcast_shapes(a_vec.shape, b_vec.shape, np.shape(np.asarray(r_p) + r_q) + (3,))
+    def rows(x, tail):
+        return np.ascontiguousarray(np.broadcast_to(x, shape[:-1] + tail).reshape((-1,) + tail))
+
+    return sphere_sphere_entry_rows(rows(a_vec, (3,)), rows(b_vec, (3,)),
+                                    rows(np.asarray(r_p, dtype=float) + r_q, ())).reshape(shape[:-1])
 
 
 def lecture_sphere_sphere(p1, p2, q1, q2, r_p, r_q) -> float:
@@ -94,10 +98,7 @@ def sphere_plane(p1, p2, radius, plane: Plane):
     """The centre's height above the plane, less r, is linear along the chord: h0 + s (h1 - h0)."""
     h0 = _dot(p1, plane.normal) - plane.offset - radius
     h1 = _dot(p2, plane.normal) - plane.offset - radius
-    with np.errstate(invalid="ignore", divide="ignore"):
-        s = h0 / (h0 - h1)
-    crossing = (h0 > 0) & (h1 <= 0)
-    return np.where(h0 <= 0, np.where(h1 < h0, 0.0, NO_IMPACT), np.where(crossing, s, NO_IMPACT))
+    return _elementwise(sphere_plane_entry_rows, h0, h1)  # :func:`.sphere_contacts.sphere_plane_entry_of`
 
 
 def _slab_entry(origin, d, lo, hi):
