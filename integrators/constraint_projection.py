@@ -7,6 +7,10 @@ their eq. 26:
     dlambda = (-C - alpha_tilde lambda - gamma grad C . (x - x_prev)) / ((1 + gamma) w + alpha_tilde),
     x_i -= w_i dlambda n,   x_j += w_j dlambda n,   lambda += dlambda,
 
+on x = x_prev + dx. The sweep moves the displacement dx over the substep, not x itself:
+x - x_prev is then dx exactly, and the velocity dx / h carries the round-off of dx, not
+that of x divided by h (which at h = 1 ms would be a thousand times larger).
+
 with w = w_i + w_j the inverse masses, alpha_tilde = alpha / h^2 (alpha = 1 / k the
 compliance, h the substep) and, for a damper of coefficient beta beside the spring,
 beta_tilde = h^2 beta and gamma = alpha_tilde beta_tilde / h = alpha beta / h = beta / (k h).
@@ -26,19 +30,23 @@ from numba import njit
 
 
 @njit(cache=True)
-def project(x, x_prev, inverse_mass, i, j, rest_length, compliance, damping, h, iterations, accumulate):
-    """``iterations`` Gauss-Seidel sweeps over the constraints, moving ``x`` (N, 3) in place.
+def project(dx, x_prev, inverse_mass, i, j, rest_length, compliance, damping, h, iterations, accumulate):
+    """``iterations`` Gauss-Seidel sweeps over the constraints, moving ``dx`` (N, 3) in place.
 
-    ``x_prev`` (N, 3) are the positions at the start of the substep (for the damping term);
-    the multipliers start at 0 in each substep. Coincident bodies (no direction) and pairs of
-    pinned bodies (w = 0) are skipped.
+    ``x_prev`` (N, 3) are the positions at the start of the substep, ``dx`` the predicted
+    displacement h v* on entry and the projected one on return; the multipliers start at 0
+    in each substep. Coincident bodies (no direction) and pairs of pinned bodies (w = 0) are
+    skipped.
     """
     lam = np.zeros(i.shape[0])
     for _ in range(iterations):
         for p in range(i.shape[0]):
             a, b = i[p], j[p]
             w = inverse_mass[a] + inverse_mass[b]
-            d0, d1, d2 = x[b, 0] - x[a, 0], x[b, 1] - x[a, 1], x[b, 2] - x[a, 2]
+            u0, u1, u2 = dx[b, 0] - dx[a, 0], dx[b, 1] - dx[a, 1], dx[b, 2] - dx[a, 2]
+            d0 = x_prev[b, 0] - x_prev[a, 0] + u0
+            d1 = x_prev[b, 1] - x_prev[a, 1] + u1
+            d2 = x_prev[b, 2] - x_prev[a, 2] + u2
             length = np.sqrt(d0 * d0 + d1 * d1 + d2 * d2)
             if w == 0.0 or length == 0.0:
                 continue
@@ -46,16 +54,14 @@ def project(x, x_prev, inverse_mass, i, j, rest_length, compliance, damping, h, 
             alpha_tilde = compliance[p] / (h * h)
             gamma = compliance[p] * damping[p] / h
             # grad C . (x - x_prev): the constraint's rate times h
-            rate = (n0 * (x[b, 0] - x_prev[b, 0] - x[a, 0] + x_prev[a, 0])
-                    + n1 * (x[b, 1] - x_prev[b, 1] - x[a, 1] + x_prev[a, 1])
-                    + n2 * (x[b, 2] - x_prev[b, 2] - x[a, 2] + x_prev[a, 2]))
+            rate = n0 * u0 + n1 * u1 + n2 * u2
             held = lam[p] if accumulate else 0.0
             dlam = (-(length - rest_length[p]) - alpha_tilde * held - gamma * rate) / ((1.0 + gamma) * w + alpha_tilde)
             lam[p] += dlam
             wa, wb = inverse_mass[a] * dlam, inverse_mass[b] * dlam
-            x[a, 0] -= wa * n0
-            x[a, 1] -= wa * n1
-            x[a, 2] -= wa * n2
-            x[b, 0] += wb * n0
-            x[b, 1] += wb * n1
-            x[b, 2] += wb * n2
+            dx[a, 0] -= wa * n0
+            dx[a, 1] -= wa * n1
+            dx[a, 2] -= wa * n2
+            dx[b, 0] += wb * n0
+            dx[b, 1] += wb * n1
+            dx[b, 2] += wb * n2

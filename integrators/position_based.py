@@ -23,7 +23,8 @@ from typing import ClassVar
 
 import numpy as np
 
-from .base import Stepper
+from . import linear_stability
+from .base import Integrator
 from .constraint_projection import project
 
 #: displacement and velocity of the linear map's basis states, m, m/s: along the spring's axis
@@ -32,8 +33,13 @@ LINEAR_AMPLITUDE = 0.25
 
 
 @dataclasses.dataclass(frozen=True)
-class PositionBased(Stepper):
+class PositionBased(Integrator):
     """Predict, project the distance constraints, update velocities; ``substeps`` x ``iterations``.
+
+    A fixed-step method like a :class:`~.base.Stepper` (``init``, ``step``, a linear map and
+    its stability theory), but a kind of its own, ``"position-based"``: it steps only models
+    of springs, dampers and constant forces, on NumPy, so what is parametrised over every
+    Stepper (studies, drag and JAX tests) leaves it out, and it has its own tests.
 
     Parameters
     ----------
@@ -47,11 +53,18 @@ class PositionBased(Stepper):
     iterations: int = 10
 
     order = 1
-    evaluations = None  # no force evaluations: substeps x iterations constraint sweeps
     implicit = True
+    kind = "position-based"
     #: whether the sweep carries the multipliers lambda between iterations (XPBD) or not (PBD)
     accumulate: ClassVar[bool]
     stability_note = "none (stable at every dt)"
+    #: no scalar stability function: the map on the oscillator is a matrix (:meth:`linear_map`)
+    stability_function = None
+
+    @property
+    def evaluations(self) -> int:
+        """Constraint sweeps per step, substeps x iterations (each one pass over the springs, as a force evaluation)."""
+        return self.substeps * self.iterations
 
     def __post_init__(self):
         for key in ("substeps", "iterations"):
@@ -77,12 +90,10 @@ class PositionBased(Stepper):
         q, v = np.array(y[0], float), np.array(y[1], float)
         h = dt / self.substeps
         for _ in range(self.substeps):
-            v = v + h * external
-            x = q + h * v
-            project(x, q, inverse_mass, c.i, c.j, c.rest_length, c.compliance, c.damping, h, self.iterations,
+            dx = h * (v + h * external)  # predict: x* = q + h v*, v* = v + h a_ext
+            project(dx, q, inverse_mass, c.i, c.j, c.rest_length, c.compliance, c.damping, h, self.iterations,
                     self.accumulate)
-            v = (x - q) / h
-            q = x
+            q, v = q + dx, dx / h
         return np.stack([q, v]).astype(y.dtype, copy=False), carry
 
     def linear_map(self, omega_dt: float, zeta: float = 0.0) -> np.ndarray:
@@ -106,6 +117,18 @@ class PositionBased(Stepper):
                             y1[1, 1, 0] / LINEAR_AMPLITUDE])
         return np.array(columns).T
 
+    def spectral_radius(self, omega_dt: float, zeta: float = 0.0) -> float:
+        """Largest |eigenvalue| of :meth:`linear_map`."""
+        return linear_stability.spectral_radius(self, omega_dt, zeta)
+
+    def stability_limit(self, zeta: float = 0.0) -> float | None:
+        """Largest stable omega dt on the oscillator: None, stable at every dt (implicit Euler per substep)."""
+        return linear_stability.stability_limit(self, zeta)
+
+    def describe(self) -> dict:
+        return super().describe() | {"substeps": self.substeps, "iterations": self.iterations,
+                                     "stability_limit_omega_dt": self.stability_limit(0.0)}
+
 
 @dataclasses.dataclass(frozen=True)
 class PBD(PositionBased):
@@ -123,6 +146,11 @@ class PBD(PositionBased):
 
     name = "pbd"
     accumulate = False
+
+    @property
+    def order(self) -> int:
+        """1 with one iteration (then it is xpbd); 0 with more: it converges to springs of another stiffness."""
+        return 1 if self.iterations == 1 else 0
     style = ("tab:pink", "P")
 
 

@@ -8,12 +8,13 @@ import sys
 import numpy as np
 import pytest
 from helpers import oscillator
-from steplab.cli import main
 from steplab.integrators import PBD, XPBD, get_integrator, simulate
 from steplab.integrators.settings import scene_integrator
 from steplab.physics import Drag, Gravity, Model, Springs
 from steplab.physics.constraints import InextensibleSpringError, NotConstraintsError
 from steplab.physics.scene import load_scene, parse_scene
+
+from steplab.cli import main
 
 CLOTH = load_scene("cloth")
 
