@@ -132,7 +132,7 @@ class PositionBased(Integrator):
 
 @dataclasses.dataclass(frozen=True)
 class PBD(PositionBased):
-    """1st order position-based dynamics, stiffness as a per-iteration factor (Mueller et al. 2007).
+    """Position-based dynamics, stiffness as a per-iteration factor (Mueller et al. 2007); 1st order with one iteration.
 
     Each projection moves the constraint the fraction s = w / (w + alpha / h^2) = k h^2 w / (1 + k h^2 w)
     of the way to C = 0 (w the pair's inverse masses, k the spring's stiffness, h the substep):
