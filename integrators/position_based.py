@@ -77,8 +77,12 @@ class PositionBased(Integrator):
             raise ValueError(f"{self.name} runs on the NumPy backend only (its constraint sweep is a sequential "
                              "Numba loop); use --backend numpy")
         c = model.distance_constraints()  # refuses forces it cannot express, before the first step
-        if np.any(c.compliance < 0) or np.any(c.damping < 0):
-            raise ValueError(f"{self.name}: compliance and damping must be >= 0")
+        bad = np.flatnonzero((c.compliance < 0) | (c.damping < 0))
+        if bad.size:
+            p = bad[0]
+            raise ValueError(f"{self.name}: the spring between bodies {c.i[p]} and {c.j[p]} has compliance "
+                             f"{c.compliance[p]:g} m/N and damping {c.damping[p]:g} N s/m; both must be >= 0 "
+                             "(a stiffness k > 0, alpha = 1 / k)")
         field = model.constant_field
         external = np.zeros((model.n_bodies, 3)) if field is None else np.broadcast_to(field, (model.n_bodies, 3))
         return c, np.asarray(external, float), np.asarray(model.inverse_masses, float)
@@ -146,12 +150,12 @@ class PBD(PositionBased):
 
     name = "pbd"
     accumulate = False
+    style = ("tab:pink", "P")
 
     @property
     def order(self) -> int:
         """1 with one iteration (then it is xpbd); 0 with more: it converges to springs of another stiffness."""
         return 1 if self.iterations == 1 else 0
-    style = ("tab:pink", "P")
 
 
 @dataclasses.dataclass(frozen=True)

@@ -204,7 +204,7 @@ def test_bad_settings_and_forces_in_python_are_one_line():
     p = oscillator()
     negative = Model([1.0, 1.0], [0.05, 0.05], [Springs(np.array([0]), np.array([1]), np.array([-1.0]),
                                                         np.array([1.0]))], pinned=[True, False])
-    with pytest.raises(ValueError, match="compliance and damping must be >= 0"):
+    with pytest.raises(ValueError, match="has compliance -1 m/N and damping 0 N s/m; both must be >= 0"):
         simulate(negative, "xpbd", p.y0, 0.0, n_steps=1, dt=1e-3)
     dragged = Model([1.0, 1.0], [0.05, 0.05], [*p.model.forces, Drag(np.array([0.0, 0.5]))], pinned=[True, False])
     with pytest.raises(NotConstraintsError, match="this model also has 'drag'"):
