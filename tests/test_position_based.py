@@ -14,6 +14,7 @@ from steplab.integrators.settings import scene_integrator
 from steplab.physics import Drag, Gravity, Model, Springs
 from steplab.physics.constraints import InextensibleSpringError, NotConstraintsError
 from steplab.physics.scene import load_scene, parse_scene
+from steplab.physics.scene_library import SCENES
 
 from steplab.cli import main
 
@@ -125,7 +126,7 @@ def test_an_inextensible_spring_is_refused_by_force_based_methods():
 
 
 def test_the_cloth_runs_under_xpbd_from_its_scene_settings():
-    text = (load_scene.__globals__["SCENES"]["cloth"].read_text()
+    text = (SCENES["cloth"].read_text()
             .replace('integrator = "semi-implicit-euler"', 'integrator = "xpbd"')
             + "\n[simulation.xpbd]\nsubsteps = 4\niterations = 1\n")
     scene = parse_scene(text)
@@ -149,7 +150,7 @@ def run(capsys, *argv):
 
 
 def cloth_file(tmp_path, replace=(), extra=""):
-    text = load_scene.__globals__["SCENES"]["cloth"].read_text()
+    text = SCENES["cloth"].read_text()
     for old, new in replace:
         assert old in text
         text = text.replace(old, new)
