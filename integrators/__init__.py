@@ -28,6 +28,8 @@ from .exact import NotConstantForceError as NotConstantForceError
 from .game_loop import GameLoop as GameLoop
 from .implicit_damping_euler import ImplicitDampingEuler as ImplicitDampingEuler
 from .implicit_euler import ImplicitEuler as ImplicitEuler
+from .position_based import PBD as PBD
+from .position_based import XPBD as XPBD
 from .position_first_euler import ExponentialDampingEuler as ExponentialDampingEuler
 from .position_first_euler import PositionFirstEuler as PositionFirstEuler
 from .references import DiffraxDopri8 as DiffraxDopri8

@@ -15,6 +15,7 @@ from .euler import ExplicitEuler
 from .exact import Exact
 from .implicit_damping_euler import ImplicitDampingEuler
 from .implicit_euler import ImplicitEuler
+from .position_based import PBD, XPBD
 from .position_first_euler import ExponentialDampingEuler, PositionFirstEuler
 from .references import DiffraxDopri8, DiffraxKvaerno5, DiffraxTsit5, ScipyDOP853, ScipyRadau
 from .runge_kutta import RK4, Heun, Midpoint
@@ -54,6 +55,8 @@ INTEGRATORS: Registry = Registry("steplab.integrators", "integrator", [(method.n
     Midpoint(), RK4(), ImplicitEuler(), ImplicitDampingEuler(), PositionFirstEuler(), ExponentialDampingEuler(),
     Exact(), DiffraxDopri8(), DiffraxTsit5(),
     DiffraxKvaerno5(), ScipyDOP853(), ScipyRadau(),
+    # position-based: the springs as constraints (steplab.physics.constraints)
+    PBD(), XPBD(),
 )], _as_integrator)
 
 

@@ -9,6 +9,7 @@ import numpy as np
 
 from .base import Solver, Stepper
 from .loop import compiled_loop
+from .position_based import PositionBased
 
 #: default step budget of one run; a larger run must ask for it explicitly
 MAX_STEPS = 10_000_000
@@ -201,7 +202,7 @@ def simulate(model, integrator, y0, t_start: float, t_end: float | None = None, 
             raise DivergenceError(integrator.name, dt, int(saves[bad[0]]), float(ts[bad[0]]))
         return Trajectory(ts, ys, integrator.name, dt, 0, backend, wall)
 
-    assert isinstance(integrator, Stepper)
+    assert isinstance(integrator, (Stepper, PositionBased))
     model = _on_backend(model, backend, dtype)
     run = _run_numpy if backend == "numpy" or step is not None else _run_jax
     return run(model, integrator, np.asarray(y0, dtype=dtype), t_start, dt, n, save_every,

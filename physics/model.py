@@ -13,6 +13,7 @@ from collections.abc import Sequence
 
 import numpy as np
 
+from . import constraints
 from .force import Force
 
 
@@ -62,6 +63,13 @@ class Model:
             field = np.where(pinned[:, None], 0.0, np.broadcast_to(field, (n, 3)))
         self._field = xp.asarray(field, dtype=self.dtype) if constant else None
         self.acceleration = self._assemble_acceleration()
+        # stiffness = inf springs are constraints: a force evaluation would be inf * 0, so every
+        # method that asks for the acceleration is refused, and the energy counts them as 0
+        # (an enforced constraint's potential); position-based methods read distance_constraints()
+        self._energy_forces = self.forces
+        if constraints.has_inextensible(self.forces):
+            self._energy_forces = constraints.without_inextensible(self.forces)
+            self.acceleration = self._refuse_inextensible
 
     @property
     def n_bodies(self) -> int:
@@ -88,6 +96,18 @@ class Model:
         return Model(np.asarray(self.masses, dtype=float), np.asarray(self.radii, dtype=float),
                      self._source_forces, self.pinned, self.names,
                      xp or self.xp, dtype or self.dtype)
+
+    @staticmethod
+    def _refuse_inextensible(t, q, v):
+        raise constraints.inextensible_error()
+
+    def distance_constraints(self) -> constraints.DistanceConstraints:
+        """The springs as distance constraints, float64 NumPy (:mod:`.constraints`), for position-based methods.
+
+        Raises :class:`.constraints.NotConstraintsError` (one line) for a model with forces
+        that are neither springs, dampers on springs nor constant.
+        """
+        return constraints.distance_constraints(self._source_forces)
 
     # --- forces --------------------------------------------------------------------------
 
@@ -179,7 +199,7 @@ class Model:
     def potential_energy(self, q):
         """Sum of the potentials of the conservative forces (gravity, springs, constant forces), J."""
         total = 0.0
-        for term in self.forces:
+        for term in self._energy_forces:
             u = term.potential(self.xp, q, self.masses)
             if u is not None:
                 total = total + u

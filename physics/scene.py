@@ -53,6 +53,9 @@ class Scene:
     rigid_bodies: rigid_body.RigidBodies | None = None
     #: [simulation] rotation, the rotation method's name (None: steplab.integrators.DEFAULT_ROTATION)
     rotation: str | None = None
+    #: the settings of ``integrator`` from its table [simulation.<integrator>] (``substeps = 4``),
+    #: as read; the integrator checks them (:func:`steplab.integrators.settings.scene_integrator`)
+    integrator_settings: dict = dataclasses.field(default_factory=dict)
 
 
 def builtin_scenes() -> list[str]:
@@ -184,8 +187,10 @@ class _SceneBuilder:
         if forces is not None:
             self.add_forces(forces)
 
-        sim.allow("integrator", "dt", "t_start", "t_end", "rotation")
         integrator = sim.string("integrator", DEFAULT_INTEGRATOR)
+        keys = ("integrator", "dt", "t_start", "t_end", "rotation")
+        sim.allow(*keys, integrator)  # [simulation.<integrator>]: its settings
+        settings = sim.table(integrator) if integrator not in keys else None
         rotation = sim.string("rotation") if "rotation" in sim.data else None
         dt = sim.number("dt", REQUIRED, positive=True)
         t_start = sim.number("t_start", 0.0)
@@ -199,7 +204,8 @@ class _SceneBuilder:
         table = root.table("collisions") if collisions else None
         collisions = self.add_collisions(table) if table is not None else None
         return Scene(root.string("name", name), model, y0, integrator, dt, t_start, t_end,
-                     root.string("description", ""), collisions, self.rigid_bodies(), rotation)
+                     root.string("description", ""), collisions, self.rigid_bodies(), rotation,
+                     {} if settings is None else dict(settings.data))
 
     def rigid_bodies(self) -> rigid_body.RigidBodies | None:
         if not self.rotating:
@@ -273,11 +279,18 @@ class _SceneBuilder:
         for k, vertex in enumerate(mesh.vertices):  # pinned vertices stay put: no velocity
             self._append(t, f"{name}[{k}]", mass / n, radius, vertex, 0 * velocity if k in pinned else velocity,
                          k in pinned)
-        springs, dampers = soft_body.connect(mesh.vertices, pairs, t.number("stiffness", REQUIRED, positive=True),
+        springs, dampers = soft_body.connect(mesh.vertices, pairs, self._stiffness(t),
                                              t.number("damping", 0.0, nonnegative=True), offset)
         if not np.all(np.isfinite(springs.rest_length)):
             t.fail("vertices so far apart that a spring's rest length overflows")
         self.forces += [f for f in (springs, dampers) if f is not None]
+
+    @staticmethod
+    def _stiffness(t: Table) -> float:
+        """k, N/m, > 0; ``inf``: inextensible springs, which only position-based integrators step."""
+        if t.data.get("stiffness") == float("inf"):
+            return float("inf")
+        return t.number("stiffness", REQUIRED, positive=True)
 
     def _indices(self, t: Table, key: str, n: int) -> list[int]:
         value = t.data.get(key, [])

@@ -1,0 +1,177 @@
+"""Position-based dynamics: ``pbd`` (Mueller et al. 2007) and ``xpbd`` (Macklin et al. 2016), with substeps.
+
+Both act on the model's springs as distance constraints (:meth:`Model.distance_constraints`:
+a spring of stiffness k is a constraint of compliance alpha = 1 / k, ``inf`` an inextensible
+one) and on its constant forces (gravity, constant forces) as external accelerations; a
+model with other forces is refused in one line. One step of dt is ``substeps`` substeps of
+h = dt / substeps, each:
+
+    v* = v + h a_ext,   x = q + h v*                           (predict)
+    ``iterations`` Gauss-Seidel sweeps over the constraints    (project, :mod:`.constraint_projection`)
+    v1 = (x - q) / h,   q1 = x                                  (update velocities)
+
+XPBD's converged sweep is implicit Euler on the springs (its multiplier lambda = -C / alpha
+is the spring force times h^2), so it is stable at every dt and damps like implicit Euler;
+with substeps and one iteration it is Macklin et al.'s "Small steps in physics simulation"
+(SCA 2019). NumPy backend only: the sweep is a sequential Numba loop.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from typing import ClassVar
+
+import numpy as np
+
+from . import linear_stability
+from .base import Integrator
+from .constraint_projection import project
+
+#: displacement and velocity of the linear map's basis states, m, m/s: along the spring's axis
+#: C = x - l_rest is exactly linear, so any size that keeps x > 0 gives the map to round-off
+LINEAR_AMPLITUDE = 0.25
+
+
+@dataclasses.dataclass(frozen=True)
+class PositionBased(Integrator):
+    """Predict, project the distance constraints, update velocities; ``substeps`` x ``iterations``.
+
+    A fixed-step method like a :class:`~.base.Stepper` (``init``, ``step``, a linear map and
+    its stability theory), but a kind of its own, ``"position-based"``: it steps only models
+    of springs, dampers and constant forces, on NumPy, so what is parametrised over every
+    Stepper (studies, drag and JAX tests) leaves it out, and it has its own tests.
+
+    Parameters
+    ----------
+    substeps : int
+        Substeps of h = dt / substeps per step, >= 1.
+    iterations : int
+        Gauss-Seidel sweeps over the constraints per substep, >= 1.
+    """
+
+    substeps: int = 1
+    iterations: int = 10
+
+    order = 1
+    implicit = True
+    kind = "position-based"
+    #: whether the sweep carries the multipliers lambda between iterations (XPBD) or not (PBD)
+    accumulate: ClassVar[bool]
+    stability_note = "none (stable at every dt)"
+    #: no scalar stability function: the map on the oscillator is a matrix (:meth:`linear_map`)
+    stability_function = None
+
+    @property
+    def evaluations(self) -> int:
+        """Constraint sweeps per step, substeps x iterations (each one pass over the springs, as a force evaluation)."""
+        return self.substeps * self.iterations
+
+    def __post_init__(self):
+        for key in ("substeps", "iterations"):
+            value = getattr(self, key)
+            if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < 1:
+                raise ValueError(f"{self.name}: {key} must be a whole number >= 1, got {value!r}")
+
+    def init(self, model, t, y):
+        if model.xp is not np:
+            raise ValueError(f"{self.name} runs on the NumPy backend only (its constraint sweep is a sequential "
+                             "Numba loop); use --backend numpy")
+        c = model.distance_constraints()  # refuses forces it cannot express, before the first step
+        bad = np.flatnonzero((c.compliance < 0) | (c.damping < 0))
+        if bad.size:
+            p = bad[0]
+            raise ValueError(f"{self.name}: the spring between bodies {c.i[p]} and {c.j[p]} has compliance "
+                             f"{c.compliance[p]:g} m/N and damping {c.damping[p]:g} N s/m; both must be >= 0 "
+                             "(a stiffness k > 0, alpha = 1 / k)")
+        field = model.constant_field
+        external = np.zeros((model.n_bodies, 3)) if field is None else np.broadcast_to(field, (model.n_bodies, 3))
+        return c, np.asarray(external, float), np.asarray(model.inverse_masses, float)
+
+    def step(self, model, t, y, dt, carry):
+        if carry is None:  # a caller that did not call init
+            carry = self.init(model, t, y)
+        c, external, inverse_mass = carry
+        q, v = np.array(y[0], float), np.array(y[1], float)
+        h = dt / self.substeps
+        for _ in range(self.substeps):
+            dx = h * (v + h * external)  # predict: x* = q + h v*, v* = v + h a_ext
+            project(dx, q, inverse_mass, c.i, c.j, c.rest_length, c.compliance, c.damping, h, self.iterations,
+                    self.accumulate)
+            q, v = q + dx, dx / h
+        return np.stack([q, v]).astype(y.dtype, copy=False), carry
+
+    def linear_map(self, omega_dt: float, zeta: float = 0.0) -> np.ndarray:
+        """One-step matrix on u'' = -u - 2 zeta u', from :meth:`step` on a spring of k = 1 to a
+        pinned anchor (m = 1, damper 2 zeta): along its axis C = x - l_rest is linear, so the
+        step is exactly linear in (u, v)."""
+        from steplab.physics import Dampers, Model, Springs
+
+        i, j = np.array([0]), np.array([1])
+        forces = [Springs(i, j, np.ones(1), np.ones(1))]
+        if zeta:
+            forces.append(Dampers(i, j, np.array([2.0 * zeta])))
+        model = Model(np.ones(2), np.ones(2), forces, pinned=np.array([True, False]))
+        carry = self.init(model, 0.0, None)
+        columns = []
+        for u, v in ((1.0, 0.0), (0.0, 1.0)):
+            y = np.zeros((2, 2, 3))
+            y[0, 1, 0], y[1, 1, 0] = 1.0 + LINEAR_AMPLITUDE * u, LINEAR_AMPLITUDE * v
+            y1, _ = self.step(model, 0.0, y, float(omega_dt), carry)
+            columns.append([(y1[0, 1, 0] - 1.0) / LINEAR_AMPLITUDE,
+                            y1[1, 1, 0] / LINEAR_AMPLITUDE])
+        return np.array(columns).T
+
+    def spectral_radius(self, omega_dt: float, zeta: float = 0.0) -> float:
+        """Largest |eigenvalue| of :meth:`linear_map`."""
+        return linear_stability.spectral_radius(self, omega_dt, zeta)
+
+    def stability_limit(self, zeta: float = 0.0) -> float | None:
+        """Largest stable omega dt on the oscillator: None, stable at every dt (implicit Euler per substep)."""
+        return linear_stability.stability_limit(self, zeta)
+
+    def describe(self) -> dict:
+        return super().describe() | {"substeps": self.substeps, "iterations": self.iterations,
+                                     "stability_limit_omega_dt": self.stability_limit(0.0)}
+
+
+@dataclasses.dataclass(frozen=True)
+class PBD(PositionBased):
+    """Position-based dynamics, stiffness as a per-iteration factor (Mueller et al. 2007); 1st order with one iteration.
+
+    Each projection moves the constraint the fraction s = w / (w + alpha / h^2) = k h^2 w / (1 + k h^2 w)
+    of the way to C = 0 (w the pair's inverse masses, k the spring's stiffness, h the substep):
+    the fraction one XPBD projection removes from lambda = 0, applied in every iteration with
+    no multiplier carried (Mueller et al., "Position based dynamics", 2007, section 3.3, with
+    their stiffness k_pbd in [0, 1] taken as s). ``iterations`` sweeps remove 1 - (1 - s)^n of
+    C, so the effective stiffness grows with the iterations: about n k as h -> 0 on one spring
+    (period shortened by sqrt(n)); with one iteration, or k = inf (s = 1), PBD is XPBD.
+    Dampers enter as in XPBD, without the multiplier.
+    """
+
+    name = "pbd"
+    accumulate = False
+    style = ("tab:pink", "P")
+
+    @property
+    def order(self) -> int:
+        """1 with one iteration (then it is xpbd); 0 with more: it converges to springs of another stiffness."""
+        return 1 if self.iterations == 1 else 0
+
+
+@dataclasses.dataclass(frozen=True)
+class XPBD(PositionBased):
+    """1st order extended position-based dynamics, compliance alpha = 1 / k (Macklin, Mueller, Chentanez 2016).
+
+    The multiplier lambda of each constraint accumulates over the iterations of a substep
+    (their eq. 18): converged, the substep is implicit Euler on the springs, whatever the
+    iteration count, and k keeps its meaning (the period of a mass on a spring tends to
+    2 pi sqrt(m / k) as dt -> 0). alpha_tilde = alpha / h^2. A damper beta beside a spring
+    enters as their eq. 26, gamma = alpha_tilde beta_tilde / h with beta_tilde = h^2 beta,
+    i.e. gamma = beta / (k h); an inextensible constraint (alpha = 0) is undamped. With
+    ``substeps = n, iterations = 1`` it is Macklin et al., "Small steps in physics
+    simulation" (SCA 2019).
+    """
+
+    name = "xpbd"
+    accumulate = True
+    style = ("tab:cyan", "X")

@@ -1,0 +1,219 @@
+"""pbd and xpbd: the springs as distance constraints, against closed forms and implicit Euler."""
+
+from __future__ import annotations
+
+import json
+import math
+import sys
+
+import numpy as np
+import pytest
+from helpers import oscillator
+from steplab.integrators import PBD, XPBD, get_integrator, simulate
+from steplab.integrators.settings import scene_integrator
+from steplab.physics import Drag, Gravity, Model, Springs
+from steplab.physics.constraints import InextensibleSpringError, NotConstraintsError
+from steplab.physics.scene import load_scene, parse_scene
+from steplab.physics.scene_library import SCENES
+
+from steplab.cli import main
+
+CLOTH = load_scene("cloth")
+
+
+def measured_period(traj) -> float:
+    """Mean time between successive downward crossings of the spring's rest length (linear interpolation)."""
+    s = np.linalg.norm(traj.positions[:, 1] - traj.positions[:, 0], axis=1) - 1.0
+    k = np.flatnonzero((s[:-1] > 0) & (s[1:] <= 0))
+    crossings = traj.t[k] + s[k] / (s[k] - s[k + 1]) * traj.dt
+    return float(np.mean(np.diff(crossings)))
+
+
+@pytest.mark.parametrize("settings", [dict(substeps=1, iterations=4), dict(substeps=4, iterations=1)])
+def test_xpbd_period_tends_to_the_spring_period_and_pbd_does_not(settings):
+    # k = 4 pi^2 N/m, m = 1 kg: the period is exactly 1 s
+    p = oscillator(amplitude=0.2)
+    errors = {}
+    for method in (XPBD(**settings), PBD(**settings)):
+        errors[method.name] = [abs(measured_period(simulate(p.model, method, p.y0, 0.0, 3.5, dt)) - 1.0)
+                               for dt in (1e-2, 1e-3)]
+    assert errors["xpbd"][1] < 0.01 and errors["xpbd"][1] < errors["xpbd"][0]
+    if settings["iterations"] > 1:  # pbd's spring is about n times stiffer: period 1 / sqrt(n)
+        assert min(errors["pbd"]) > 0.4
+    else:  # one iteration: pbd's one projection is xpbd's, the same step
+        assert errors["pbd"] == errors["xpbd"]
+
+
+def implicit_euler_map(h, zeta):
+    """Implicit Euler on u'' = -u - 2 zeta u': x1 - h v1 = x, h x1 + (1 + 2 zeta h) v1 = v."""
+    return np.linalg.inv(np.array([[1.0, -h], [h, 1.0 + 2.0 * zeta * h]]))
+
+
+@pytest.mark.parametrize("zeta", [0.0, 0.3])
+@pytest.mark.parametrize("omega_dt", [0.1, 1.0, 5.0])
+def test_xpbd_substep_is_implicit_euler_with_its_damper(omega_dt, zeta):
+    # one linear constraint converges in one iteration, to implicit Euler on the spring and,
+    # with gamma = alpha beta / h (Macklin 2016 eq. 26), on the damper beside it
+    for substeps, iterations in ((1, 1), (4, 3)):
+        expected = np.linalg.matrix_power(implicit_euler_map(omega_dt / substeps, zeta), substeps)
+        np.testing.assert_allclose(XPBD(substeps, iterations).linear_map(omega_dt, zeta), expected,
+                                   rtol=0, atol=1e-12)
+    assert XPBD().stability_limit() is None
+
+
+def spring_net(seed, n=8, p=16):
+    """A seeded random net: n bodies in the unit cube, p springs of 10-1000 N/m, pre-stretched +-20 %."""
+    rng = np.random.default_rng(seed)
+    q = rng.uniform(0.0, 1.0, (n, 3))
+    pairs = set()
+    while len(pairs) < p:
+        a, b = sorted(rng.choice(n, 2, replace=False).tolist())
+        pairs.add((a, b))
+    i, j = np.array(sorted(pairs)).T
+    rest = np.linalg.norm(q[j] - q[i], axis=1) * rng.uniform(0.8, 1.2, p)
+    model = Model(rng.uniform(0.5, 2.0, n), np.full(n, 0.01), [Springs(i, j, rng.uniform(10.0, 1000.0, p), rest)])
+    return model, np.stack([q, rng.normal(0.0, 1.0, (n, 3))])
+
+
+@pytest.mark.parametrize("seed", [0, 1, 2])
+@pytest.mark.parametrize("method", [XPBD(1, 1), XPBD(4, 1), XPBD(1, 10)])
+def test_undamped_xpbd_never_gains_energy(seed, method):
+    # the energy is kinetic plus the constraints' potential C^2 / (2 alpha) = k C^2 / 2 (the
+    # springs' potential): XPBD, implicit Euler on it, may only dissipate it
+    model, y0 = spring_net(seed)
+    traj = simulate(model, method, y0, 0.0, n_steps=10_000, dt=1e-2)
+    energy = np.array([model.energy(y) for y in traj.y])
+    assert energy.max() <= energy[0] * (1 + 1e-12)
+    assert energy[-1] < 0.9 * energy[0]  # and it does dissipate: the check sees the energy move
+
+
+def test_xpbd_conserves_linear_momentum_to_round_off():
+    # every projection moves its pair by equal and opposite impulses, m_i w_i dlambda = dlambda
+    model, y0 = spring_net(4)
+    traj = simulate(model, XPBD(2, 5), y0, 0.0, n_steps=1000, dt=1e-2)
+    momentum = np.einsum("n,knd->kd", np.asarray(model.masses), traj.velocities)
+    scale = float(np.sum(np.asarray(model.masses)[:, None] * np.abs(y0[1])))
+    assert np.abs(momentum - momentum[0]).max() < 1e-12 * scale
+
+
+def hanging_chain(links=10, length=0.1):
+    """A chain of inextensible links pinned at one end, released horizontal under gravity."""
+    n = links + 1
+    q = np.zeros((n, 3))
+    q[:, 0] = length * np.arange(n)
+    i = np.arange(links)
+    springs = Springs(i, i + 1, np.full(links, np.inf), np.full(links, length))
+    model = Model(np.full(n, 0.1), np.full(n, 0.01), [springs, Gravity()], pinned=np.arange(n) == 0)
+    return model, np.stack([q, np.zeros_like(q)])
+
+
+@pytest.mark.parametrize("name", ["pbd", "xpbd"])
+def test_inextensible_chain_holds_its_lengths(name):
+    model, y0 = hanging_chain()
+    traj = simulate(model, type(get_integrator(name))(substeps=10, iterations=10), y0, 0.0, n_steps=1000, dt=1e-3)
+    q = traj.positions
+    stretch = np.abs(np.linalg.norm(q[:, 1:] - q[:, :-1], axis=2) - 0.1)
+    assert stretch.max() < 1e-6
+    assert np.ptp(q[:, -1, 2]) > 0.5  # it swung down, the constraints were not idle
+    assert np.isfinite(model.energy(traj.y[-1]))  # an enforced constraint's potential counts 0
+
+
+def test_an_inextensible_spring_is_refused_by_force_based_methods():
+    model, y0 = hanging_chain()
+    for name in ("semi-implicit-euler", "rk4", "implicit-euler"):
+        with pytest.raises(InextensibleSpringError, match="only the position-based integrators"):
+            simulate(model, name, y0, 0.0, n_steps=1, dt=1e-3)
+
+
+def test_the_cloth_runs_under_xpbd_from_its_scene_settings():
+    text = (SCENES["cloth"].read_text()
+            .replace('integrator = "semi-implicit-euler"', 'integrator = "xpbd"')
+            + "\n[simulation.xpbd]\nsubsteps = 4\niterations = 1\n")
+    scene = parse_scene(text)
+    method = scene_integrator(scene)
+    assert method == XPBD(substeps=4, iterations=1)
+    assert scene_integrator(scene, "pbd") == PBD()  # another method: its own defaults
+    traj = simulate(scene.model, method, scene.y0, 0.0, 0.5, scene.dt)
+    c = scene.model.distance_constraints()
+    assert len(c.i) == len(CLOTH.model.forces[0].i) and np.all(c.damping == 0.05)
+    q = traj.positions[-1]
+    assert np.all(q[[0, 11]] == scene.y0[0, [0, 11]])  # pinned corners
+    assert q[:, 2].min() < scene.y0[0, :, 2].min() - 0.01  # it fell
+    stretch = np.linalg.norm(q[c.j] - q[c.i], axis=1) / c.rest_length - 1
+    assert np.abs(stretch).max() < 0.5  # a cloth, not a spaghetti
+
+
+def run(capsys, *argv):
+    status = main(list(argv))
+    captured = capsys.readouterr()
+    return status, captured.out, captured.err
+
+
+def cloth_file(tmp_path, replace=(), extra=""):
+    text = SCENES["cloth"].read_text()
+    for old, new in replace:
+        assert old in text
+        text = text.replace(old, new)
+    path = tmp_path / "c.toml"
+    path.write_text(text + extra)
+    return str(path)
+
+
+@pytest.mark.parametrize("replace,extra,argv,message", [
+    ([("stiffness = 100.0", "stiffness = -100.0")], "", ["--integrator", "xpbd"], "stiffness: must be > 0"),
+    ([("stiffness = 100.0", "stiffness = inf")], "", ["--integrator", "semi-implicit-euler"],
+     "only the position-based integrators (pbd, xpbd) can step them"),
+    ([], "[forces.drag]\n", ["--integrator", "xpbd"], "this model also has 'drag'"),
+    ([], "", ["--integrator", "xpbd", "--backend", "jax"], "xpbd runs on the NumPy backend only"),
+])
+def test_bad_input_is_one_line_status_2(capsys, tmp_path, replace, extra, argv, message):
+    path = cloth_file(tmp_path, replace, "\n" + extra)
+    with pytest.raises(SystemExit) as exit_:
+        sys.exit(main(["run", path, "--t-end", "0.01", *argv]))
+    err = capsys.readouterr().err
+    assert exit_.value.code == 2, err
+    assert message in err and err.count("\n") == 1 and "Traceback" not in err
+
+
+@pytest.mark.parametrize("name,settings,message", [
+    ("xpbd", "substeps = 0", "xpbd: substeps must be a whole number >= 1, got 0"),
+    ("pbd", "iterations = -2", "pbd: iterations must be a whole number >= 1, got -2"),
+    ("xpbd", "substeps = 1.5", "xpbd: substeps must be a whole number >= 1, got 1.5"),
+    ("xpbd", "sweeps = 2", "'sweeps' is not a setting of xpbd (its settings: iterations, substeps)"),
+])
+def test_bad_scene_settings_are_one_line(tmp_path, name, settings, message):
+    path = cloth_file(tmp_path, [('"semi-implicit-euler"', f'"{name}"')], f"\n[simulation.{name}]\n{settings}\n")
+    with pytest.raises(ValueError) as err:
+        scene_integrator(load_scene(path))
+    assert str(err.value) == f"scene c: [simulation.{name}]: {message}"
+
+
+def test_an_inextensible_cloth_runs_at_the_command_line(capsys, tmp_path):
+    path = cloth_file(tmp_path, [("stiffness = 100.0", "stiffness = inf")])
+    status, out, err = run(capsys, "run", path, "--integrator", "xpbd", "--t-end", "0.1", "--json")
+    assert status == 0, err
+    summary = json.loads(out)
+    assert summary["integrator"] == "xpbd" and math.isfinite(summary["energy_end"])
+    assert summary["energy_end"] < summary["energy_start"]  # gravity's work, partly dissipated
+
+
+def test_bad_settings_and_forces_in_python_are_one_line():
+    with pytest.raises(ValueError, match="substeps must be a whole number >= 1, got 0"):
+        XPBD(substeps=0)
+    with pytest.raises(ValueError, match="iterations must be a whole number >= 1, got True"):
+        PBD(iterations=True)
+    p = oscillator()
+    negative = Model([1.0, 1.0], [0.05, 0.05], [Springs(np.array([0]), np.array([1]), np.array([-1.0]),
+                                                        np.array([1.0]))], pinned=[True, False])
+    with pytest.raises(ValueError, match="has compliance -1 m/N and damping 0 N s/m; both must be >= 0"):
+        simulate(negative, "xpbd", p.y0, 0.0, n_steps=1, dt=1e-3)
+    dragged = Model([1.0, 1.0], [0.05, 0.05], [*p.model.forces, Drag(np.array([0.0, 0.5]))], pinned=[True, False])
+    with pytest.raises(NotConstraintsError, match="this model also has 'drag'"):
+        simulate(dragged, "xpbd", p.y0, 0.0, n_steps=1, dt=1e-3)
+
+
+def test_the_same_inputs_give_the_same_bytes():
+    model, y0 = spring_net(3)
+    a, b = (simulate(model, XPBD(2, 3), y0, 0.0, n_steps=200, dt=1e-2).y for _ in range(2))
+    assert a.tobytes() == b.tobytes()
+    assert math.isfinite(float(a.sum()))
