@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import importlib
 import os
+import signal
 import sys
 import warnings
 from pathlib import Path
@@ -54,6 +55,10 @@ def main(argv=None) -> int:
             return _run_command(args)
     except KeyboardInterrupt:
         return fail(command, "interrupted", EXIT_INTERRUPTED)
+    finally:
+        if argv is None:  # the command itself, not a call from Python: the work is done, so a Ctrl-C
+            # now (during the interpreter's shutdown) would only print a traceback after the result
+            signal.signal(signal.SIGINT, signal.SIG_IGN)
 
 
 def _run_command(args) -> int:
