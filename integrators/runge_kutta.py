@@ -27,6 +27,8 @@ class ButcherTableau:
     c : tuple, length s - 1
         Nodes of stages 1 .. s-1 (c_0 = 0).
 
+    Notes
+    -----
     The constructor checks the consistency conditions: each row of ``a`` sums to its
     node c_i, and sum(b) = 1.
     """

@@ -1,6 +1,6 @@
 """Scenes: TOML files declaring bodies, forces and the simulation settings.
 
-The schema (see README.md, "Scene files") is checked strictly: an unknown key, a
+The schema (see the documentation, docs/scenes.md) is checked strictly: an unknown key, a
 wrong type, a non-finite number or a non-positive mass is an error naming the file and
 the key, so a typo never silently changes a study. Built-in scenes ship in
 ``physics/scenes/`` and can be named without a path (``projectile``).

@@ -2,8 +2,8 @@
 
 ``--workers N`` starts a ``LocalCluster`` of N worker processes on this machine (one thread
 each: the tasks are NumPy and JAX loops); ``--scheduler ADDRESS`` joins a cluster already
-running (``dask scheduler`` on one machine, ``dask worker ADDRESS`` on each; see the
-README). What runs on it, and how the records come back, is studies/distributed.py.
+running (``dask scheduler`` on one machine, ``dask worker ADDRESS`` on each; see
+docs/cluster.md). What runs on it, and how the records come back, is studies/distributed.py.
 
 The workers of a local cluster are asked to import the studies as soon as they are up, so
 that their imports (a second or more each: JAX, Numba, matplotlib) happen while this

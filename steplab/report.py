@@ -332,6 +332,10 @@ def _paper_pages(paper: Path) -> dict[str, bytes]:
         quoted = _quoted(study.name, value_of, paper / "paper.template.md")
         if quoted:
             text += "## Numbers the paper quotes\n\n" + quoted + "\n"
+        if not (mine or drawn or quoted):  # a study newer than the paper: nothing of it to show
+            text = (f"# {study.title}\n\nThe paper does not cover this study yet, and no results records "
+                    f"were found when this site was built: `steplab study {study.name}` computes it "
+                    f"(record `{study.name}.json`); build the site again to see it.\n")
         pages[f"{study.name}.md"] = text
     errata = [(name, tables[name][1].draw(numbers["tables"][name])) for name in ERRATA_TABLES
               if name in numbers["tables"]]

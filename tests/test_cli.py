@@ -375,7 +375,7 @@ def test_tables_align_for_any_name_length(capsys):
 
 
 def test_a_dt_longer_than_the_run_is_one_line_that_says_what_to_pass(capsys):
-    """The README's `--dt 16` (milliseconds meant) on the oscillator, whose run lasts 10 s."""
+    """The command-line page's `--dt 16` (milliseconds meant) on the oscillator, whose run lasts 10 s."""
     status, out, err = run(capsys, "run", "oscillator", "--dt", "16")
     assert status == 2 and not out and err.count("\n") == 1
     assert "longer than the run" in err and "--t-end 16 or later" in err and "--dt 0.016" in err

@@ -1,6 +1,6 @@
 """Reliability: invariants as property tests, determinism, crash-safe results, soak, edge cases.
 
-Each section backs one guarantee of README.md, "What steplab guarantees". The property
+Each section backs one guarantee of docs/guarantees.md, "What steplab guarantees". The property
 tests draw random spring-mass systems with hypothesis (derandomised in the ``ci``
 profile, tests/conftest.py); the crash tests kill real processes with SIGINT and SIGKILL
 at seeded random moments. Nothing here asserts on wall-clock time.

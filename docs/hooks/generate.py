@@ -4,7 +4,8 @@ them is written by hand.
 - the study pages, from the records in ``results/`` (or ``$STEPLAB_RESULTS``) where there are
   any, from the paper's committed figures and numbers otherwise (:func:`steplab.report.docs_pages`);
 - the integrators' table and theory, from the registry (``INTEGRATORS``: each method states its
-  order, cost, stability limit and tableau itself);
+  order, cost, stability limit and tableau itself), and the rotation methods' from theirs
+  (``ROTATIONS``: order, what each composes with, its stage order, source, what it conserves);
 - the paper, the tutorial, the notebooks and CONTRIBUTING.md, rendered from where they live in
   the repository (not copied into docs/).
 """
@@ -12,6 +13,7 @@ them is written by hand.
 from __future__ import annotations
 
 import atexit
+import inspect
 import os
 import re
 import shutil
@@ -25,6 +27,8 @@ ROOT = Path(__file__).resolve().parents[2]
 #: where docs/integrators.md takes the summary table and each method's theory, from the registry
 REGISTRY_TABLE = "<!-- integrators table: generated from the registry by docs/hooks/generate.py -->"
 REGISTRY_THEORY = "<!-- integrators theory: generated from the registry by docs/hooks/generate.py -->"
+ROTATION_TABLE = "<!-- rotation methods table: generated from the registry by docs/hooks/generate.py -->"
+ROTATION_THEORY = "<!-- rotation methods theory: generated from the registry by docs/hooks/generate.py -->"
 
 
 def results_folder() -> Path:
@@ -87,6 +91,9 @@ def on_page_markdown(markdown, page, config, files):
     if REGISTRY_TABLE in markdown:
         table, theory = integrators_markdown()
         markdown = markdown.replace(REGISTRY_TABLE, table).replace(REGISTRY_THEORY, theory)
+    if ROTATION_TABLE in markdown:
+        table, theory = rotations_markdown()
+        markdown = markdown.replace(ROTATION_TABLE, table).replace(ROTATION_THEORY, theory)
     if page.file.src_uri in READ_IN_PLACE:
         markdown = LINK.sub(lambda m: _link_or_path(m, page.file.src_uri, files), markdown)
     if page.file.src_uri == "paper/paper.md":
@@ -131,8 +138,6 @@ def api_markdown(package: str) -> str:
 def integrators_markdown() -> tuple[str, str]:
     """Every registered integrator: a summary table; and each method's docstring, its stability
     limit and, for a Runge-Kutta method, its Butcher tableau, all from the method itself."""
-    import inspect
-
     from steplab.integrators import INTEGRATORS
     from steplab.studies.tables import markdown_table
 
@@ -146,11 +151,8 @@ def integrators_markdown() -> tuple[str, str]:
         note = getattr(method, "stability_note", None)
         rows.append([f"[`{name}`](#{name})", d["kind"], cell(d["order"]), cell(evaluations),
                      cell(d["symplectic"]), cell(d["implicit"]), note or "-"])
-        doc = inspect.cleandoc(type(method).__doc__ or d["description"])
-        # a numpydoc section ("Parameters" over dashes) would read as a Markdown heading
-        doc = re.sub(r"^(\w[\w ]*)\n-{3,}$", r"**\1**", doc, flags=re.M)
         text = f"### `{name}` {{#{name}}}\n\n`{type(method).__module__}.{type(method).__name__}`"
-        text += f" (from {INTEGRATORS.origin(name)})\n\n{doc}\n\n"
+        text += f" (from {INTEGRATORS.origin(name)})\n\n{_docstring(method, d['description'])}\n\n"
         if note:
             text += f"Largest stable ω·dt on the oscillator: {note}.\n\n"
         tableau = getattr(method, "tableau", None)
@@ -159,6 +161,35 @@ def integrators_markdown() -> tuple[str, str]:
         sections.append(text)
     table = markdown_table(["name", "kind", "order", "force evaluations / step", "symplectic", "implicit",
                             "largest stable ω·dt"], rows)
+    return table, "".join(sections)
+
+
+def _docstring(method, description: str) -> str:
+    doc = inspect.cleandoc(type(method).__doc__ or description)
+    # a numpydoc section ("Parameters" over dashes) would read as a Markdown heading
+    return re.sub(r"^(\w[\w ]*)\n-{3,}$", r"**\1**", doc, flags=re.M)
+
+
+def rotations_markdown() -> tuple[str, str]:
+    """Every registered rotation method (``ROTATIONS``, kind ``rotation``): a summary table, and each
+    method's docstring with its class data. Anchors are ``rotation-<name>``: ``rk4`` is also a
+    translation method's name."""
+    from steplab.integrators import ROTATIONS
+    from steplab.studies.tables import markdown_table
+
+    rows, sections = [], []
+    for name, method in ROTATIONS.items():
+        d = method.describe()
+        conserves = ", ".join(d["conserves"]) or "-"
+        rows.append([f"[`{name}`](#rotation-{name})", str(d["order"]), str(d["evaluations_per_step"]),
+                     "yes" if d["symplectic"] else "no", "yes" if d["implicit"] else "no",
+                     ", ".join(d["composes_with"]), conserves])
+        sections.append(f"### `{name}` {{#rotation-{name}}}\n\n`{type(method).__module__}.{type(method).__name__}`"
+                        f" (from {ROTATIONS.origin(name)})\n\n{_docstring(method, d['description'])}\n\n"
+                        f"- stage order: {d['stage_order']}\n- composes with: {', '.join(d['composes_with'])}\n"
+                        f"- conserves on a free body: {conserves}\n- source: {d['source']}\n\n")
+    table = markdown_table(["name", "order", "evaluations / step", "symplectic", "implicit",
+                            "composes with", "conserves"], rows)
     return table, "".join(sections)
 
 

@@ -145,4 +145,4 @@ def study_arguments(p) -> None:
     where.add_argument("--workers", type=count, metavar="N", help="run the sweeps' tasks on a local Dask cluster "
                        "of N worker processes (timing studies run alone afterwards)")
     where.add_argument("--scheduler", metavar="ADDRESS", help="run them on the Dask cluster whose scheduler is "
-                       "at ADDRESS (e.g. tcp://host:8786; see the README)")
+                       "at ADDRESS (e.g. tcp://host:8786; see docs/cluster.md)")
