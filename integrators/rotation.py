@@ -156,6 +156,7 @@ class ImplicitGyroscopic(RotationMethod):
     style: ClassVar[tuple[str, str]] = ("tab:brown", "X")
     order: ClassVar[int] = 1
     implicit: ClassVar[bool] = True
+    scheme: ClassVar[str] = "linearly implicit"  # one Newton step: one 3 x 3 solve, no iteration
     composes_with: ClassVar[tuple[str, ...]] = ("semi-implicit-euler",)
     stage_order: ClassVar[str] = ("forces and torques at t; v and omega (torque explicit, gyroscopic term "
                                   "by one Newton step); then x and q with the new v and omega")
@@ -268,6 +269,7 @@ class ImplicitMidpoint(RotationMethod):
     style: ClassVar[tuple[str, str]] = ("tab:purple", "D")
     order: ClassVar[int] = 2
     implicit: ClassVar[bool] = True
+    scheme: ClassVar[str] = "implicit"  # Newton iterated to round-off
     symplectic: ClassVar[bool] = True
     conserves: ClassVar[tuple[str, ...]] = ("energy", "|L|")
     composes_with: ClassVar[tuple[str, ...]] = ("implicit-midpoint (not a steplab translation method; "
