@@ -387,6 +387,17 @@ def simulate_rotation(method: RotationMethod, model, q0, omega0, dt: float, n_st
     return ts, qs, omegas
 
 
+def compiled_steps(method, model, dt: float, n_steps: int, t0: float = 0.0):
+    """``n_steps`` steps of ``method`` from t0 as one jitted ``run(q, omega) -> (q, omega)``, the
+    loop :func:`simulate_rotation` compiles between two saved states (for benchmarks)."""
+    import jax
+    import jax.numpy as jnp
+
+    model = dataclasses.replace(model, xp=jnp)
+    return jax.jit(lambda q, omega: jax.lax.fori_loop(
+        0, n_steps, lambda i, state: method.step(model, t0 + i * dt, *state, dt), (q, omega)))
+
+
 def _compiled_rotation(method, model, q, omega, dt, n_steps, t0, save_every):
     import jax
     import jax.numpy as jnp
