@@ -79,7 +79,8 @@ def rotate_inverse(xp, q, v):
 
 #: |r|/2 up to which :func:`exp` sums the Taylor series of cos and sin(x)/x instead of calling
 #: them: the first term left out, x^16/16! <= 0.5^16/16! = 7e-19, is below half an ulp of
-#: either (both >= 0.87 there). h |omega| <= 1 rad covers every step a rotation method is stable at
+#: either (both >= 0.87 there). It covers h |omega| <= 1 rad, far past the explicit methods'
+#: stable omega dt (0.16 and below, ``steplab study rotation``)
 EXP_SERIES_HALF_ANGLE = 0.5
 #: the series' coefficients in x^2: cos x = sum (-1)^k x^2k / (2k)!, sin x / x = sum (-1)^k x^2k / (2k + 1)!
 _COS_SERIES = tuple((-1) ** k / math.factorial(2 * k) for k in range(8))
@@ -99,8 +100,9 @@ def exp(xp, rotation_vector):
     When every |r|/2 <= :data:`EXP_SERIES_HALF_ANGLE` (a step's rotation, the usual case), cos x
     and sin x / x (x = |r|/2) are their Taylor series in x^2, summed to round-off: eight
     multiply-adds each, no square root, exact at r = 0. float64 sin and cos are not vectorised
-    on XLA's CPU backend (one libm call per element, about 9 ns): the series makes the
-    exponential-map step of 10^5 bodies about 8x faster. Otherwise sin(|r|/2)/|r| is
+    on XLA's CPU backend (one libm call per element, about 9 ns): the series takes the
+    exponential-map step of 10^5 bodies from 6.0 to 1.6 ms in the compiled loop (14.3 to 1.5 ms
+    jitted alone). Otherwise sin(|r|/2)/|r| is
     sinc(|r|/(2 pi))/2, exact at 0 (numpy's and jax's sinc switch to the series near 0).
     """
     x2 = 0.25 * (rotation_vector[..., 0] ** 2 + rotation_vector[..., 1] ** 2 + rotation_vector[..., 2] ** 2)

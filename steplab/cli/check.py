@@ -39,7 +39,7 @@ def command(args) -> int:
     report = {"scene": scene.name, "dt": dt, "omega_max": mode.omega, "damping_ratio": mode.damping_ratio,
               "integrators": [dataclasses.asdict(r) | {"stable": r.stable(dt)} for r in rows]}
     if scene.rigid_bodies is not None:
-        report["rotation"] = _rotation_limit(rotation, scene.rigid_bodies, dt)
+        report["rotation"] = rotation_limit(rotation, scene.rigid_bodies, dt)
     if args.json:
         print(json.dumps(report, indent=2))
         return 0
@@ -67,7 +67,7 @@ def command(args) -> int:
     return 0
 
 
-def _rotation_limit(method, bodies, dt: float) -> dict:
+def rotation_limit(method, bodies, dt: float) -> dict:
     """The largest stable dt (s) of the rotation ``method`` on the scene's spinning ``bodies``."""
     from steplab.integrators.rotation_stability import stable_rotation_dt
 

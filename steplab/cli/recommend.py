@@ -55,9 +55,9 @@ def command(args) -> int:
         return _with_collisions(args, scene, t_end, world, integrators)
     result = recommend(problem_of(scene, t_end), args.tol, dt_max=args.dt_max, integrators=integrators)
     if scene.rigid_bodies is not None and result["dt"] is not None:  # the tolerance is on the translation only
-        from .check import _rotation_limit
+        from .check import rotation_limit
 
-        result["rotation"] = _rotation_limit(rotation, scene.rigid_bodies, result["dt"])
+        result["rotation"] = rotation_limit(rotation, scene.rigid_bodies, result["dt"])
     if args.json:
         print(json.dumps(result, indent=2))
         return 0

@@ -90,12 +90,14 @@ def command(args) -> int:
         rotation = rotate_scene(scene, traj, rotation_method, backend=args.backend)
     summary = run_summary(scene, integrator, dt, traj, world, args.precision, energy_start, run_warnings, rotation)
     if args.out is not None:
-        from steplab.integrators.scene_rotation import rotation_arrays
+        extra = None
+        if rotation is not None:
+            from steplab.integrators.scene_rotation import rotation_arrays
 
+            extra = rotation_arrays(rotation, scene.model.n_bodies)
         save_trajectory(args.out, traj, scene.model, {k: summary[k] for k in (
             "scene", "integrator", "dt", "steps", "t_start", "t_end", "backend", "precision", "detector",
-            "collisions", "rotation") if k in summary},
-            rotation_arrays(rotation, scene.model.n_bodies) if rotation is not None else None)
+            "collisions", "rotation") if k in summary}, extra)
         summary["out"] = str(args.out)
         if traj.collisions is not None:
             from steplab.core.records import write_atomic
