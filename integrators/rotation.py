@@ -156,6 +156,7 @@ class ImplicitGyroscopic(RotationMethod):
     style: ClassVar[tuple[str, str]] = ("tab:brown", "X")
     order: ClassVar[int] = 1
     implicit: ClassVar[bool] = True
+    scheme: ClassVar[str] = "linearly implicit"  # one Newton step: one 3 x 3 solve, no iteration
     composes_with: ClassVar[tuple[str, ...]] = ("semi-implicit-euler",)
     stage_order: ClassVar[str] = ("forces and torques at t; v and omega (torque explicit, gyroscopic term "
                                   "by one Newton step); then x and q with the new v and omega")
@@ -268,6 +269,7 @@ class ImplicitMidpoint(RotationMethod):
     style: ClassVar[tuple[str, str]] = ("tab:purple", "D")
     order: ClassVar[int] = 2
     implicit: ClassVar[bool] = True
+    scheme: ClassVar[str] = "implicit"  # Newton iterated to round-off
     symplectic: ClassVar[bool] = True
     conserves: ClassVar[tuple[str, ...]] = ("energy", "|L|")
     composes_with: ClassVar[tuple[str, ...]] = ("implicit-midpoint (not a steplab translation method; "
@@ -383,6 +385,17 @@ def simulate_rotation(method: RotationMethod, model, q0, omega0, dt: float, n_st
         k = int(np.argmax(bad))
         raise DivergenceError(method.name, dt, int(round((ts[k] - t0) / dt)), float(ts[k]))
     return ts, qs, omegas
+
+
+def compiled_steps(method, model, dt: float, n_steps: int, t0: float = 0.0):
+    """``n_steps`` steps of ``method`` from t0 as one jitted ``run(q, omega) -> (q, omega)``, the
+    loop :func:`simulate_rotation` compiles between two saved states (for benchmarks)."""
+    import jax
+    import jax.numpy as jnp
+
+    model = dataclasses.replace(model, xp=jnp)
+    return jax.jit(lambda q, omega: jax.lax.fori_loop(
+        0, n_steps, lambda i, state: method.step(model, t0 + i * dt, *state, dt), (q, omega)))
 
 
 def _compiled_rotation(method, model, q, omega, dt, n_steps, t0, save_every):

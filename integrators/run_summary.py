@@ -12,10 +12,21 @@ import dataclasses
 
 
 def run_summary(scene, integrator, dt: float, traj, world, precision: str, energy_start: float,
-                warnings: list[str]) -> dict:
+                warnings: list[str], rotation=None) -> dict:
     """The summary of ``traj``, a finished run of ``scene`` by ``integrator`` at ``dt`` with collision
-    ``world`` (None: without collisions); ``energy_start`` (J) is the scene's initial energy."""
-    energy_end = float(scene.model.energy(traj.y[-1].astype(float)))
+    ``world`` (None: without collisions); ``energy_start`` (J) is the scene's initial energy.
+
+    ``rotation`` (a :class:`.scene_rotation.RotationTrajectory`, None for a scene without rotating
+    bodies) adds the rotating bodies' kinetic energy 1/2 omega . I omega to ``energy_end`` and the
+    fields of :func:`.scene_rotation.rotation_summary`: orientations [w, x, y, z], angular
+    velocities in rad/s (world frame), angular momenta in kg m^2/s.
+    """
+    energy_end = float(scene.model.energy(traj.y[-1].astype(float), rotation.at(-1) if rotation is not None else None))
+    fields = {}
+    if rotation is not None:
+        from .scene_rotation import rotation_summary
+
+        fields = rotation_summary(scene, traj, rotation)
     return {
         "scene": scene.name, "integrator": integrator.name, "dt": dt, "steps": traj.steps,
         "t_start": scene.t_start, "t_end": float(traj.t[-1]), "backend": traj.backend,
@@ -28,7 +39,7 @@ def run_summary(scene, integrator, dt: float, traj, world, precision: str, energ
         "method": world.method if world is not None else None,
         "solver": dataclasses.asdict(world.solver) if world is not None and world.method == "solver" else None,
         "collisions": traj.collisions.summary() if traj.collisions is not None else None, "warnings": warnings,
-    }
+    } | fields
 
 
 def stopped_summary(scene, integrator, dt: float, world, error, energy_start: float, warnings: list[str],

@@ -9,7 +9,11 @@ runs on both backends and XLA fuses it.
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
+
+from ._array import is_numpy
 
 #: the identity orientation
 IDENTITY = np.array([1.0, 0.0, 0.0, 0.0])
@@ -73,15 +77,51 @@ def rotate_inverse(xp, q, v):
     return rotate(xp, conjugate(xp, q), v)
 
 
+#: |r|/2 up to which :func:`exp` sums the Taylor series of cos and sin(x)/x instead of calling
+#: them: the first term left out, x^16/16! <= 0.5^16/16! = 7e-19, is below half an ulp of
+#: either (both >= 0.87 there). It covers h |omega| <= 1 rad, far past the explicit methods'
+#: stable omega dt (0.16 and below, ``steplab study rotation``)
+EXP_SERIES_HALF_ANGLE = 0.5
+#: the series' coefficients in x^2: cos x = sum (-1)^k x^2k / (2k)!, sin x / x = sum (-1)^k x^2k / (2k + 1)!
+_COS_SERIES = tuple((-1) ** k / math.factorial(2 * k) for k in range(8))
+_SINC_SERIES = tuple((-1) ** k / math.factorial(2 * k + 1) for k in range(8))
+
+
+def _horner(coefficients, x2):
+    total = coefficients[-1]
+    for c in reversed(coefficients[:-1]):
+        total = total * x2 + c
+    return total
+
+
 def exp(xp, rotation_vector):
     """The unit quaternion of a rotation by angle |r| about r/|r|: exp(r/2) = [cos(|r|/2), sin(|r|/2) r/|r|].
 
-    sin(|r|/2)/|r| is written as sinc(|r|/(2 pi))/2, which is exact at r = 0 (no 0/0) and
-    accurate for tiny angles (numpy's and jax's sinc switch to the series near 0).
+    When every |r|/2 <= :data:`EXP_SERIES_HALF_ANGLE` (a step's rotation, the usual case), cos x
+    and sin x / x (x = |r|/2) are their Taylor series in x^2, summed to round-off: eight
+    multiply-adds each, no square root, exact at r = 0. float64 sin and cos are not vectorised
+    on XLA's CPU backend (one libm call per element, about 9 ns): the series takes the
+    exponential-map step of 10^5 bodies from 6.0 to 1.6 ms in the compiled loop (14.3 to 1.5 ms
+    jitted alone). Otherwise sin(|r|/2)/|r| is
+    sinc(|r|/(2 pi))/2, exact at 0 (numpy's and jax's sinc switch to the series near 0).
     """
-    angle = xp.sqrt(rotation_vector[..., 0] ** 2 + rotation_vector[..., 1] ** 2 + rotation_vector[..., 2] ** 2)
-    half_sinc = 0.5 * xp.sinc(angle / (2 * np.pi))
-    return xp.concatenate([xp.cos(0.5 * angle)[..., None], half_sinc[..., None] * rotation_vector], axis=-1)
+    x2 = 0.25 * (rotation_vector[..., 0] ** 2 + rotation_vector[..., 1] ** 2 + rotation_vector[..., 2] ** 2)
+
+    def series(x2):
+        return _horner(_COS_SERIES, x2), 0.5 * _horner(_SINC_SERIES, x2)
+
+    def trigonometric(x2):
+        angle = 2.0 * xp.sqrt(x2)
+        return xp.cos(0.5 * angle), 0.5 * xp.sinc(angle / (2 * np.pi))
+
+    small = xp.max(x2, initial=0.0) <= EXP_SERIES_HALF_ANGLE**2  # NaN: the trigonometric branch, NaN out
+    if is_numpy(xp):
+        c, half_sinc = series(x2) if small else trigonometric(x2)
+    else:  # one branch for all bodies: a where() would compute both
+        import jax
+
+        c, half_sinc = jax.lax.cond(small, series, trigonometric, x2)
+    return xp.concatenate([c[..., None], half_sinc[..., None] * rotation_vector], axis=-1)
 
 
 def cayley(xp, u):

@@ -32,8 +32,11 @@ def check_trajectory_path(path: str | Path) -> Path:
     return path
 
 
-def save_trajectory(path: str | Path, trajectory, model, metadata: dict) -> None:
+def save_trajectory(path: str | Path, trajectory, model, metadata: dict, extra: dict | None = None) -> None:
     """Write a trajectory as NPZ (arrays plus metadata JSON) or CSV (one row per body and time).
+
+    ``extra``: more NPZ arrays by name (the rotating bodies' ``orientations`` and
+    ``angular_velocities``); the CSV holds the translation only.
 
     CSV columns: ``t, body, x, y, z, vx, vy, vz``. Numbers are written with ``repr``
     precision (17 significant digits), so the same run gives byte-identical files.
@@ -45,7 +48,7 @@ def save_trajectory(path: str | Path, trajectory, model, metadata: dict) -> None
         np.savez(buffer, t=trajectory.t, positions=trajectory.positions,
                  velocities=trajectory.velocities, masses=np.asarray(model.masses),
                  radii=np.asarray(model.radii), names=names,
-                 metadata=np.array(json.dumps(metadata, sort_keys=True)))
+                 metadata=np.array(json.dumps(metadata, sort_keys=True)), **(extra or {}))
         write_atomic(path, buffer.getvalue())
         return
     k, n = trajectory.positions.shape[:2]

@@ -347,11 +347,15 @@ def columns(out: str, header: str) -> tuple[int, list[str]]:
 def test_integrators_table_says_what_the_class_data_says(capsys):
     """Only Newton's method evaluates per iteration; implicit damping is linearly implicit, exponential
     damping no solve at all; every description starts in the same column."""
-    from steplab.integrators import INTEGRATORS
+    from steplab.integrators import INTEGRATORS, ROTATIONS
 
     status, out, _ = run(capsys, "integrators")
     start, rows = columns(out, "description")
-    rows = {row.split()[0]: row for row in rows}
+    rows = rows[:rows.index("")]  # the table, not the rotation methods' stages below it
+    assert {row.split()[1] for row in rows if row.split()[0] in ROTATIONS} >= {"rotation"}
+    for row in rows:  # every description in the same column, the rotation methods' too
+        assert row[start - 2:start] == "  " and row[start] != " "
+    rows = {row.split()[0]: row for row in rows if row.split()[1] != "rotation"}
     assert status == 0 and set(rows) == set(INTEGRATORS)
     assert rows["implicit-euler"].split()[3:6] == ["1/iter", "no", "yes"]
     assert rows["implicit-damping-euler"].split()[3:6] == ["1", "yes", "linearly"]
@@ -436,3 +440,110 @@ def test_the_contact_solvers_residual_is_printed_with_its_unit_and_meaning(capsy
     [line] = [line for line in out.splitlines() if "largest residual" in line]
     residual = float(line.split("largest residual: ")[1].split()[0])
     assert status == 0 and residual < 1e-12 and "m/s (the worst contact's complementarity residual" in line
+
+
+# --- rotation on the command line (issue 25): the dzhanibekov scene, a free 0.2 kg box 0.3 x 0.2 x 0.1 m
+DZHANIBEKOV_INERTIA = 0.2 / 12 * np.array([0.2**2 + 0.1**2, 0.3**2 + 0.1**2, 0.3**2 + 0.2**2])  # m (b^2 + c^2) / 12
+DZHANIBEKOV_OMEGA = np.array([0.05, 2 * np.pi, 0.05])  # rad/s, world = body frame at the identity orientation
+
+
+@pytest.mark.parametrize("rotation, atol", [("rk4", 2e-5), ("dlm", 5e-3)])
+def test_dzhanibekov_run_json_against_the_exact_tumbling(capsys, rotation, atol):
+    from steplab.integrators.torque_free import TorqueFreeMotion
+    from steplab.physics import quaternion as quat
+
+    status, out, _ = run(capsys, "run", "dzhanibekov", "--rotation", rotation, "--json")
+    assert status == 0
+    s = json.loads(out)
+    assert s["rotation"] == rotation and s["rotating_bodies"] == ["box"]
+    # the rotational kinetic energy 1/2 omega . I omega (the box does not move)
+    assert s["energy_start"] == pytest.approx(0.5 * DZHANIBEKOV_INERTIA @ DZHANIBEKOV_OMEGA**2, rel=1e-14)
+    np.testing.assert_allclose(s["angular_momentum_start"], DZHANIBEKOV_INERTIA * DZHANIBEKOV_OMEGA, rtol=1e-14)
+    # the exact torque-free motion (Jacobi elliptic functions) at t_end, world frame
+    motion = TorqueFreeMotion(DZHANIBEKOV_INERTIA, quat.IDENTITY, DZHANIBEKOV_OMEGA)
+    q_exact = motion.orientation(np.array([s["t_end"]]))
+    omega_world = quat.rotate(np, q_exact, motion.angular_velocity(np.array([s["t_end"]])))[0]
+    np.testing.assert_allclose(s["final_angular_velocities"][0], omega_world, atol=atol * 2 * np.pi)
+    assert quat.angle_between(np, np.array(s["final_orientations"]), q_exact)[0] < atol
+    if rotation == "dlm":  # dlm keeps the vector L in space to round-off
+        np.testing.assert_allclose(s["angular_momentum_end"], s["angular_momentum_start"], rtol=1e-12)
+
+
+def test_rotation_summary_in_words_with_units(capsys):
+    status, out, _ = run(capsys, "run", "dzhanibekov")
+    assert status == 0
+    assert "rotation: dlm" in out  # the scene's [simulation] rotation
+    assert "angular velocity (rad/s, world)" in out and "orientation [w, x, y, z]" in out
+    assert "angular momentum (about the centre of mass):" in out and "kg m^2/s" in out
+    _, out, _ = run(capsys, "run", "projectile")
+    assert "rotation" not in out and "angular" not in out  # no rotating bodies: as before
+    _, out, _ = run(capsys, "run", "projectile", "--json")
+    assert "final_orientations" not in json.loads(out)
+
+
+def test_npz_has_the_orientations_and_angular_velocities(capsys, tmp_path):
+    path = tmp_path / "d.npz"
+    status, out, _ = run(capsys, "run", "dzhanibekov", "--rotation", "implicit-midpoint", "--save-every", "10",
+                         "--out", str(path), "--json")
+    assert status == 0
+    s, data = json.loads(out), np.load(path)
+    assert data["orientations"].shape == (61, 1, 4) and data["angular_velocities"].shape == (61, 1, 3)
+    np.testing.assert_allclose(np.linalg.norm(data["orientations"], axis=-1), 1, atol=1e-12)
+    np.testing.assert_allclose(data["angular_velocities"][0, 0], DZHANIBEKOV_OMEGA, rtol=1e-15)
+    np.testing.assert_array_equal(data["orientations"][-1], s["final_orientations"])
+    assert json.loads(str(data["metadata"]))["rotation"] == "implicit-midpoint"
+    # the implicit midpoint rule keeps the energy, rotational included, to round-off
+    assert s["energy_end"] == pytest.approx(s["energy_start"], rel=1e-12)
+
+
+@pytest.mark.parametrize("command", [["run"], ["check"], ["recommend", "--tol", "1"]])
+def test_unknown_rotation_is_one_line_status_2(capsys, command):
+    status, out, err = run(capsys, command[0], "dzhanibekov", *command[1:], "--rotation", "euler")
+    assert status == 2 and out == ""
+    assert err.strip().count("\n") == 0
+    assert "unknown rotation method 'euler'; valid: explicit" in err
+
+
+def test_a_diverging_rotation_is_one_line_status_1(capsys):
+    status, out, err = run(capsys, "run", "dzhanibekov", "--rotation", "explicit", "--dt", "0.5", "--t-end", "500")
+    assert status == 1 and out == ""
+    assert err.strip().count("\n") == 0 and "'explicit' diverged with dt = 0.5 s" in err
+
+
+def test_check_predicts_the_rotation_limit_that_a_run_shows(capsys):
+    status, out, _ = run(capsys, "check", "dzhanibekov", "--json")
+    limit = json.loads(out)["rotation"]
+    assert status == 0 and limit["method"] == "dlm" and limit["stable"] and limit["dt_max"] > 1 / 60
+    # the claims hold in runs of the measurement's length (1000 steps, energy within +10 %)
+    for dt, stable in ((0.9 * limit["dt_max"], True), (1.3 * limit["dt_max"], False)):
+        _, out, _ = run(capsys, "run", "dzhanibekov", "--dt", f"{dt!r}", "--steps", "1000", "--json")
+        change = json.loads(out)["energy_relative_change"]
+        assert (change < 0.1) == stable, (dt, change)
+    # the engines' exponential map is unstable about the intermediate axis at any dt on the grid
+    _, out, _ = run(capsys, "check", "dzhanibekov", "--rotation", "exponential-map", "--json")
+    assert json.loads(out)["rotation"] == {"method": "exponential-map", "dt_max": 0.0, "stable": False}
+    _, out, _ = run(capsys, "run", "dzhanibekov", "--rotation", "exponential-map", "--steps", "1000", "--json")
+    assert json.loads(out)["energy_relative_change"] > 0.1
+    _, out, _ = run(capsys, "check", "dzhanibekov", "--rotation", "exponential-map")
+    assert "rotation exponential-map" in out and "none (grows at every omega dt from 0.05 to 50)" in out
+
+
+def test_integrators_lists_the_rotation_methods(capsys):
+    from steplab.integrators import ROTATIONS
+
+    _, out, _ = run(capsys, "integrators", "--json")
+    rows = {r["name"]: r for r in json.loads(out) if r["kind"] == "rotation"}
+    assert list(rows) == list(ROTATIONS)
+    assert rows["dlm"]["order"] == 2 and rows["dlm"]["composes_with"] == ["velocity-verlet"]
+    assert rows["dlm"]["source"] == "steplab" and "Dullweber" in rows["dlm"]["reference"]
+    _, out, _ = run(capsys, "integrators")
+    lines = out.splitlines()
+    main_rows = [line for line in lines if line.split()[:2] == ["rk4", "rotation"]]
+    assert len(main_rows) == 1 and main_rows[0].split()[2] == "4"
+    header = next(line for line in lines if "composes with" in line)
+    start = header.index("composes with")
+    table_rows = lines[lines.index(header) + 1:]
+    assert len(table_rows) == len(ROTATIONS)
+    for line in table_rows:  # aligned: each row's partner starts under the header
+        name = line.split()[0]
+        assert line[start:].startswith(", ".join(ROTATIONS[name].composes_with))

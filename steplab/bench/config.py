@@ -20,6 +20,8 @@ TARGETS = {
     "vs_ckdtree_1e5": 0.5,
     # issue 16: one implicit Euler step on the cloth, at its largest useful dt, against a semi-implicit one
     "implicit_euler_cloth_step": 10.0,
+    # issue 25: one exponential-map step of 10^5 free tumbling bodies against the memory-traffic bound
+    "vs_memory_bound_rotation_1e5": 2.0,
     "implicit_euler_one_newton_cloth_step": 10.0,
 }
 #: smallest acceptable simulated seconds per wall second of a ball pit, by its balls

@@ -146,3 +146,16 @@ def study_arguments(p) -> None:
                        "of N worker processes (timing studies run alone afterwards)")
     where.add_argument("--scheduler", metavar="ADDRESS", help="run them on the Dask cluster whose scheduler is "
                        "at ADDRESS (e.g. tcp://host:8786; see docs/cluster.md)")
+
+
+def rotation_argument(p) -> None:
+    p.add_argument("--rotation", metavar="NAME", help="rotation method of the rotating bodies (see `steplab "
+                   "integrators`, kind rotation; default: the scene's [simulation] rotation, else exponential-map)")
+
+
+def rotation_named(scene, args):
+    """The run's rotation method: --rotation, else the scene's, else the default; an unknown name
+    is one line (UnknownIntegratorError) before anything runs, with or without rotating bodies."""
+    from steplab.integrators import DEFAULT_ROTATION, get_rotation
+
+    return get_rotation(args.rotation or scene.rotation or DEFAULT_ROTATION)

@@ -5,7 +5,7 @@ from __future__ import annotations
 import dataclasses
 import json
 
-from .args import json_argument, positive, scene_argument
+from .args import json_argument, positive, rotation_argument, rotation_named, scene_argument
 from .table import table
 
 
@@ -14,6 +14,7 @@ def add_parser(sub, name: str) -> None:
     scene_argument(p)
     p.add_argument("--integrator", help="only this integrator (default: every fixed-step one)")
     p.add_argument("--dt", type=positive, help="the dt to check, s (default: the scene's)")
+    rotation_argument(p)
     json_argument(p)
 
 
@@ -25,6 +26,7 @@ def command(args) -> int:
     from .run import integrator_named
 
     scene = load_scene(args.scene)
+    rotation = rotation_named(scene, args)
     if args.integrator is not None:
         steppers = [integrator_named(args.integrator)]
         if not isinstance(steppers[0], Stepper):
@@ -36,9 +38,21 @@ def command(args) -> int:
     mode, rows = stable_steps(scene.model, scene.y0[0], steppers)
     report = {"scene": scene.name, "dt": dt, "omega_max": mode.omega, "damping_ratio": mode.damping_ratio,
               "integrators": [dataclasses.asdict(r) | {"stable": r.stable(dt)} for r in rows]}
+    if scene.rigid_bodies is not None:
+        report["rotation"] = rotation_limit(rotation, scene.rigid_bodies, dt)
     if args.json:
         print(json.dumps(report, indent=2))
         return 0
+    if "rotation" in report:
+        from steplab.integrators.rotation_stability import ENERGY_GROWTH, OMEGA_DT_GRID, STEPS
+
+        r = report["rotation"]
+        grid = f"omega dt from {OMEGA_DT_GRID[0]:g} to {OMEGA_DT_GRID[-1]:g}"
+        limit = {None: f"no limit ({grid})", 0: f"none (grows at every {grid})"}.get(
+            r["dt_max"], f"dt_max = {r['dt_max']:.4g} s")
+        print(f"{scene.name}: rotation {r['method']}, measured along each spinning body's own spin (stable: energy "
+              f"within +{100 * ENERGY_GROWTH:g} % over {STEPS} steps): {limit}; at dt = {dt:g} s "
+              f"{'stable' if r['stable'] else 'UNSTABLE'}")
     if mode.omega is None:
         print(f"{scene.name}: no oscillating mode (no springs or other restoring force): the model sets "
               f"no limit on dt = {dt:g} s")
@@ -51,6 +65,15 @@ def command(args) -> int:
                 ("integrator", "limit omega dt", "dt_max (s)", "damped dt_max (s)", "at this dt"),
                 right=(1, 2, 3), indent="  "))
     return 0
+
+
+def rotation_limit(method, bodies, dt: float) -> dict:
+    """The largest stable dt (s) of the rotation ``method`` on the scene's spinning ``bodies``."""
+    from steplab.integrators.rotation_stability import stable_rotation_dt
+
+    dt_max = stable_rotation_dt(method, bodies)
+    dt_max = None if dt_max is None else float(dt_max)
+    return {"method": method.name, "dt_max": dt_max, "stable": dt_max is None or bool(dt <= dt_max)}
 
 
 def _limit(value) -> str:

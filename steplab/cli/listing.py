@@ -22,16 +22,20 @@ def command(args) -> int:
 
 
 def integrators(args) -> int:
-    from steplab.integrators import INTEGRATORS, Integrator
+    from steplab.integrators import INTEGRATORS, ROTATIONS, Integrator
 
     if args.json:  # with what the table leaves out: each method's stability limit, a solver's tolerances
         rows = [method.describe() | {"source": INTEGRATORS.origin(name)} for name, method in INTEGRATORS.items()]
+        # a rotation method's own "source" is its literature: kept as "reference", "source" says who registered it
+        rows += [method.describe() | {"reference": method.source, "source": ROTATIONS.origin(name)}
+                 for name, method in ROTATIONS.items()]
         print(json.dumps(rows, indent=2))
         return 0
     rows = []
-    for name, method in INTEGRATORS.items():
+    methods = [(method, INTEGRATORS.origin(name)) for name, method in INTEGRATORS.items()]
+    methods += [(method, ROTATIONS.origin(name)) for name, method in ROTATIONS.items()]
+    for method, source in methods:
         r = Integrator.describe(method)  # the class data alone: no stability limit is computed
-        source = INTEGRATORS.origin(name)
         evals = "adaptive" if r["evaluations_per_step"] is None else str(r["evaluations_per_step"])
         if r["scheme"] == "implicit" and r["kind"] == "fixed-step":  # evaluations are per Newton iteration
             evals += "/iter"
@@ -40,6 +44,9 @@ def integrators(args) -> int:
                      r["description"] + ("" if source == "steplab" else f" [plugin: {source}]")))
     print(table(rows, ("name", "kind", "order", "evals/step", "symplectic", "implicit", "description"),
                 right=(2, 3)))
+    print("\nrotation methods, with the translation methods they pair with and the order of their stages:")
+    print(table([(name, ", ".join(method.composes_with), method.stage_order) for name, method in ROTATIONS.items()],
+                ("name", "composes with", "stage order"), indent="  "))
     return 0
 
 

@@ -5,7 +5,16 @@ from __future__ import annotations
 import json
 import sys
 
-from .args import DETECTORS, json_argument, positive, scene_argument, time_arguments, time_span
+from .args import (
+    DETECTORS,
+    json_argument,
+    positive,
+    rotation_argument,
+    rotation_named,
+    scene_argument,
+    time_arguments,
+    time_span,
+)
 from .errors import EXIT_DIVERGED
 
 
@@ -20,6 +29,7 @@ def add_parser(sub, name: str) -> None:
     p.add_argument("--integrators", metavar="A,B", help="candidates (default: every fixed-step integrator)")
     p.add_argument("--detector", choices=DETECTORS, metavar="NAME", help="collision detector to measure "
                    "with, one of %(choices)s (default: the scene's; none: without collisions)")
+    rotation_argument(p)
     json_argument(p)
 
 
@@ -31,6 +41,7 @@ def command(args) -> int:
     from .run import collision_world
 
     scene = load_scene(args.scene)
+    rotation = rotation_named(scene, args)
     _, t_end = time_span(scene, args)
     integrators = None
     if args.integrators is not None:
@@ -43,6 +54,10 @@ def command(args) -> int:
     if world is not None:
         return _with_collisions(args, scene, t_end, world, integrators)
     result = recommend(problem_of(scene, t_end), args.tol, dt_max=args.dt_max, integrators=integrators)
+    if scene.rigid_bodies is not None and result["dt"] is not None:  # the tolerance is on the translation only
+        from .check import rotation_limit
+
+        result["rotation"] = rotation_limit(rotation, scene.rigid_bodies, result["dt"])
     if args.json:
         print(json.dumps(result, indent=2))
         return 0
@@ -53,6 +68,11 @@ def command(args) -> int:
         print(f"{scene.name}: {result['integrator']} with dt = {result['dt']:.6g} s ({result['steps']} steps) "
               f"reaches error {result['error']:.3g} m <= {args.tol:g} m in {result['seconds'] * 1e3:.3g} ms "
               "(compiled, median)")
+    if "rotation" in result:
+        r = result["rotation"]
+        print(f"  rotation {r['method']}: {'stable' if r['stable'] else 'UNSTABLE'} at this dt (its dt_max: "
+              f"{'no limit' if r['dt_max'] is None else format(r['dt_max'], '.4g') + ' s'}); the tolerance "
+              "bounds the translation only")
     return 0
 
 

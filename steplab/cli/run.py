@@ -7,7 +7,17 @@ import json
 import sys
 from pathlib import Path
 
-from .args import DETECTORS, count, json_argument, scene_argument, solver_arguments, time_arguments, time_span
+from .args import (
+    DETECTORS,
+    count,
+    json_argument,
+    rotation_argument,
+    rotation_named,
+    scene_argument,
+    solver_arguments,
+    time_arguments,
+    time_span,
+)
 from .errors import EXIT_DIVERGED, fail
 
 
@@ -30,6 +40,7 @@ def add_parser(sub, name: str) -> None:
                    help="collision detection, one of %(choices)s (overlap: overlap testing with bisection; swept: "
                    "intersection testing; default: the scene's [collisions], else none)")
     solver_arguments(p)
+    rotation_argument(p)
     json_argument(p, "print the summary as JSON")
 
 
@@ -46,6 +57,7 @@ def command(args) -> int:
         check_trajectory_path(args.out)  # before the run, not after it
     scene = load_scene(args.scene)
     integrator = integrator_named(args.integrator or scene.integrator)
+    rotation_method = rotation_named(scene, args)
     dt, t_end = time_span(scene, args)
     world = with_method(collision_world(scene, args.detector, args.backend), args)
     warning = dt_warning(scene.model, scene.y0[0], integrator, dt)  # before the run: it may be long
@@ -54,7 +66,7 @@ def command(args) -> int:
     run_warnings = [] if warning is None else [warning]
     end = {"n_steps": args.steps} if args.steps is not None else {"t_end": t_end}
     kept = []  # the run's collision step, whose log tells what happened before a stop
-    energy_start = float(scene.model.energy(scene.y0))
+    energy_start = float(scene.model.energy(scene.y0, scene.rigid_bodies))  # with the spin's 1/2 omega . I omega
     try:
         traj = simulate(scene.model, integrator, scene.y0, scene.t_start, dt=dt, **end, backend=args.backend,
                         dtype=np.dtype(args.precision), save_every=args.save_every,
@@ -71,11 +83,21 @@ def command(args) -> int:
             print(json.dumps(stopped_summary(scene, integrator, dt, world, err, energy_start, run_warnings,
                                              kept[0].log if kept else None), indent=2))
         return fail(args.command, str(err), EXIT_DIVERGED)
-    summary = run_summary(scene, integrator, dt, traj, world, args.precision, energy_start, run_warnings)
+    rotation = None
+    if scene.rigid_bodies is not None:  # beside the translation, at its saved times; a divergence is status 1
+        from steplab.integrators.scene_rotation import rotate_scene
+
+        rotation = rotate_scene(scene, traj, rotation_method, backend=args.backend)
+    summary = run_summary(scene, integrator, dt, traj, world, args.precision, energy_start, run_warnings, rotation)
     if args.out is not None:
+        extra = None
+        if rotation is not None:
+            from steplab.integrators.scene_rotation import rotation_arrays
+
+            extra = rotation_arrays(rotation, scene.model.n_bodies)
         save_trajectory(args.out, traj, scene.model, {k: summary[k] for k in (
             "scene", "integrator", "dt", "steps", "t_start", "t_end", "backend", "precision", "detector",
-            "collisions")})
+            "collisions", "rotation") if k in summary}, extra)
         summary["out"] = str(args.out)
         if traj.collisions is not None:
             from steplab.core.records import write_atomic
@@ -160,6 +182,8 @@ def print_summary(s: dict) -> None:
         print(f"  ... and {len(shown) - 8} more bodies")
     change = s["energy_change"]
     rel = f" ({100 * change / abs(s['energy_start']):+.3g} %)" if s["energy_start"] else ""
+    if s.get("rotating_bodies"):
+        _print_rotation(s)
     print(f"  energy: {s['energy_start']:.6g} J -> {s['energy_end']:.6g} J, change {change:+.4g} J{rel}")
     if s.get("collisions") is not None:
         c = s["collisions"]
@@ -183,6 +207,21 @@ def print_summary(s: dict) -> None:
         print(f"  trajectory written to {s['out']}")
     if "collisions_out" in s:
         print(f"  collisions written to {s['collisions_out']}")
+
+
+def _print_rotation(s: dict) -> None:
+    """The rotating bodies' final orientation and spin, and the angular momentum at both ends."""
+    rotating = [row for row in zip(s["bodies"], s["final_orientations"], s["final_angular_velocities"])
+                if row[0] in s["rotating_bodies"]]
+    print(f"  rotation: {s['rotation']}")
+    print(f"  {'body':<14} {'orientation [w, x, y, z]':>48}   {'angular velocity (rad/s, world)':>36}")
+    for name, q, w in rotating[:8]:
+        print(f"  {name:<14} {_vec(q):>48}   {_vec(w):>36}")
+    if len(rotating) > 8:
+        print(f"  ... and {len(rotating) - 8} more rotating bodies")
+    about = "about the centre of mass" if len(s["bodies"]) == 1 else "total, about the origin"
+    print(f"  angular momentum ({about}): {_vec(s['angular_momentum_start'])} -> "
+          f"{_vec(s['angular_momentum_end'])} kg m^2/s")
 
 
 def plural(n: int, noun: str) -> str:
