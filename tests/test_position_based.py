@@ -217,3 +217,21 @@ def test_the_same_inputs_give_the_same_bytes():
     a, b = (simulate(model, XPBD(2, 3), y0, 0.0, n_steps=200, dt=1e-2).y for _ in range(2))
     assert a.tobytes() == b.tobytes()
     assert math.isfinite(float(a.sum()))
+
+
+def test_steplab_run_applies_the_scenes_integrator_settings(tmp_path, capsys):
+    """``[simulation.xpbd] substeps = 4, iterations = 1`` reaches ``steplab run``: its final state is
+    XPBD(4, 1)'s, not the defaults'; ``--integrator pbd`` takes pbd's own defaults instead."""
+    path = cloth_file(tmp_path, [('integrator = "semi-implicit-euler"', 'integrator = "xpbd"')],
+                      "\n[simulation.xpbd]\nsubsteps = 4\niterations = 1\n")
+    scene = parse_scene((tmp_path / "c.toml").read_text())
+    finals = {}
+    for argv, method in ((["--steps", "50"], XPBD(substeps=4, iterations=1)),
+                         (["--steps", "50", "--integrator", "pbd"], PBD())):
+        status, out, _ = run(capsys, "run", path, "--json", *argv)
+        assert status == 0
+        expected = simulate(scene.model, method, scene.y0, 0.0, n_steps=50, dt=scene.dt).positions[-1]
+        finals[method] = np.array(json.loads(out)["final_positions"])
+        assert np.array_equal(finals[method], expected)
+    default = simulate(scene.model, XPBD(), scene.y0, 0.0, n_steps=50, dt=scene.dt).positions[-1]
+    assert not np.array_equal(finals[XPBD(substeps=4, iterations=1)], default)

@@ -56,7 +56,12 @@ def command(args) -> int:
     if args.out is not None:
         check_trajectory_path(args.out)  # before the run, not after it
     scene = load_scene(args.scene)
-    integrator = integrator_named(args.integrator or scene.integrator)
+    name = args.integrator or scene.integrator
+    integrator = integrator_named(name)
+    if name == scene.integrator and scene.integrator_settings:  # its [simulation.<integrator>] table
+        from steplab.integrators.settings import configured
+
+        integrator = configured(integrator, scene.integrator_settings, f"scene {scene.name}: [simulation.{name}]")
     rotation_method = rotation_named(scene, args)
     dt, t_end = time_span(scene, args)
     world = with_method(collision_world(scene, args.detector, args.backend), args)
