@@ -235,3 +235,9 @@ def test_steplab_run_applies_the_scenes_integrator_settings(tmp_path, capsys):
         assert np.array_equal(finals[method], expected)
     default = simulate(scene.model, XPBD(), scene.y0, 0.0, n_steps=50, dt=scene.dt).positions[-1]
     assert not np.array_equal(finals[XPBD(substeps=4, iterations=1)], default)
+
+
+def test_check_says_a_position_based_method_has_no_dt_limit(capsys):
+    status, out, err = run(capsys, "check", "cloth", "--integrator", "xpbd")
+    assert status == 0 and err == "" and "stable at every dt" in out
+    assert XPBD().stability_limit() is None  # what the line says is the class's theory

@@ -29,6 +29,11 @@ def command(args) -> int:
     rotation = rotation_named(scene, args)
     if args.integrator is not None:
         steppers = [integrator_named(args.integrator)]
+        if getattr(steppers[0], "kind", None) == "position-based":  # nothing to predict: no dt limit
+            print(f"{scene.name}: {steppers[0].name} is position-based: its constraint projection is implicit, "
+                  "stable at every dt on springs (stiffness then depends on dt and iterations: see the "
+                  "integrators' documentation)")
+            return 0
         if not isinstance(steppers[0], Stepper):
             raise ValueError(f"--integrator {args.integrator}: {steppers[0].name} is not a fixed-step integrator "
                              "(it has no step size to limit)")
