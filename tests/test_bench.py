@@ -172,6 +172,22 @@ def test_settled_samples_stop_when_the_minimums_settle():
     assert len(timing.settled_samples({"shrinking": lambda: _busy(next(waits))}, 2, 12, 60.0)["shrinking"]) == 12
 
 
+def test_marginal_cost_leaves_out_the_fixed_cost_of_a_call():
+    from steplab.bench import timing
+
+    # calls of k and 2k steps of 5 ms behind a 100 ms fixed cost (the 10^6-particle call's
+    # fresh output), each round slowed by a preemption of 0 to 8 ms on one of its calls
+    k, step, fixed = 32, 5e-3, 0.1
+    delays = np.array([0.0, 4e-3, 8e-3, 0.0, 4e-3])
+    once, twice = fixed + k * step + delays, fixed + 2 * k * step + delays[::-1]
+    times, how = timing.marginal_times(once, twice, k)
+    assert how == "marginal" and times.minimum == pytest.approx(step)  # the undisturbed calls
+    assert times.minimum <= times.median <= times.maximum == pytest.approx(step + 4e-3 / k)
+    # noise larger than k steps: the average over 2k steps, an upper bound, and said so
+    times, how = timing.marginal_times(once + [0.0, 0.0, 0.5, 0.0, 0.0], twice, k)
+    assert how.startswith("average") and times.minimum >= step
+
+
 def test_bench_pins_one_thread_per_side_in_the_timed_process():
     # a fresh process, as ``steplab bench`` is: pinned before JAX and Numba are imported,
     # then the timing helper runs a compiled call and reports the settings it ran with

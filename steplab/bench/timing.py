@@ -102,17 +102,21 @@ def spread(samples) -> dict:
 def marginal_times(once, twice, k: int):
     """Per-step cost from rounds of a k-step and a 2k-step call: (:class:`Times`, how estimated).
 
-    Each round's (t(2k) - t(k)) / k, the two calls adjacent in time: the cost of k more
-    steps without entering and leaving the loop, and so without allocating (and paging in)
-    the call's fresh output buffer, which costs more than a few steps of 10^6 particles.
-    Where noise swamps it (a round's difference not positive), the average over 2k steps
-    instead, an upper bound.
+    The cost of k more steps, without entering and leaving the loop, and so without
+    allocating (and paging in) the call's fresh output buffer, which costs more than a few
+    steps of 10^6 particles. Median and max: of each round's (t(2k) - t(k)) / k, the two
+    calls adjacent in time. Minimum: (min t(2k) - min t(k)) / k, the least-disturbed calls
+    (the least of the rounds' differences would pick a round whose k-step call was slowed),
+    at most the median. Where noise swamps it (a difference not positive), the average
+    over 2k steps instead, an upper bound.
     """
     from steplab.core.timing import Times
 
     differences = np.subtract(twice, once) / k
-    if np.min(differences) > 0:
-        return Times.of(differences), "marginal"
+    least = (np.min(twice) - np.min(once)) / k
+    if np.min(differences) > 0 and least > 0:
+        median = float(np.median(differences))
+        return Times(median, min(float(least), median), len(differences), float(np.max(differences))), "marginal"
     return Times.of(np.divide(twice, 2 * k)), "average (noise swamped the marginal cost)"
 
 
