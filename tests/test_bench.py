@@ -205,9 +205,10 @@ def test_bench_pins_one_thread_per_side_in_the_timed_process():
     assert "--xla_cpu_multi_thread_eigen=false" in settings["XLA_FLAGS"].split()
     assert "intra_op_parallelism_threads=1" in settings["XLA_FLAGS"].split()
     # too late after JAX: the helper says so rather than pretending
-    late = "import jax\nfrom steplab.bench import timing\nprint(timing.pin_threads())\n"
+    late = ("import os, jax\nfrom steplab.bench import timing\nos.environ.pop('XLA_FLAGS', None)\n"
+            "print(timing.pin_threads(), os.environ.get('XLA_FLAGS'))\n")
     assert subprocess.run([sys.executable, "-c", late], capture_output=True, text=True,
-                          check=True).stdout.strip() == "False"
+                          check=True).stdout.split() == ["False", "None"]
 
 
 def test_tiny_bench_run_compared_equal_computations(tiny_record):

@@ -38,12 +38,15 @@ PATIENCE = 3
 
 
 def pin_threads() -> bool:
-    """Set :data:`PINNED_ENVIRONMENT` for this process; False if JAX or Numba came first.
+    """Set :data:`PINNED_ENVIRONMENT` for this process; False, changing nothing, if JAX or Numba came first.
 
-    XLA reads its flags when its CPU backend starts and Numba its thread count at import,
-    so the pinning acts only before those imports (``steplab bench`` calls this first).
-    Flags already in ``XLA_FLAGS`` are kept, the pinning ones appended.
+    XLA reads its flags when its CPU backend starts and Numba its thread count at import
+    (and refuses a new count once its threads run), so the pinning acts only before those
+    imports (``steplab bench`` calls this first). Flags already in ``XLA_FLAGS`` are kept,
+    the pinning ones appended.
     """
+    if {"jax", "numba"} & set(sys.modules):
+        return False
     for name, value in PINNED_ENVIRONMENT.items():
         if name == "XLA_FLAGS":
             current = os.environ.get(name, "")
@@ -51,7 +54,7 @@ def pin_threads() -> bool:
             os.environ[name] = " ".join([current, *missing]).strip()
         else:
             os.environ[name] = value
-    return not ({"jax", "numba"} & set(sys.modules))
+    return True
 
 
 def thread_settings() -> dict:
