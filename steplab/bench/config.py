@@ -32,10 +32,10 @@ SOLVER_REAL_TIME_TARGETS = {10_000: 1.0, 100_000: 0.1}
 SOLVER_ENGINE_TARGETS = {("mujoco", 10_000): 0.25}
 #: longest acceptable JIT compilation of a built-in scene, s
 COMPILE_TARGET_SECONDS = 2.0
-#: the ratios ``--json`` always carries (the issue's JSON contract)
 #: when a ratio is flagged as not to be trusted (``ratio_stable`` in the record): a side's
 #: median more than ``spread`` above its minimum in the run, or a known cause, noted here
 STABILITY = {"spread": 0.15, "known": {}}
+#: the ratios ``--json`` always carries (the issue's JSON contract)
 REQUIRED_RATIOS = ("vs_diffrax_semi_implicit_euler", "vs_numba_semi_implicit_euler", "vs_memory_bound_1e6",
                    "vs_scipy_at_1e-8", "vs_ckdtree_1e5")
 

@@ -42,9 +42,8 @@ class Record:
         """
         spreads = {side: {"min": t.minimum, "median": t.median, "max": t.maximum, "rounds": t.rounds}
                    for side, t in (("steplab", steplab), ("peer", peer_times))}
-        noisy = [side for side, s in spreads.items() if s["median"] > (1 + STABILITY["spread"]) * s["min"]]
         notes = [f"{side}'s median {s['median'] / s['min'] - 1:.0%} above its minimum in this run"
-                 for side, s in spreads.items() if side in noisy]
+                 for side, s in spreads.items() if s["median"] > (1 + STABILITY["spread"]) * s["min"]]
         if name in STABILITY["known"]:
             notes.insert(0, STABILITY["known"][name])
         self.data["ratios"][name] = steplab.median / peer_times.median
