@@ -22,7 +22,7 @@ from collections.abc import Callable
 
 import numpy as np
 
-from steplab.core.timing import interleaved_samples
+from steplab.core.timing import Times, interleaved_samples
 
 #: one thread everywhere: the memory bound, Numba and scipy are single-threaded, so XLA is too
 PINNED_ENVIRONMENT = {
@@ -96,12 +96,6 @@ def _settled(samples: list[float]) -> bool:
     return now >= (1.0 - SETTLED) * before
 
 
-def spread(samples) -> dict:
-    """Min, median and max of the rounds (seconds), and their number."""
-    s = np.asarray(samples, float)
-    return {"min": float(s.min()), "median": float(np.median(s)), "max": float(s.max()), "rounds": int(s.size)}
-
-
 def marginal_times(once, twice, k: int):
     """Per-step cost from rounds of a k-step and a 2k-step call: (:class:`Times`, how estimated).
 
@@ -113,8 +107,6 @@ def marginal_times(once, twice, k: int):
     at most the median. Where noise swamps it (a difference not positive), the average
     over 2k steps instead, an upper bound.
     """
-    from steplab.core.timing import Times
-
     differences = np.subtract(twice, once) / k
     least = (np.min(twice) - np.min(once)) / k
     if np.min(differences) > 0 and least > 0:
@@ -125,7 +117,5 @@ def marginal_times(once, twice, k: int):
 
 def settled_times(calls: dict[object, Callable[[], object]], config, min_rounds: int | None = None) -> dict:
     """:class:`~steplab.core.timing.Times` of each call by :func:`settled_samples`, the config's rounds and budget."""
-    from steplab.core.timing import Times
-
     samples = settled_samples(calls, min_rounds or config.repeats, config.max_rounds, config.round_budget_seconds)
     return {name: Times.of(s) for name, s in samples.items()}
