@@ -152,24 +152,37 @@ def test_record_says_where_a_ratio_cannot_be_trusted():
     assert "peer's median 50% above its minimum" in record.data["seconds"]["noisy"]["stability_note"]
 
 
-def _busy(seconds: float) -> None:
-    """Wait on the clock (a sleep may overshoot by more than the times the test tells apart)."""
-    end = time.perf_counter() + seconds
-    while time.perf_counter() < end:
-        pass
+class _Clock:
+    """A fake ``time.perf_counter`` that a call advances by the seconds it says it took."""
+
+    def __init__(self):
+        self.now = 0.0
+
+    def __call__(self):
+        return self.now
+
+    def call(self, seconds):
+        def advance():
+            self.now += next(seconds) if hasattr(seconds, "__next__") else seconds
+        return advance
 
 
-def test_settled_samples_stop_when_the_minimums_settle():
+def test_settled_samples_stop_when_the_minimums_settle(monkeypatch):
     from steplab.bench import timing
 
-    calls = {"a": lambda: _busy(2e-3), "b": lambda: _busy(1e-3)}
+    clock = _Clock()
+    monkeypatch.setattr(time, "perf_counter", clock)  # the wall clock of a loaded machine is no test
+    calls = {"a": clock.call(2e-3), "b": clock.call(1e-3)}
     samples = timing.settled_samples(calls, 2, 50, 60.0)
-    rounds = len(samples["a"])
-    assert rounds == len(samples["b"]) and timing.PATIENCE < rounds < 50
+    assert len(samples["a"]) == len(samples["b"]) == timing.PATIENCE + 1  # settled at the first look
+    assert samples["a"] == pytest.approx([2e-3] * len(samples["a"]))
     assert len(timing.settled_samples(calls, 2, 3, 60.0)["a"]) == 3  # the budget of rounds holds
     # a side whose every round is much faster than the last never settles: the budget stops it
-    waits = iter(np.geomspace(0.03, 0.0003, 13))
-    assert len(timing.settled_samples({"shrinking": lambda: _busy(next(waits))}, 2, 12, 60.0)["shrinking"]) == 12
+    shrinking = {"shrinking": clock.call(iter(np.geomspace(0.03, 0.0003, 13)))}
+    assert len(timing.settled_samples(shrinking, 2, 12, 60.0)["shrinking"]) == 12
+    # and the budget of seconds: rounds of 1 s within 5.5 s
+    assert len(timing.settled_samples({"slow": clock.call(iter(np.geomspace(1.0, 0.5, 30)))}, 2, 30, 5.5)["slow"]) \
+        in (5, 6)
 
 
 def test_marginal_cost_leaves_out_the_fixed_cost_of_a_call():
