@@ -7,6 +7,9 @@ produce the JSON contract of issue 6.
 
 import dataclasses
 import json
+import subprocess
+import sys
+import time
 from pathlib import Path
 
 import numpy as np
@@ -23,7 +26,8 @@ from steplab.cli import main
 #: a bench run small enough for a unit test (seconds, not minutes)
 TINY = bench.Config(small_steps=300, particles=500, cloth_side=6, broadphase_n=2_000, periods=1,
                     max_log2_steps=14, batch=3, batch_steps=50, repeats=1, python_repeats=1, python_steps=50,
-                    loop_steps=2, compile_scenes=("projectile",), collision_runs=((30, 3),))
+                    loop_steps=2, compile_scenes=("projectile",), collision_runs=((30, 3),), max_rounds=4,
+                    round_budget_seconds=1.0)
 #: final states of the same method, dt and steps agree to this (m, m/s): round-off only
 ROUND_OFF = 1e-12
 
@@ -122,6 +126,102 @@ def test_tiny_bench_run_has_the_json_contract(tiny_record):
         assert target["met"] == ((target.get("ratio") or target.get("seconds")) <= target["target"]), name
     assert set(bench.TARGETS) | {"compile_seconds_max"} <= set(record["targets"])
     assert record["compile_seconds"] and record["provenance"]["packages"]["jax"]
+
+
+def test_tiny_bench_run_records_the_spread_of_every_side(tiny_record):
+    for name, seconds in tiny_record["seconds"].items():
+        for side in ("steplab", "peer"):
+            spread = seconds[f"{side}_spread"]
+            assert 0 < spread["min"] <= spread["median"] <= spread["max"], (name, side)
+            # the fields other code reads are the spread's
+            assert (seconds[side], seconds[f"{side}_min"]) == (spread["median"], spread["min"]), (name, side)
+        assert seconds["ratio_stable"] == (seconds["stability_note"] is None), name
+    markdown = bench.format_markdown(tiny_record)
+    assert "steplab min / median / max" in markdown.splitlines()[0]
+    s = tiny_record["seconds"]["vs_memory_bound_1e6"]
+    assert bench.report._spread(s["steplab_spread"]) in markdown
+
+
+def test_record_says_where_a_ratio_cannot_be_trusted():
+    record = bench.Record(TINY, quick=True)
+    steady, noisy = bench.Times.of([1.0, 1.01, 1.02]), bench.Times.of([1.0, 1.5, 2.0])
+    record.compare("steady", "g", "what", "peer", steady, steady)
+    record.compare("noisy", "g", "what", "peer", steady, noisy)
+    assert record.data["seconds"]["steady"]["ratio_stable"] is True
+    assert record.data["seconds"]["noisy"]["ratio_stable"] is False
+    assert "peer's median 50% above its minimum" in record.data["seconds"]["noisy"]["stability_note"]
+
+
+class _Clock:
+    """A fake ``time.perf_counter`` that a call advances by the seconds it says it took."""
+
+    def __init__(self):
+        self.now = 0.0
+
+    def __call__(self):
+        return self.now
+
+    def call(self, seconds):
+        def advance():
+            self.now += next(seconds) if hasattr(seconds, "__next__") else seconds
+        return advance
+
+
+def test_settled_samples_stop_when_the_minimums_settle(monkeypatch):
+    from steplab.bench import timing
+
+    clock = _Clock()
+    monkeypatch.setattr(time, "perf_counter", clock)  # the wall clock of a loaded machine is no test
+    calls = {"a": clock.call(2e-3), "b": clock.call(1e-3)}
+    samples = timing.settled_samples(calls, 2, 50, 60.0)
+    assert len(samples["a"]) == len(samples["b"]) == timing.PATIENCE + 1  # settled at the first look
+    assert samples["a"] == pytest.approx([2e-3] * len(samples["a"]))
+    assert len(timing.settled_samples(calls, 2, 3, 60.0)["a"]) == 3  # the budget of rounds holds
+    # a side whose every round is much faster than the last never settles: the budget stops it
+    shrinking = {"shrinking": clock.call(iter(np.geomspace(0.03, 0.0003, 13)))}
+    assert len(timing.settled_samples(shrinking, 2, 12, 60.0)["shrinking"]) == 12
+    # and the budget of seconds: rounds of 1 s within 5.5 s
+    assert len(timing.settled_samples({"slow": clock.call(iter(np.geomspace(1.0, 0.5, 30)))}, 2, 30, 5.5)["slow"]) \
+        in (5, 6)
+
+
+def test_marginal_cost_leaves_out_the_fixed_cost_of_a_call():
+    from steplab.bench import timing
+
+    # calls of k and 2k steps of 5 ms behind a 100 ms fixed cost (the 10^6-particle call's
+    # fresh output), each round slowed by a preemption of 0 to 8 ms on one of its calls
+    k, step, fixed = 32, 5e-3, 0.1
+    delays = np.array([0.0, 4e-3, 8e-3, 0.0, 4e-3])
+    once, twice = fixed + k * step + delays, fixed + 2 * k * step + delays[::-1]
+    times, how = timing.marginal_times(once, twice, k)
+    assert how == "marginal" and times.minimum == pytest.approx(step)  # the undisturbed calls
+    assert times.minimum <= times.median <= times.maximum == pytest.approx(step + 4e-3 / k)
+    # noise larger than k steps: the average over 2k steps, an upper bound, and said so
+    times, how = timing.marginal_times(once + [0.0, 0.0, 0.5, 0.0, 0.0], twice, k)
+    assert how.startswith("average") and times.minimum >= step
+
+
+def test_bench_pins_one_thread_per_side_in_the_timed_process():
+    # a fresh process, as ``steplab bench`` is: pinned before JAX and Numba are imported,
+    # then the timing helper runs a compiled call and reports the settings it ran with
+    script = (
+        "import json, os\n"
+        "os.environ.pop('XLA_FLAGS', None); os.environ['NUMBA_NUM_THREADS'] = '2'\n"
+        "from steplab.bench import timing\n"
+        "assert timing.pin_threads()\n"
+        "import jax, jax.numpy as jnp, numba\n"
+        "timing.settled_samples({'jax': lambda: jnp.ones(1000).sum().block_until_ready()}, 2, 4, 5.0)\n"
+        "print(json.dumps(timing.thread_settings()))\n")
+    out = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True, check=True).stdout
+    settings = json.loads(out.splitlines()[-1])
+    assert settings["pinned"] and settings["numba_threads"] == 1
+    assert "--xla_cpu_multi_thread_eigen=false" in settings["XLA_FLAGS"].split()
+    assert "intra_op_parallelism_threads=1" in settings["XLA_FLAGS"].split()
+    # too late after JAX: the helper says so rather than pretending
+    late = ("import os, jax\nfrom steplab.bench import timing\nos.environ.pop('XLA_FLAGS', None)\n"
+            "print(timing.pin_threads(), os.environ.get('XLA_FLAGS'))\n")
+    assert subprocess.run([sys.executable, "-c", late], capture_output=True, text=True,
+                          check=True).stdout.split() == ["False", "None"]
 
 
 def test_tiny_bench_run_compared_equal_computations(tiny_record):

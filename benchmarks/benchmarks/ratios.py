@@ -8,7 +8,13 @@ the accuracy match and the ball pits take minutes (``steplab bench`` runs them a
 
 from __future__ import annotations
 
-from steplab.peers import DIFFRAX_METHODS
+from steplab.bench.timing import pin_threads
+
+# one thread per side, as ``steplab bench`` runs: before this module imports JAX (asv times
+# each benchmark in a process of its own)
+pin_threads()
+
+from steplab.peers import DIFFRAX_METHODS  # noqa: E402
 
 #: the small system's ratios, named as in the bench's record (one per diffrax method, then Numba and Python)
 SMALL_SYSTEM_RATIOS = [f"vs_diffrax_{method.replace('-', '_')}" for method in DIFFRAX_METHODS] + [

@@ -16,7 +16,8 @@ sections), :mod:`.systems` (the large models), :mod:`.profile` (loop kernels fro
 compiled text), :mod:`.record` and :mod:`.report` (the JSON record and its tables);
 :mod:`.collisions` (the ball pits, issue 13) with :mod:`.ball_pit_scene` (the scene) and
 :mod:`.engines` (MuJoCo and pybullet, when installed); the timer is the studies'
-(:mod:`steplab.core.timing`).
+(:mod:`steplab.core.timing`), run by :mod:`.timing` with one thread per side until the
+minimums settle.
 """
 
 from __future__ import annotations
@@ -52,6 +53,8 @@ from .report import rows as rows
 from .systems import cloth_model as cloth_model
 from .systems import particles_model as particles_model
 from .systems import step_bytes as step_bytes
+from .timing import pin_threads as pin_threads
+from .timing import thread_settings as thread_settings
 
 
 def run_bench(config: Config, quick: bool = False, progress: Callable[[str], None] | None = None) -> dict:
@@ -70,6 +73,7 @@ def run_bench(config: Config, quick: bool = False, progress: Callable[[str], Non
     from equinox import _config as equinox_config
 
     record.data["details"]["EQX_ON_ERROR"] = getattr(equinox_config, "EQX_ON_ERROR", None)
+    record.data["details"]["threads"] = thread_settings()
     record.data["provenance"] = provenance()
     return record.data
 
@@ -87,8 +91,9 @@ def fair_diffrax() -> None:
 
 
 def command(args) -> int:
-    """``steplab bench``: run (or, with ``--from``, re-print) the comparisons."""
+    """``steplab bench``: run (or, with ``--from``, re-print) the comparisons, one thread per side."""
     fair_diffrax()
+    pin_threads()
     if args.source is not None:
         record = json.loads(args.source.read_text())
     else:

@@ -18,7 +18,7 @@ import time
 
 import numpy as np
 
-from steplab.core.timing import Times, interleaved_samples, interleaved_times, ready
+from steplab.core.timing import Times, interleaved_times, ready
 from steplab.integrators.references import solve_adaptive
 from steplab.integrators.simulate import final_state_function
 
@@ -30,6 +30,7 @@ from .record import Record, final_difference, size_label
 from .rotation import tumbling_bodies
 from .startup import startup
 from .systems import cloth_model, particles_model, step_bytes
+from .timing import marginal_times, settled_samples, settled_times
 
 # --- 1. the small system: one oscillator, 10^5 steps ---------------------------------------------
 
@@ -59,7 +60,7 @@ def small_system(config: Config, record: Record, progress) -> None:
     calls[("numba", sie)] = lambda: peers.numba_semi_implicit_euler(system, problem.y0, dt, n)
     finals[("numba", sie)] = calls[("numba", sie)]()
     progress("small system: compiled")
-    t = interleaved_times(calls, config.repeats)
+    t = settled_times(calls, config)
     what = f"one oscillator, {n:,} steps of dt = {dt:g} s"
     for method in peers.DIFFRAX_METHODS:
         key = method.replace("-", "_")
@@ -77,7 +78,7 @@ def small_system(config: Config, record: Record, progress) -> None:
     m, run = config.python_steps, final_state_function(model, sie)
     python = {"steplab": lambda: ready(run(y0, 0.0, dt, m)[0]),
               "python": lambda: peers.numpy_semi_implicit_euler(system, problem.y0, dt, m)}
-    tp = interleaved_times(python, config.python_repeats)
+    tp = settled_times(python, config, config.python_repeats)
     record.compare("vs_python_loop_semi_implicit_euler", "small system",
                    f"{sie}: one oscillator, {m:,} steps of dt = {dt:g} s", "Python loop over NumPy",
                    tp["steplab"], tp["python"], final_difference(python["steplab"](), python["python"]()))
@@ -130,7 +131,7 @@ def _large_system(label: str, what: str, model, y0, dt: float, config: Config, r
     buffer = np.array(y0)  # Numba steps this buffer in place, as a game engine would
     read_write, read_only = step_bytes(model, system)
     stream = peers.memory_stream(read_write, read_only)
-    samples = interleaved_samples({
+    samples = settled_samples({
         ("steplab", 1): lambda: ready(run(yj, 0.0, dt, k)[0]),
         ("steplab", 2): lambda: ready(run(yj, 0.0, dt, 2 * k)[0]),
         ("numba", 1): lambda: kernel(buffer[0], buffer[1], *system.arrays, dt, k),
@@ -138,18 +139,11 @@ def _large_system(label: str, what: str, model, y0, dt: float, config: Config, r
         ("unchecked", 1): lambda: ready(unchecked(yj, 0.0, dt, k)[0]),
         ("unchecked", 2): lambda: ready(unchecked(yj, 0.0, dt, 2 * k)[0]),
         "stream": stream,
-    }, config.repeats)
+    }, config.repeats, config.max_rounds, config.round_budget_seconds)
     t = {name: float(np.median(s)) for name, s in samples.items()}
-    # The marginal cost of k more steps: the median of the differences of the two calls of
-    # a round (adjacent in time), and the difference of the two minimums. Where noise
-    # swamps it (not positive), the average over 2k steps instead, an upper bound.
     per_step, estimate = {}, {}
     for name in ("steplab", "numba", "unchecked"):
-        marginal = float(np.median(np.subtract(samples[(name, 2)], samples[(name, 1)]))) / k
-        least = (min(samples[(name, 2)]) - min(samples[(name, 1)])) / k
-        per_step[name] = Times(marginal if marginal > 0 else t[(name, 2)] / (2 * k),
-                               least if least > 0 else min(samples[(name, 2)]) / (2 * k), config.repeats)
-        estimate[name] = "marginal" if marginal > 0 else "average (noise swamped the marginal cost)"
+        per_step[name], estimate[name] = marginal_times(samples[(name, 1)], samples[(name, 2)], k)
     bound = Times.of(samples["stream"])
     difference = final_difference(run(yj, 0.0, dt, k)[0], peers.numba_semi_implicit_euler(system, y0, dt, k))
     calls = {"steplab_call_seconds": {f"{k} steps": t[("steplab", 1)], f"{2 * k} steps": t[("steplab", 2)]},
@@ -274,9 +268,8 @@ def _accuracy_problem(label: str, problem, config: Config, record: Record) -> di
         if result is None:
             raise RuntimeError(f"{peer} does not reach {tol:g} m on {label} at rtol >= 1e-13")
     s_rtol, d_rtol = found_peers["scipy"][0], found_peers["diffrax"][0]
-    t = interleaved_times({"steplab": best["call"], "scipy": lambda: scipy_call(s_rtol),
-                             "diffrax": lambda: ready(adaptive(yj, jnp.asarray(d_rtol))[0])},
-                            config.python_repeats)
+    t = settled_times({"steplab": best["call"], "scipy": lambda: scipy_call(s_rtol),
+                       "diffrax": lambda: ready(adaptive(yj, jnp.asarray(d_rtol))[0])}, config, config.python_repeats)
     what = (f"{label.replace('_', ' ')} to t = {problem.t_end:g} s, final position error <= {tol:g} m: "
             f"steplab {best['method']} with {best['steps']:,} steps")
     common = {"steplab_method": best["method"], "steplab_steps": best["steps"], "steplab_error": best["error"],
@@ -316,7 +309,7 @@ def broadphase(config: Config, record: Record, progress) -> None:
     fastest = min(methods, key=once.get)
     calls = {"steplab": lambda: find_pairs(centers, radius, fastest),
              "ckdtree": lambda: cKDTree(centers).query_pairs(2 * radius, output_type="ndarray")}
-    t = interleaved_times(calls, config.repeats)
+    t = settled_times(calls, config)
     ours = {tuple(p) for p in calls["steplab"]().tolist()}
     theirs = {tuple(sorted(p)) for p in calls["ckdtree"]().tolist()}
     record.compare(f"vs_ckdtree_{size_label(n)}", "broadphase",
@@ -389,7 +382,7 @@ def batching(config: Config, record: Record, progress) -> None:
         # the loop's inputs are on the device before timing, as the batched call's are
         calls = {"batched": lambda batched=batched, args=args: ready(batched(*args)[0]),
                  "loop": lambda run=run, singles=singles: ready([run(*a)[0] for a in singles])}
-        t = interleaved_times(calls, config.repeats)
+        t = settled_times(calls, config)
         difference = final_difference(calls["batched"](), np.stack(calls["loop"]()))
         record.compare(f"batched_vs_loop_{label}", "batching", what, "Python loop of single compiled runs",
                        t["batched"], t["loop"], difference, speedup=t["loop"].median / t["batched"].median)

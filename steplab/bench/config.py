@@ -34,6 +34,9 @@ SOLVER_REAL_TIME_TARGETS = {10_000: 1.0, 100_000: 0.1}
 SOLVER_ENGINE_TARGETS = {("mujoco", 10_000): 0.25}
 #: longest acceptable JIT compilation of a built-in scene, s
 COMPILE_TARGET_SECONDS = 2.0
+#: when a ratio is flagged as not to be trusted (``ratio_stable`` in the record): a side's
+#: median more than ``spread`` above its minimum in the run, or a known cause, noted here
+STABILITY = {"spread": 0.15, "known": {}}
 #: the ratios ``--json`` always carries (the issue's JSON contract)
 REQUIRED_RATIOS = ("vs_diffrax_semi_implicit_euler", "vs_numba_semi_implicit_euler", "vs_memory_bound_1e6",
                    "vs_scipy_at_1e-8", "vs_ckdtree_1e5")
@@ -65,8 +68,14 @@ class Config:
     python_steps: int
     small_dt: float = 1e-3
     #: steps per timed call of the large systems; the per-step cost is the marginal one,
-    #: (t(2K) - t(K)) / K, which leaves out the cost of entering and leaving the loop
-    loop_steps: int = 4
+    #: (t(2K) - t(K)) / K, which leaves out the cost of entering and leaving the loop.
+    #: 32, not 4: a call of 10^6 particles costs 40 to 150 ms before its first step (a fresh
+    #: 48 MB output paged in), whose noise swamped 4 steps of 5 ms (NOTES-bench.md)
+    loop_steps: int = 32
+    #: rounds are added after ``repeats`` until every contender's minimum settles, up to
+    #: max_rounds rounds or round_budget_seconds per comparison (:mod:`.timing`)
+    max_rounds: int = 25
+    round_budget_seconds: float = 8.0
     #: final position error the accuracy-matched comparison asks for, m
     tolerance: float = 1e-8
     #: built-in scenes whose compile time is measured (None: all of them)
@@ -88,7 +97,7 @@ class Config:
 FULL = Config(small_steps=100_000, particles=1_000_000, cloth_side=160, broadphase_n=100_000, periods=100,
               max_log2_steps=22, batch=256, batch_steps=2_500, repeats=9, python_repeats=3, python_steps=100_000,
               collision_runs=((1_000, 60), (2_000, 60), (10_000, 60), (100_000, 6)), collision_repeats=3,
-              implicit_search=True)
+              implicit_search=True, max_rounds=60, round_budget_seconds=30.0)
 #: the systems the targets are stated for, with fewer rounds, smaller batches, 20 oscillator
 #: periods for the accuracy match and 10^4 steps for the Python loop: under a minute; the
 #: ball pits of 10^3 and 10^4 balls for their first 0.2 and 0.1 s (a per-step cost), the

@@ -24,12 +24,13 @@ from __future__ import annotations
 
 import numpy as np
 
-from steplab.core.timing import Times, interleaved_samples, ready
+from steplab.core.timing import Times, ready
 from steplab.integrators.simulate import final_state_function
 
 from .config import Config
 from .record import Record
 from .systems import cloth_model
+from .timing import marginal_times, settled_samples
 
 #: the span the accuracy is judged over, s, and its step counts (dt = span / n)
 USEFUL_SPAN = 0.2
@@ -69,7 +70,7 @@ def implicit_euler_cloth(config: Config, record: Record, progress) -> None:
     y = y0
     for k in range(3):
         y = converged.step(model, k * implicit_dt, y, implicit_dt, None)[0]
-    k = 4 * config.loop_steps  # calls of several ms: a marginal cost above the timer's noise
+    k = config.loop_steps  # calls of tens of ms: a marginal cost above the timer's noise
     yj = jnp.asarray(y)
     semi = SemiImplicitEuler()
     # the first Newton iteration's system, at v1 = v: A delta = -M G, G = -dt a(q + dt v, v)
@@ -77,7 +78,7 @@ def implicit_euler_cloth(config: Config, record: Record, progress) -> None:
     a, matrix, pattern = newton_system(model, implicit_dt, q1, y[1], implicit_dt)
     b = (implicit_dt * np.asarray(model.masses)[:, None] * a)[pattern.kept].ravel()
     x = np.ones(matrix.shape[0])
-    samples = interleaved_samples({
+    samples = settled_samples({
         "implicit": lambda: converged.step(model, 0.0, y, implicit_dt, None),
         "linearised": lambda: linearised.step(model, 0.0, y, implicit_dt, None),
         ("compiled", 1): lambda: ready(compiled(yj, 0.0, explicit_dt, k)[0]),
@@ -89,7 +90,7 @@ def implicit_euler_cloth(config: Config, record: Record, progress) -> None:
         "system": lambda: newton_system(model, implicit_dt, q1, y[1], implicit_dt),
         "solve": lambda: cg.solve(matrix, b),
         "product": lambda: matrix @ x,
-    }, config.repeats)
+    }, config.repeats, config.max_rounds, config.round_budget_seconds)
     first = cg.solve(matrix, b)
     profile = {"newton_to_rtol": newton_report(converged, model, 0.0, y, implicit_dt),
                "one_newton_iteration": newton_report(linearised, model, 0.0, y, implicit_dt),
@@ -98,12 +99,8 @@ def implicit_euler_cloth(config: Config, record: Record, progress) -> None:
                            "cg_matrix_product": float(np.median(samples["product"]))},
                "cg_solve_iterations": first.iterations, "cg_preconditioner": cg.PRECONDITIONER,
                "newton_matrix_bytes": int(matrix.nbytes)}
-    # the compiled loop's marginal cost of k more steps, as the large-system comparisons take
-    # it: the median of the rounds' differences, and the difference of the minimums
-    once, twice = samples[("compiled", 1)], samples[("compiled", 2)]
-    explicit = Times(float(np.median(np.subtract(twice, once))) / k, (min(twice) - min(once)) / k, config.repeats)
-    if not (explicit.median > 0 and explicit.minimum > 0):  # noise swamped it: the average over 2k steps
-        explicit = Times.of(np.divide(twice, 2 * k))
+    # the compiled loop's marginal cost of k more steps, as the large-system comparisons take it
+    explicit, _ = marginal_times(samples[("compiled", 1)], samples[("compiled", 2)], k)
     numpy_step = Times.of(samples["numpy"])
     what = (f"cloth of {model.n_bodies:,} particles, {springs:,} springs and dampers, gravity: one implicit Euler "
             f"step (Newton to rtol, conjugate gradients) at its largest useful dt = {implicit_dt:.3g} s")

@@ -8,7 +8,7 @@ import numpy as np
 
 from steplab.core.timing import Times
 
-from .config import TARGETS, Config
+from .config import STABILITY, TARGETS, Config
 
 
 def final_difference(a, b) -> float:
@@ -35,13 +35,24 @@ class Record:
         """Record ratio ``name`` = steplab's median / the peer's, both medians and what was compared.
 
         ``difference`` is the largest |difference| of the two final states (None where the
-        peer computes no state, as for the memory bound).
+        peer computes no state, as for the memory bound). Each side's spread over its rounds
+        (min, median, max) is kept, and whether the ratio can be trusted: ``ratio_stable``
+        is False where a side's median lies more than STABILITY["spread"] above its minimum
+        in this run, or where the comparison is known to move (STABILITY["known"], the note why).
         """
+        spreads = {side: {"min": t.minimum, "median": t.median, "max": t.maximum, "rounds": t.rounds}
+                   for side, t in (("steplab", steplab), ("peer", peer_times))}
+        notes = [f"{side}'s median {s['median'] / s['min'] - 1:.0%} above its minimum in this run"
+                 for side, s in spreads.items() if s["median"] > (1 + STABILITY["spread"]) * s["min"]]
+        if name in STABILITY["known"]:
+            notes.insert(0, STABILITY["known"][name])
         self.data["ratios"][name] = steplab.median / peer_times.median
         self.data["seconds"][name] = {
             "steplab": steplab.median, "peer": peer_times.median, "peer_name": peer, "group": group, "what": what,
             "difference": difference, "steplab_min": steplab.minimum, "peer_min": peer_times.minimum,
-            "ratio_of_minimums": steplab.minimum / peer_times.minimum, "rounds": steplab.rounds, **details}
+            "ratio_of_minimums": steplab.minimum / peer_times.minimum, "rounds": steplab.rounds,
+            "steplab_spread": spreads["steplab"], "peer_spread": spreads["peer"],
+            "ratio_stable": not notes, "stability_note": "; ".join(notes) or None, **details}
         self.data["order"].append(name)
         self._check_target(name)
 

@@ -19,6 +19,8 @@ def rows(record: dict) -> list[dict]:
         out.append({"name": name, "group": s["group"], "what": s["what"], "peer": s["peer_name"],
                     "steplab": s["steplab"], "peer_seconds": s["peer"], "ratio": record["ratios"][name],
                     "ratio_of_minimums": s.get("ratio_of_minimums"),
+                    "steplab_spread": s.get("steplab_spread"), "peer_spread": s.get("peer_spread"),
+                    "ratio_stable": s.get("ratio_stable"), "stability_note": s.get("stability_note"),
                     "target": None if target is None else target["target"],
                     "met": None if target is None else target["met"]})
     return out
@@ -89,6 +91,19 @@ def _seconds(s: float) -> str:
     return f"{s:.2g} s"
 
 
+def _spread(spread) -> str:
+    """``min / median / max`` of a side's rounds; empty for a record written before they were kept."""
+    if spread is None:
+        return ""
+    return " / ".join(_optional(spread[key], _seconds) for key in ("min", "median", "max"))
+
+
+def _stability(row) -> str:
+    if row["ratio_stable"] is None:
+        return ""
+    return "yes" if row["ratio_stable"] else f"no: {row['stability_note']}"
+
+
 def _verdict(row) -> str:
     if row["target"] is None:
         return ""
@@ -97,23 +112,25 @@ def _verdict(row) -> str:
 
 def format_table(record: dict) -> str:
     lines = [f"{'group':<17} {'comparison':<40} {'peer':<44} {'steplab':>9} {'peer':>9} {'ratio':>7} "
-             f"{'(min)':>7}  target on the ratio"]
+             f"{'(min)':>7}  {'target on the ratio':<20} stable (spread of the rounds within 15 %)"]
     for r in rows(record):
         lines.append(f"{r['group']:<17} {r['name']:<40} {r['peer'][:44]:<44} {_seconds(r['steplab']):>9} "
                      f"{_seconds(r['peer_seconds']):>9} {r['ratio']:>7.3g} {_ratio(r['ratio_of_minimums']):>7}  "
-                     f"{_verdict(r)}")
+                     f"{_verdict(r):<20} {_stability(r)}")
     lines += _collision_table(record)
     lines += _footer(record)
     return "\n".join(lines)
 
 
 def format_markdown(record: dict) -> str:
-    lines = ["| comparison | what | peer | steplab | peer | ratio | ratio of minimums | target |",
-             "|---|---|---|---|---|---|---|---|"]
+    lines = ["| comparison | what | peer | steplab | peer | ratio | ratio of minimums | target | "
+             "steplab min / median / max | peer min / median / max | ratio stable |",
+             "|---|---|---|---|---|---|---|---|---|---|---|"]
     for r in rows(record):
         lines.append(f"| `{r['name']}` | {r['what']} | {r['peer']} | {_seconds(r['steplab'])} | "
                      f"{_seconds(r['peer_seconds'])} | {r['ratio']:.3g} | {_ratio(r['ratio_of_minimums'])} | "
-                     f"{_verdict(r)} |")
+                     f"{_verdict(r)} | {_spread(r['steplab_spread'])} | {_spread(r['peer_spread'])} | "
+                     f"{_stability(r)} |")
     lines += collision_markdown(record)
     lines.append("")
     lines += [f"- {line}" for line in _footer(record)]
@@ -136,8 +153,12 @@ def _footer(record: dict) -> list[str]:
     out += startup_footer(record)
     prov = record.get("provenance", {})
     mode = "quick" if record["quick"] else "full"
+    pinned = record["details"].get("threads", {}).get("pinned")
     out.append(f"ratio = steplab median / peer median (below 1: steplab faster), (min) the same of the "
                f"fastest rounds; {mode} run, "
-               f"{record['config']['repeats']} interleaved rounds; {prov.get('cpu', '?')}, "
+               f"{record['config']['repeats']} to {record['config'].get('max_rounds', record['config']['repeats'])} "
+               f"interleaved rounds (until the minimums settle), "
+               f"{'one thread per side' if pinned else 'threads not pinned'}"
+               f"; {prov.get('cpu', '?')}, "
                f"jax {prov.get('packages', {}).get('jax', '?')}, commit {str(prov.get('git_commit'))[:10]}")
     return out

@@ -53,7 +53,7 @@ def interleaved_samples(calls: dict[object, Callable[[], object]], repeats: int,
 
 @dataclasses.dataclass(frozen=True)
 class Times:
-    """Seconds of one contender over the interleaved rounds: the median, and the minimum.
+    """Seconds of one contender over the interleaved rounds: the median, the minimum and the maximum.
 
     On a shared machine a call the scheduler preempts loses whole time slices (4 ms at
     250 Hz), so times cluster at the true cost plus multiples of the slice. The median is
@@ -63,14 +63,16 @@ class Times:
     median: float
     minimum: float
     rounds: int
+    #: the slowest round (None where the rounds were not kept)
+    maximum: float | None = None
 
     @classmethod
     def of(cls, samples) -> Times:
-        return cls(float(np.median(samples)), float(np.min(samples)), len(samples))
+        return cls(float(np.median(samples)), float(np.min(samples)), len(samples), float(np.max(samples)))
 
     @classmethod
     def exactly(cls, seconds: float) -> Times:
-        return cls(seconds, seconds, 1)
+        return cls(seconds, seconds, 1, seconds)
 
 
 def interleaved_times(calls: dict[object, Callable[[], object]], repeats: int,
