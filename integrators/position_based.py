@@ -25,7 +25,6 @@ import numpy as np
 
 from . import linear_stability
 from .base import Integrator
-from .constraint_projection import project
 
 #: displacement and velocity of the linear map's basis states, m, m/s: along the spring's axis
 #: C = x - l_rest is exactly linear, so any size that keeps x > 0 gives the map to round-off
@@ -88,6 +87,8 @@ class PositionBased(Integrator):
         return c, np.asarray(external, float), np.asarray(model.inverse_masses, float)
 
     def step(self, model, t, y, dt, carry):
+        from .constraint_projection import project  # Numba: only when a position-based run steps
+
         if carry is None:  # a caller that did not call init
             carry = self.init(model, t, y)
         c, external, inverse_mass = carry

@@ -21,6 +21,7 @@ from steplab.core.timing import Times, interleaved_samples, ready
 
 from .config import SEED, Config
 from .record import Record, final_difference
+from .timing import marginal_times
 
 #: the issue's size: 10^5 free bodies
 TUMBLING_BODIES = 100_000
@@ -54,10 +55,7 @@ def tumbling_bodies(config: Config, record: Record, progress) -> None:
         "trigonometric": lambda: ready(runs[1](qj, fast)[0]),
         "stream": peers.memory_stream(read_write, read_only),
     }, config.repeats)
-    marginal = float(np.median(np.subtract(samples[2], samples[1]))) / k
-    least = (min(samples[2]) - min(samples[1])) / k
-    per_step = Times(marginal if marginal > 0 else float(np.median(samples[2])) / (2 * k),
-                     least if least > 0 else min(samples[2]) / (2 * k), config.repeats)
+    per_step, estimate = marginal_times(samples[1], samples[2], k)
     bound = Times.of(samples["stream"])
     _, q_numpy, omega_numpy = simulate_rotation(method, model, q, omega, dt, k)
     q_loop, omega_loop = runs[1](qj, omegaj)
@@ -68,5 +66,6 @@ def tumbling_bodies(config: Config, record: Record, progress) -> None:
                    bytes_read_and_written=read_write, bytes_read=read_only,
                    # the same loop with the exponential's trigonometric branch, per step
                    step_trigonometric_seconds=float(np.median(samples["trigonometric"])) / k,
-                   difference_from_numpy="largest |difference| from the NumPy loop after K steps")
+                   difference_from_numpy="largest |difference| from the NumPy loop after K steps",
+                   per_step_estimate=estimate)
     progress("rotation: done")
