@@ -151,7 +151,7 @@ class PBD(PositionBased):
 
     name = "pbd"
     accumulate = False
-    style = ("tab:pink", "P")
+    style = ("#7b4173", "p")  # plum: no other method has it
 
     @property
     def order(self) -> int:
@@ -175,4 +175,4 @@ class XPBD(PositionBased):
 
     name = "xpbd"
     accumulate = True
-    style = ("tab:cyan", "X")
+    style = ("#5254a3", "d")  # periwinkle: no other method has it
