@@ -30,14 +30,16 @@ from numba import njit
 
 
 @njit(cache=True)
-def project(dx, x_prev, inverse_mass, i, j, rest_length, compliance, damping, h, iterations, accumulate):
-    """``iterations`` Gauss-Seidel sweeps over the constraints, moving ``dx`` (N, 3) in place.
+def project(dx, x_prev, inverse_mass, constraints, h, iterations, accumulate):
+    """``iterations`` Gauss-Seidel sweeps over ``constraints`` (a physics.constraints.DistanceConstraints),
+    moving ``dx`` (N, 3) in place.
 
     ``x_prev`` (N, 3) are the positions at the start of the substep, ``dx`` the predicted
     displacement h v* on entry and the projected one on return; the multipliers start at 0
     in each substep. Coincident bodies (no direction) and pairs of pinned bodies (w = 0) are
     skipped.
     """
+    i, j, rest_length, compliance, damping = constraints
     lam = np.zeros(i.shape[0])
     for _ in range(iterations):
         for p in range(i.shape[0]):

@@ -96,8 +96,7 @@ class PositionBased(Integrator):
         h = dt / self.substeps
         for _ in range(self.substeps):
             dx = h * (v + h * external)  # predict: x* = q + h v*, v* = v + h a_ext
-            project(dx, q, inverse_mass, c.i, c.j, c.rest_length, c.compliance, c.damping, h, self.iterations,
-                    self.accumulate)
+            project(dx, q, inverse_mass, c, h, self.iterations, self.accumulate)
             q, v = q + dx, dx / h
         return np.stack([q, v]).astype(y.dtype, copy=False), carry
 
