@@ -11,16 +11,31 @@ from __future__ import annotations
 import dataclasses
 
 
-def run_summary(scene, integrator, dt: float, traj, world, precision: str, energy_start: float,
-                warnings: list[str], rotation=None) -> dict:
-    """The summary of ``traj``, a finished run of ``scene`` by ``integrator`` at ``dt`` with collision
-    ``world`` (None: without collisions); ``energy_start`` (J) is the scene's initial energy.
+@dataclasses.dataclass(frozen=True)
+class RunSettings:
+    """What a run of ``scene`` was asked to be: both summaries below start from it.
+
+    ``world`` is its collision world (None: without collisions), ``energy_start`` (J) the
+    scene's initial energy, ``warnings`` every warning line of the run."""
+
+    scene: object
+    integrator: object
+    dt: float
+    world: object
+    precision: str
+    energy_start: float
+    warnings: list[str]
+
+
+def run_summary(run: RunSettings, traj, rotation=None) -> dict:
+    """The summary of ``traj``, the finished ``run``.
 
     ``rotation`` (a :class:`.scene_rotation.RotationTrajectory`, None for a scene without rotating
     bodies) adds the rotating bodies' kinetic energy 1/2 omega . I omega to ``energy_end`` and the
     fields of :func:`.scene_rotation.rotation_summary`: orientations [w, x, y, z], angular
     velocities in rad/s (world frame), angular momenta in kg m^2/s.
     """
+    scene, world, energy_start = run.scene, run.world, run.energy_start
     energy_end = float(scene.model.energy(traj.y[-1].astype(float), rotation.at(-1) if rotation is not None else None))
     fields = {}
     if rotation is not None:
@@ -28,9 +43,9 @@ def run_summary(scene, integrator, dt: float, traj, world, precision: str, energ
 
         fields = rotation_summary(scene, traj, rotation)
     return {
-        "scene": scene.name, "integrator": integrator.name, "dt": dt, "steps": traj.steps,
+        "scene": scene.name, "integrator": run.integrator.name, "dt": run.dt, "steps": traj.steps,
         "t_start": scene.t_start, "t_end": float(traj.t[-1]), "backend": traj.backend,
-        "precision": precision, "bodies": list(scene.model.names),
+        "precision": run.precision, "bodies": list(scene.model.names),
         "final_positions": traj.positions[-1].tolist(), "final_velocities": traj.velocities[-1].tolist(),
         "energy_start": energy_start, "energy_end": energy_end,
         "energy_change": energy_end - energy_start,
@@ -38,14 +53,13 @@ def run_summary(scene, integrator, dt: float, traj, world, precision: str, energ
         "wall_time": traj.wall_time, "detector": world.detector if world is not None else "none",
         "method": world.method if world is not None else None,
         "solver": dataclasses.asdict(world.solver) if world is not None and world.method == "solver" else None,
-        "collisions": traj.collisions.summary() if traj.collisions is not None else None, "warnings": warnings,
+        "collisions": traj.collisions.summary() if traj.collisions is not None else None, "warnings": run.warnings,
     } | fields
 
 
-def stopped_summary(scene, integrator, dt: float, world, error, energy_start: float, warnings: list[str],
-                    log=None) -> dict:
-    """The summary of a run stopped by ``error`` at ``error.t`` (s), before a step that held more
+def stopped_summary(run: RunSettings, error, log=None) -> dict:
+    """The summary of ``run`` stopped by ``error`` at ``error.t`` (s), before a step that held more
     impacts than the cap; ``log``: the collisions up to there."""
-    return {"scene": scene.name, "integrator": integrator.name, "dt": dt, "detector": world.detector,
-            "error": str(error), "stopped_at": error.t, "warnings": [*warnings, str(error)],
-            "energy_start": energy_start, "collisions": log.summary() if log is not None else None}
+    return {"scene": run.scene.name, "integrator": run.integrator.name, "dt": run.dt, "detector": run.world.detector,
+            "error": str(error), "stopped_at": error.t, "warnings": [*run.warnings, str(error)],
+            "energy_start": run.energy_start, "collisions": log.summary() if log is not None else None}

@@ -47,7 +47,7 @@ def add_parser(sub, name: str) -> None:
 def command(args) -> int:
     import numpy as np
 
-    from steplab.integrators.run_summary import run_summary, stopped_summary
+    from steplab.integrators.run_summary import RunSettings, run_summary, stopped_summary
     from steplab.integrators.simulate import MAX_STEPS, simulate
     from steplab.integrators.stable_dt import dt_warning
     from steplab.io import check_trajectory_path, save_trajectory
@@ -72,6 +72,7 @@ def command(args) -> int:
     end = {"n_steps": args.steps} if args.steps is not None else {"t_end": t_end}
     kept = []  # the run's collision step, whose log tells what happened before a stop
     energy_start = float(scene.model.energy(scene.y0, scene.rigid_bodies))  # with the spin's 1/2 omega . I omega
+    settings = RunSettings(scene, integrator, dt, world, args.precision, energy_start, run_warnings)
     try:
         traj = simulate(scene.model, integrator, scene.y0, scene.t_start, dt=dt, **end, backend=args.backend,
                         dtype=np.dtype(args.precision), save_every=args.save_every,
@@ -85,15 +86,14 @@ def command(args) -> int:
         if not isinstance(err, ImpactCapError):
             raise
         if args.json:  # stopped, never dropped: one line, status 1 (and the record)
-            print(json.dumps(stopped_summary(scene, integrator, dt, world, err, energy_start, run_warnings,
-                                             kept[0].log if kept else None), indent=2))
+            print(json.dumps(stopped_summary(settings, err, kept[0].log if kept else None), indent=2))
         return fail(args.command, str(err), EXIT_DIVERGED)
     rotation = None
     if scene.rigid_bodies is not None:  # beside the translation, at its saved times; a divergence is status 1
         from steplab.integrators.scene_rotation import rotate_scene
 
         rotation = rotate_scene(scene, traj, rotation_method, backend=args.backend)
-    summary = run_summary(scene, integrator, dt, traj, world, args.precision, energy_start, run_warnings, rotation)
+    summary = run_summary(settings, traj, rotation)
     if args.out is not None:
         extra = None
         if rotation is not None:
