@@ -24,7 +24,8 @@ from .errors import EXIT_DIVERGED, fail
 def add_parser(sub, name: str) -> None:
     p = sub.add_parser(name, help="simulate a scene and write its trajectory")
     scene_argument(p)
-    p.add_argument("--integrator", help="integrator name, or package.module:Name (default: the scene's)")
+    p.add_argument("--integrator", help="integrator name, or package.module:Name (default: the scene's, "
+                   "with its [simulation.<integrator>] settings such as xpbd's substeps and iterations)")
     time_arguments(p, steps=True)
     p.add_argument("--backend", choices=("numpy", "jax"), default="numpy",
                    help="numpy: step by step; jax: compiled loop (default: numpy)")
