@@ -57,6 +57,16 @@ def _solve(xp, matrix, rhs):
     return xp.linalg.solve(matrix, rhs[..., None])[..., 0]
 
 
+def first_order_update(xp, q, omega, dt):
+    """q + h/2 q (0, omega), normalised: the linearised exponential (body-frame omega)."""
+    return quat.normalize(xp, q + 0.5 * dt * quat.multiply_vector(xp, q, omega))
+
+
+def exponential_update(xp, q, omega, dt):
+    """q exp(h omega), normalised: exact for a constant body-frame omega over the step."""
+    return quat.normalize(xp, quat.multiply(xp, q, quat.exp(xp, dt * omega)))
+
+
 @dataclasses.dataclass(frozen=True)
 class RotationMethod(Integrator):
     """A fixed-step method for (q, omega); the theory is class data."""
@@ -99,7 +109,7 @@ class Explicit(RotationMethod):
     def step(self, model, t, q, omega, dt):
         xp = model.xp
         alpha = angular_acceleration(xp, model, t, q, omega)
-        q1 = quat.normalize(xp, q + 0.5 * dt * quat.multiply_vector(xp, q, omega))
+        q1 = first_order_update(xp, q, omega, dt)
         return q1, omega + dt * alpha
 
 
@@ -120,7 +130,7 @@ class FirstOrderQuaternion(RotationMethod):
     def step(self, model, t, q, omega, dt):
         xp = model.xp
         omega1 = omega + dt * angular_acceleration(xp, model, t, q, omega)
-        return quat.normalize(xp, q + 0.5 * dt * quat.multiply_vector(xp, q, omega1)), omega1
+        return first_order_update(xp, q, omega1, dt), omega1
 
 
 class ExponentialMap(RotationMethod):
@@ -140,7 +150,7 @@ class ExponentialMap(RotationMethod):
     def step(self, model, t, q, omega, dt):
         xp = model.xp
         omega1 = omega + dt * angular_acceleration(xp, model, t, q, omega)
-        return quat.normalize(xp, quat.multiply(xp, q, quat.exp(xp, dt * omega1))), omega1
+        return exponential_update(xp, q, omega1, dt), omega1
 
 
 class ImplicitGyroscopic(RotationMethod):
@@ -172,7 +182,7 @@ class ImplicitGyroscopic(RotationMethod):
         jacobian = (xp.eye(3) * inertia[..., None, :]
                     + dt * (_skew(xp, omega1) * inertia[..., None, :] - _skew(xp, momentum)))
         omega2 = omega1 - _solve(xp, jacobian, f)
-        return quat.normalize(xp, quat.multiply(xp, q, quat.exp(xp, dt * omega2))), omega2
+        return exponential_update(xp, q, omega2, dt), omega2
 
 
 class MomentumRescaled(RotationMethod):
@@ -199,7 +209,7 @@ class MomentumRescaled(RotationMethod):
         before, after = norm(xp, inertia * omega), norm(xp, inertia * gyro)
         gyro = gyro * xp.where(after > 0, before / xp.where(after > 0, after, 1.0), 1.0)[..., None]
         omega1 = gyro + dt * model.torque(xp, t, q, omega) / inertia
-        return quat.normalize(xp, quat.multiply(xp, q, quat.exp(xp, dt * omega1))), omega1
+        return exponential_update(xp, q, omega1, dt), omega1
 
 
 def _free_rotation_about_axis(xp, q, momentum, inertia, axis: int, h):
