@@ -55,15 +55,28 @@ def lookup(records: dict, path: str):
 
 
 def _bench_table(data: dict) -> str:
-    rows = []
-    for name in data["order"]:
-        x = data["seconds"][name]
-        target = data["targets"].get(name)
-        verdict = "-" if target is None else f"<= {target['target']:g}: {'met' if target['met'] else 'missed'}"
-        rows.append([x["what"], x["peer_name"], _seconds(x["steplab"]), _seconds(x["peer"]),
-                     f"{data['ratios'][name]:.3g}", verdict])
-    return markdown_table(["comparison", "peer", "steplab", "peer time", "ratio", "target"], rows) + \
-        "\n\n(medians of interleaved rounds; ratio = steplab / peer, below 1: steplab is faster.)"
+    # the rows of the bench's own report (steplab.bench.report.rows), with each side's spread
+    # over its rounds: a ratio is read beside how far its two medians moved in this run
+    from steplab.bench.config import STABILITY
+    from steplab.bench.report import rows
+
+    out = []
+    for r in rows(data):
+        verdict = "-" if r["target"] is None else f"<= {r['target']:g}: {'met' if r['met'] else 'missed'}"
+        stable = "" if r["ratio_stable"] is None else "yes" if r["ratio_stable"] else f"no: {r['stability_note']}"
+        out.append([r["what"], r["peer"], _spread(r["steplab"], r["steplab_spread"]),
+                    _spread(r["peer_seconds"], r["peer_spread"]), f"{r['ratio']:.3g}", verdict, stable])
+    return markdown_table(["comparison", "peer", "steplab (min-max)", "peer time (min-max)", "ratio", "target",
+                           "ratio stable"], out) + \
+        "\n\n(medians of interleaved rounds, with the fastest and slowest round in brackets; ratio = steplab / peer, " \
+        "below 1: steplab is faster; a ratio is marked unstable where a side's median lies more than " \
+        f"{STABILITY['spread']:.0%} above its minimum.)"
+
+
+def _spread(median: float, spread: dict | None) -> str:
+    if spread is None:  # a record written before the rounds' spread was kept
+        return _seconds(median)
+    return f"{_seconds(median)} ({_seconds(spread['min'])}-{_seconds(spread['max'])})"
 
 
 def _seconds(t: float) -> str:

@@ -19,7 +19,11 @@ from steplab.report import build
 SITE_STUDIES = ("frame_rate", "restitution", "truncation")
 #: a bench record written by hand: the bench page must print its ratio and both times
 BENCH = {"order": ["step"], "ratios": {"step": 0.5}, "targets": {},
-         "seconds": {"step": {"what": "one oscillator step", "peer_name": "scipy", "steplab": 0.002, "peer": 0.004}},
+         "seconds": {"step": {"what": "one oscillator step", "group": "oscillator", "peer_name": "scipy",
+                              "steplab": 0.002, "peer": 0.004, "ratio_stable": False,
+                              "stability_note": "peer's median 33% above its minimum in this run",
+                              "steplab_spread": {"min": 0.0019, "median": 0.002, "max": 0.0025, "rounds": 5},
+                              "peer_spread": {"min": 0.003, "median": 0.004, "max": 0.007, "rounds": 5}}},
          "collisions": {"pit": {"balls": 10, "steps": 6, "not_compared": {}, "contenders": {"mujoco": {
              "settings": "MuJoCo, PGS", "per_step_seconds": 0.003, "real_time_factor": 5.5, "balls_inside": 10,
              "impacts": 0}}}}}
@@ -107,6 +111,9 @@ def test_errata_and_bench_pages_print_the_records(site, results):
     bench = (site / "bench.html").read_text()
     # steplab 2 ms against the peer's 4 ms: ratio 0.5
     assert "2 ms" in bench and "4 ms" in bench and "<td>0.5</td>" in bench
+    # each side's fastest and slowest round beside its median, and the ratio marked as moving
+    assert "2 ms (1.9 ms-2.5 ms)" in bench and "4 ms (3 ms-7 ms)" in bench
+    assert "no: peer's median 33% above its minimum in this run" in bench
     # and the engines' ball pit: 3 ms a step, 5.5 simulated seconds per wall second
     assert "<td>MuJoCo, PGS</td>" in bench and "<td>3 ms</td>" in bench and "<td>5.5</td>" in bench
 
