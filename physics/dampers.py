@@ -7,9 +7,10 @@ from typing import ClassVar
 
 import numpy as np
 
-from ._array import dot, norm, rows, safe_unit, scatter_pair_blocks, scatter_pairs
+from ._array import dot, inverse_length, norm, rows, safe_unit, scatter_pair_blocks, scatter_pairs
 from .force import Force
 from .jacobian_blocks import PairJacobian
+from .pair_laws import damper_position_block, damper_tension, damper_velocity_block
 from .scene_toml import REQUIRED
 
 
@@ -56,7 +57,7 @@ class Dampers(Force):
 
     def force(self, xp, q, v, m):
         d, _, u = self._terms(xp, q, v)
-        f = (self.damping * dot(xp, u, d))[:, None] * d
+        f = damper_tension(self.damping, dot(xp, u, d))[:, None] * d
         return scatter_pairs(xp, q.shape[0], self.i, self.j, f)
 
     def jacobian(self, xp, q, v, m):
@@ -67,20 +68,17 @@ class Dampers(Force):
     def jacobian_blocks(self, xp, q, v, m, definite=False):
         """One block per damper: d f_i / d v_j = c d d^T and d f_i / d q_j = c [(d . u) P + d u^T P] / l.
 
-        ``u`` is the relative velocity, P = I - d d^T. With ``definite``, the position block
-        (not symmetric, and indefinite) is left out, as Baraff and Witkin do with their
-        damping forces (1998, section 5).
+        ``u`` is the relative velocity, P = I - d d^T (the laws: :mod:`.pair_laws`). With
+        ``definite``, the position block (not symmetric, and indefinite) is left out, as Baraff
+        and Witkin do with their damping forces (1998, section 5).
         """
         d, length, u = self._terms(xp, q, v)
-        c = self.damping[:, None, None]
         ddT = d[:, :, None] * d[:, None, :]
-        dv_block = c * ddT
+        dv_block = damper_velocity_block(self.damping, 1.0)[:, None, None] * ddT
         if definite:
             return PairJacobian(self.i, self.j, None, dv_block)
-        # d/d delta of (d . u) d, with d d / d delta = P / l and P = I - d d^T:
-        # [ (d . u) P + d u^T P ] / l
+        e, b = damper_position_block(self.damping, inverse_length(xp, length), dot(xp, u, d), 1.0)
         proj = xp.eye(3, dtype=q.dtype) - ddT
-        du = xp.sum(d * u, axis=1)[:, None, None]
-        inv_l = xp.where(length > 0, 1 / xp.where(length > 0, length, 1), 0)[:, None, None]
-        dq_block = c * inv_l * (du * proj + d[:, :, None] * (u[:, None, :] @ proj))
+        w = (u[:, None, :] @ proj)[:, 0]  # P u, the relative velocity across the pair
+        dq_block = b[:, None, None] * proj + e[:, None, None] * (d[:, :, None] * w[:, None, :])
         return PairJacobian(self.i, self.j, dq_block, dv_block)

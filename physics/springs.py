@@ -7,9 +7,10 @@ from typing import ClassVar
 
 import numpy as np
 
-from ._array import norm, rows, safe_unit, scatter_pair_blocks, scatter_pairs
+from ._array import inverse_length, norm, rows, safe_unit, scatter_pair_blocks, scatter_pairs
 from .force import Force
 from .jacobian_blocks import PairJacobian
+from .pair_laws import spring_block, spring_potential, spring_tension, spring_transverse
 from .scene_toml import REQUIRED
 
 
@@ -64,7 +65,7 @@ class Springs(Force):
 
     def force(self, xp, q, v, m):
         d, length = self._geometry(xp, q)
-        f = (self.stiffness * (length - self.rest_length))[:, None] * d
+        f = spring_tension(self.stiffness, length, self.rest_length)[:, None] * d
         return scatter_pairs(xp, q.shape[0], self.i, self.j, f)
 
     def jacobian(self, xp, q, v, m):
@@ -75,19 +76,18 @@ class Springs(Force):
 
         With ``definite``, a compressed spring's transverse term, negative where
         l < L (a compressed spring buckles sideways), is left out, so that every block is
-        positive semidefinite (Choi and Ko, "Stable but responsive cloth", 2002).
+        positive semidefinite (Choi and Ko, "Stable but responsive cloth", 2002). The laws:
+        :mod:`.pair_laws`.
         """
-        # f_i = k (l - L) d with d = delta / l, delta = q_j - q_i: the axial term k d d^T and
-        # the geometric stiffness k (1 - L / l) (I - d d^T)
         d, length = self._geometry(xp, q)
-        transverse = 1 - xp.where(length > 0, self.rest_length / xp.where(length > 0, length, 1), 0)
+        transverse = spring_transverse(self.rest_length, inverse_length(xp, length))
         if definite:
             transverse = xp.maximum(transverse, 0)
+        axial, across = spring_block(self.stiffness, transverse, 1.0)
         ddT = d[:, :, None] * d[:, None, :]
-        eye = xp.eye(3, dtype=q.dtype)
-        block = self.stiffness[:, None, None] * (ddT + transverse[:, None, None] * (eye - ddT))
+        block = axial[:, None, None] * ddT + across[:, None, None] * xp.eye(3, dtype=q.dtype)
         return PairJacobian(self.i, self.j, block, None)
 
     def potential(self, xp, q, m):
         _, length = self._geometry(xp, q)
-        return 0.5 * xp.sum(self.stiffness * (length - self.rest_length) ** 2)
+        return xp.sum(spring_potential(self.stiffness, length, self.rest_length))
