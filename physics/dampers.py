@@ -7,6 +7,7 @@ from typing import ClassVar
 
 import numpy as np
 
+from . import attachments
 from ._array import dot, inverse_length, norm, rows, safe_unit, scatter_pair_blocks, scatter_pairs
 from .force import Force
 from .jacobian_blocks import PairJacobian
@@ -27,38 +28,48 @@ class Dampers(Force):
     i, j : int ndarray, shape (P,)
     damping : ndarray, shape (P,)
         c, N s/m.
+    attachment : physics.attachments.Attachment, optional
+        Body-frame points of rotating bodies where the ends act (None: the centres); ``d`` and
+        the relative velocity are then those of the points.
     """
 
     i: np.ndarray
     j: np.ndarray
     damping: np.ndarray
+    attachment: attachments.Attachment | None = None
 
     name: ClassVar[str] = "dampers"
     array_of_tables: ClassVar[bool] = True
 
     @classmethod
     def from_scene(cls, tables, bodies) -> Dampers:
-        """``[[forces.dampers]]``: ``bodies = ["a", "b"]`` and ``damping`` (N s/m)."""
-        i, j, c = [], [], []
+        """``[[forces.dampers]]``: ``bodies = ["a", "b"]``, ``damping`` (N s/m) and ``offsets``
+        (body-frame points of the two ends, m, on rotating bodies: :mod:`.attachments`)."""
         for d in tables:
-            d.allow("bodies", "damping")
-            a, b = bodies.pair(d)
-            i.append(a)
-            j.append(b)
-            c.append(d.number("damping", REQUIRED, nonnegative=True))
-        return cls(np.array(i), np.array(j), np.array(c))
+            d.allow("bodies", "damping", "offsets")
+        pairs = [bodies.pair(d) for d in tables]
+        offsets = attachments.read_offsets(tables, bodies, pairs)
+        c = [d.number("damping", REQUIRED, nonnegative=True) for d in tables]
+        i, j = np.array([a for a, _ in pairs]), np.array([b for _, b in pairs])
+        return cls(i, j, np.array(c), attachments.initial_attachment(offsets, i, j, bodies))
 
     def _terms(self, xp, q, v):
         delta = rows(xp, q, self.j) - rows(xp, q, self.i)
+        u = rows(xp, v, self.j) - rows(xp, v, self.i)
+        if self.attachment is not None:  # between the points, which move with v + omega x R r
+            delta = delta + (self.attachment.arms[:, 1] - self.attachment.arms[:, 0])
+            u = u + (self.attachment.velocities[:, 1] - self.attachment.velocities[:, 0])
         length = norm(xp, delta)
         d = safe_unit(xp, delta, length)
-        u = rows(xp, v, self.j) - rows(xp, v, self.i)
         return d, length, u
 
-    def force(self, xp, q, v, m):
+    def pair_force(self, xp, q, v):
+        """The force on each damper's first end, (P, 3), N (the second gets minus it)."""
         d, _, u = self._terms(xp, q, v)
-        f = damper_tension(self.damping, dot(xp, u, d))[:, None] * d
-        return scatter_pairs(xp, q.shape[0], self.i, self.j, f)
+        return damper_tension(self.damping, dot(xp, u, d))[:, None] * d
+
+    def force(self, xp, q, v, m):
+        return scatter_pairs(xp, q.shape[0], self.i, self.j, self.pair_force(xp, q, v))
 
     def jacobian(self, xp, q, v, m):
         blocks, n = self.jacobian_blocks(xp, q, v, m), q.shape[0]

@@ -176,8 +176,11 @@ class PairGroup:
 
 
 def has_kernel(force) -> bool:
-    """Whether ``force`` (exactly a Springs or a Dampers, not a subclass) has a compiled kernel here."""
-    return type(force) in (Springs, Dampers)
+    """Whether ``force`` (exactly a Springs or a Dampers, not a subclass, between centres) has a compiled kernel here.
+
+    Forces attached at body-frame points (:mod:`.attachments`) go through their NumPy blocks.
+    """
+    return type(force) in (Springs, Dampers) and force.attachment is None
 
 
 #: each model's groups, found on first use: {model: tuple of PairGroup}
@@ -190,8 +193,8 @@ def pair_groups(model) -> tuple[PairGroup, ...]:
     Only forces with a kernel (:func:`has_kernel`); a force without a partner is a group alone.
     """
     if model not in _GROUPS:
-        springs = [f for f in model.forces if type(f) is Springs]
-        dampers = [f for f in model.forces if type(f) is Dampers]
+        springs = [f for f in model.forces if type(f) is Springs and has_kernel(f)]
+        dampers = [f for f in model.forces if type(f) is Dampers and has_kernel(f)]
         groups = []
         for s in springs:
             partner = next((d for d in dampers if np.array_equal(d.i, s.i) and np.array_equal(d.j, s.j)), None)

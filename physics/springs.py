@@ -7,6 +7,7 @@ from typing import ClassVar
 
 import numpy as np
 
+from . import attachments
 from ._array import inverse_length, norm, rows, safe_unit, scatter_pair_blocks, scatter_pairs
 from .force import Force
 from .jacobian_blocks import PairJacobian
@@ -33,40 +34,50 @@ class Springs(Force):
         k, N/m.
     rest_length : ndarray, shape (P,)
         l_rest, m.
+    attachment : physics.attachments.Attachment, optional
+        Body-frame points of rotating bodies where the ends act (None: the centres); ``d`` and
+        ``l`` are then those of the points.
     """
 
     i: np.ndarray
     j: np.ndarray
     stiffness: np.ndarray
     rest_length: np.ndarray
+    attachment: attachments.Attachment | None = None
 
     name: ClassVar[str] = "springs"
     array_of_tables: ClassVar[bool] = True
 
     @classmethod
     def from_scene(cls, tables, bodies) -> Springs:
-        """``[[forces.springs]]``: ``bodies = ["a", "b"]``, ``stiffness`` (N/m) and ``rest_length``
-        (m; default: the initial distance, so the spring starts relaxed)."""
-        i, j, k, rest = [], [], [], []
+        """``[[forces.springs]]``: ``bodies = ["a", "b"]``, ``stiffness`` (N/m), ``rest_length``
+        (m; default: the initial distance, so the spring starts relaxed) and ``offsets``
+        (body-frame points of the two ends, m, on rotating bodies: :mod:`.attachments`)."""
         for s in tables:
-            s.allow("bodies", "stiffness", "rest_length")
-            a, b = bodies.pair(s)
-            i.append(a)
-            j.append(b)
-            k.append(s.number("stiffness", REQUIRED, positive=True))
-            initial = float(np.linalg.norm(bodies.positions[b] - bodies.positions[a]))
-            rest.append(s.number("rest_length", initial, nonnegative=True))
-        return cls(np.array(i), np.array(j), np.array(k), np.array(rest))
+            s.allow("bodies", "stiffness", "rest_length", "offsets")
+        pairs = [bodies.pair(s) for s in tables]
+        offsets = attachments.read_offsets(tables, bodies, pairs)
+        k = [s.number("stiffness", REQUIRED, positive=True) for s in tables]
+        rest = [s.number("rest_length", attachments.point_distance(None if offsets is None else offsets[n], pair,
+                                                                   bodies), nonnegative=True)
+                for n, (s, pair) in enumerate(zip(tables, pairs))]
+        i, j = np.array([a for a, _ in pairs]), np.array([b for _, b in pairs])
+        return cls(i, j, np.array(k), np.array(rest), attachments.initial_attachment(offsets, i, j, bodies))
 
     def _geometry(self, xp, q):
         delta = rows(xp, q, self.j) - rows(xp, q, self.i)
+        if self.attachment is not None:  # between the points: x_j + R_j r_j - (x_i + R_i r_i)
+            delta = delta + (self.attachment.arms[:, 1] - self.attachment.arms[:, 0])
         length = norm(xp, delta)
         return safe_unit(xp, delta, length), length
 
-    def force(self, xp, q, v, m):
+    def pair_force(self, xp, q, v):
+        """The force on each spring's first end, (P, 3), N (the second gets minus it)."""
         d, length = self._geometry(xp, q)
-        f = spring_tension(self.stiffness, length, self.rest_length)[:, None] * d
-        return scatter_pairs(xp, q.shape[0], self.i, self.j, f)
+        return spring_tension(self.stiffness, length, self.rest_length)[:, None] * d
+
+    def force(self, xp, q, v, m):
+        return scatter_pairs(xp, q.shape[0], self.i, self.j, self.pair_force(xp, q, v))
 
     def jacobian(self, xp, q, v, m):
         return scatter_pair_blocks(xp, q.shape[0], self.i, self.j, self.jacobian_blocks(xp, q, v, m).dq), None
