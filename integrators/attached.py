@@ -68,6 +68,10 @@ class AttachedStep:
         angular_velocities[self.bodies.index] = quat.rotate(np, q, omega)
         return attachments.model_at(self.model, orientations, angular_velocities), orientations
 
+    def final_model(self):
+        """The model with its lever arms at the last step's orientations (for the energy at the end)."""
+        return self.model_at(self.q, self.omega)[0]
+
     def _accelerations(self, t, x, v, q, omega):
         """The centres' acceleration (N, 3) and the rotating bodies' body-frame torque (R, 3) at one state."""
         model, orientations = self.model_at(q, omega)
@@ -84,9 +88,9 @@ class AttachedStep:
 
     def _held(self, t, y, dt):
         # each system steps with the other held at the start of the step
-        model, _ = self.model_at(self.q, self.omega)
+        model, orientations = self.model_at(self.q, self.omega)
         y1, _ = self.integrator.step(model, t, y, dt, self.integrator.init(model, t, y))
-        torque = _HeldTorque(self, y[0], y[1])
+        torque = _HeldTorque(self, y[0], y[1], (self.q, self.omega, model, orientations))
         self.q, self.omega = self.rotation.step(RotationModel(self.bodies.inertia, (torque,)), t, self.q, self.omega,
                                                 dt)
         return y1
@@ -116,13 +120,16 @@ class AttachedStep:
 
 
 class _HeldTorque:
-    """The attached forces' torque at positions ``x`` and velocities ``v`` held over a rotation step."""
+    """The attached forces' torque at positions ``x`` and velocities ``v`` held over a rotation step;
+    ``start`` is (q, omega, model, orientations) at the step's start, which most methods ask for."""
 
-    def __init__(self, step: AttachedStep, x, v):
-        self.step, self.x, self.v = step, x, v
+    def __init__(self, step: AttachedStep, x, v, start):
+        self.step, self.x, self.v, self.start = step, x, v, start
 
     def torque(self, xp, t, q, omega_body):
-        model, orientations = self.step.model_at(q, omega_body)
+        q0, omega0, model, orientations = self.start
+        if q is not q0 or omega_body is not omega0:  # a stage inside the step (rk4, dlm's second kick)
+            model, orientations = self.step.model_at(q, omega_body)
         return attachments.torques(model, self.x, self.v, orientations)[self.step.bodies.index]
 
 
