@@ -270,3 +270,21 @@ offsets = {offsets}
     with pytest.raises(SceneError) as err:
         parse_scene(text, "bad.toml")
     assert message in str(err.value) and "\n" not in str(err.value)
+
+
+def test_steplab_run_couples_the_rotation_and_refuses_what_it_cannot_couple(capsys):
+    from steplab.cli import main
+
+    assert main(["run", "spring-pendulum", "--t-end", "0.1", "--integrator", "velocity-verlet", "--rotation", "dlm",
+                 "--json"]) == 0
+    import json
+
+    record = json.loads(capsys.readouterr().out)
+    assert record["rotation"].startswith("dlm") and record["rotating_bodies"] == ["cube"]
+    assert abs(record["energy_relative_change"]) < 1e-6  # the potential at the corner, both kinetic energies
+    for argv, message in ((["--backend", "jax"], "run on the NumPy backend"), (["--detector", "swept"],
+                                                                                 "do not run with collisions")):
+        assert main(["run", "spring-pendulum", "--t-end", "0.01", *argv]) == 2
+        assert message in capsys.readouterr().err
+    assert main(["recommend", "spring-pendulum", "--tol", "1e-3"]) == 2
+    assert "recommend does not measure yet" in capsys.readouterr().err

@@ -42,6 +42,11 @@ def command(args) -> int:
 
     scene = load_scene(args.scene)
     rotation = rotation_named(scene, args)
+    from steplab.physics.attachments import attached_forces
+
+    if attached_forces(scene.model):  # its references and candidates step the translation alone
+        raise ValueError(f"scene {scene.name}: springs or dampers at body-frame points (offsets) couple the "
+                         "rotation with the translation, which recommend does not measure yet; use steplab run")
     _, t_end = time_span(scene, args)
     integrators = None
     if args.integrators is not None:
