@@ -109,14 +109,13 @@ def attached_forces(model) -> tuple:
 
 def model_at(model, orientations, angular_velocities):
     """``model`` with every attached force's lever arms at these ``orientations`` (N, 4) and world
-    ``angular_velocities`` (N, 3); the other forces are the same objects."""
-    from .model import Model
-
+    ``angular_velocities`` (N, 3); the other forces are the same objects (a model of the same class:
+    the model imports the forces, which import this module, so it is not imported here)."""
     forces = [dataclasses.replace(f, attachment=attachment_at(f.attachment.offsets, f.i, f.j, orientations,
                                                               angular_velocities))
               if getattr(f, "attachment", None) is not None else f for f in model.forces]
-    return Model(np.asarray(model.masses), np.asarray(model.radii), forces, model.pinned, model.names,
-                 model.xp, model.dtype)
+    return type(model)(np.asarray(model.masses), np.asarray(model.radii), forces, model.pinned, model.names,
+                       model.xp, model.dtype)
 
 
 def torques(model, q, v, orientations) -> np.ndarray:

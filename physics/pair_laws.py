@@ -25,8 +25,6 @@ returning the coefficients of its terms already multiplied by the Newton matrix'
 
 from __future__ import annotations
 
-from numba import njit
-
 
 def spring_tension(stiffness, length, rest_length):
     """Hooke's law: k (l - L), N, the pull along d on the first body (> 0: stretched)."""
@@ -78,5 +76,11 @@ def damper_position_block(damping, inverse_length, approach, coefficient):
 
 
 def compiled(law):
-    """``law`` compiled by Numba for the kernels' loops over pairs (inlined where it is called)."""
+    """``law`` compiled by Numba for the kernels' loops over pairs (inlined where it is called).
+
+    Numba is imported here, by the kernels, not by the forces: a command that only reads a scene
+    stays light (tests/test_startup.py).
+    """
+    from numba import njit
+
     return njit(cache=True, inline="always")(law)
