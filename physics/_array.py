@@ -72,6 +72,7 @@ def block_diagonal(xp, block):
         return out
     return xp.zeros((n, 3, n, 3), dtype=block.dtype).at[idx, :, idx, :].set(block)
 
+
 def inverse_length(xp, length):
     """``1 / length``, and 0 where ``length`` is zero (no direction: the laws then see no lever)."""
     positive = length > 0

@@ -91,14 +91,14 @@ def initial_attachment(offsets, i, j, bodies) -> Attachment | None:
     return attachment_at(offsets, i, j, bodies.orientations, bodies.angular_velocities)
 
 
-def point_distance(points, pair, bodies) -> float:
-    """The initial distance between an element's two points ``points`` (2, 3) (None: the centres), m:
+def point_distance(offsets, k: int, pair, bodies) -> float:
+    """The initial distance between the two points of element ``k`` (``offsets`` None: the centres), m:
     its default rest length."""
     a, b = pair
     delta = bodies.positions[b] - bodies.positions[a]
-    if points is not None:
-        delta = delta + (quat.rotate(np, bodies.orientations[b], points[1])
-                         - quat.rotate(np, bodies.orientations[a], points[0]))
+    if offsets is not None:
+        delta = delta + (quat.rotate(np, bodies.orientations[b], offsets[k, 1])
+                         - quat.rotate(np, bodies.orientations[a], offsets[k, 0]))
     return float(np.linalg.norm(delta))
 
 

@@ -58,8 +58,7 @@ class Springs(Force):
         pairs = [bodies.pair(s) for s in tables]
         offsets = attachments.read_offsets(tables, bodies, pairs)
         k = [s.number("stiffness", REQUIRED, positive=True) for s in tables]
-        rest = [s.number("rest_length", attachments.point_distance(None if offsets is None else offsets[n], pair,
-                                                                   bodies), nonnegative=True)
+        rest = [s.number("rest_length", attachments.point_distance(offsets, n, pair, bodies), nonnegative=True)
                 for n, (s, pair) in enumerate(zip(tables, pairs))]
         i, j = np.array([a for a, _ in pairs]), np.array([b for _, b in pairs])
         return cls(i, j, np.array(k), np.array(rest), attachments.initial_attachment(offsets, i, j, bodies))

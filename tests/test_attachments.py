@@ -288,3 +288,12 @@ def test_steplab_run_couples_the_rotation_and_refuses_what_it_cannot_couple(caps
         assert message in capsys.readouterr().err
     assert main(["recommend", "spring-pendulum", "--tol", "1e-3"]) == 2
     assert "recommend does not measure yet" in capsys.readouterr().err
+
+
+def test_the_free_rotation_beside_the_translation_refuses_an_attached_scene():
+    from steplab.integrators.scene_rotation import rotate_scene
+
+    scene = load_scene("spring-pendulum")
+    trajectory = simulate(scene.model, "semi-implicit-euler", scene.y0, 0.0, dt=scene.dt, n_steps=2)
+    with pytest.raises(ValueError, match="step its translation and rotation together"):
+        rotate_scene(scene, trajectory)
