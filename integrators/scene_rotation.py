@@ -1,11 +1,12 @@
 """A scene's rotating bodies along a run: the rotation method stepped beside the translation.
 
-A scene's forces act at the bodies' centres (gravity, drag, springs and dampers between
-centres), so they exert no torque: each rotating body is a free rigid body while its centre
+A scene's forces that act at the bodies' centres (gravity, drag, springs and dampers between
+centres) exert no torque: each rotating body is then a free rigid body while its centre
 moves as a point mass, and the two systems are integrated side by side with the same dt,
 saved at the same times. The translation is untouched, bit for bit, and a scene without
-rotating bodies does no rotation work at all. (Forces at body-frame points would couple the
-two; each method's ``stage_order`` says how it would interleave with its translation partner.)
+rotating bodies does no rotation work at all. Springs and dampers at body-frame points
+(``offsets``) couple the two and feed their torques to the rotation: such a scene is stepped
+by :mod:`.attached`, and :func:`rotate_scene` refuses it.
 
 ``steplab run`` calls :func:`rotate_scene` after :func:`.simulate`, then :func:`rotation_summary`
 for its JSON fields and :func:`rotation_arrays` for the NPZ file.
@@ -17,6 +18,7 @@ import dataclasses
 
 import numpy as np
 from steplab.physics import quaternion as quat
+from steplab.physics.attachments import attached_forces
 from steplab.physics.rigid_body import RigidBodies, RotationModel, total_angular_momentum
 
 from .rotation import DEFAULT_ROTATION, simulate_rotation
@@ -83,6 +85,9 @@ def rotate_scene(scene, trajectory, rotation: str | None = None, backend: str = 
     method = get_rotation(rotation or scene.rotation or DEFAULT_ROTATION)  # checked even without rotating bodies
     if bodies is None:
         return None
+    if attached_forces(scene.model):
+        raise ValueError(f"scene {scene.name}: its springs or dampers at body-frame points turn the bodies; step "
+                         "its translation and rotation together (steplab.integrators.attached)")
     model = RotationModel(bodies.inertia)
     q, omega = bodies.orientations, bodies.body_angular_velocities()
     t = np.asarray(trajectory.t, float)

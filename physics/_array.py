@@ -72,6 +72,13 @@ def block_diagonal(xp, block):
         return out
     return xp.zeros((n, 3, n, 3), dtype=block.dtype).at[idx, :, idx, :].set(block)
 
+
+def inverse_length(xp, length):
+    """``1 / length``, and 0 where ``length`` is zero (no direction: the laws then see no lever)."""
+    positive = length > 0
+    return xp.where(positive, 1 / xp.where(positive, length, 1), 0)
+
+
 def safe_unit(xp, x, length):
     """``x / length`` row-wise, and the zero vector where ``length`` is zero.
 

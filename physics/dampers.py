@@ -7,9 +7,11 @@ from typing import ClassVar
 
 import numpy as np
 
-from ._array import dot, norm, rows, safe_unit, scatter_pair_blocks, scatter_pairs
+from . import attachments
+from ._array import dot, inverse_length, norm, rows, safe_unit, scatter_pair_blocks, scatter_pairs
 from .force import Force
 from .jacobian_blocks import PairJacobian
+from .pair_laws import damper_position_block, damper_tension, damper_velocity_block
 from .scene_toml import REQUIRED
 
 
@@ -26,38 +28,48 @@ class Dampers(Force):
     i, j : int ndarray, shape (P,)
     damping : ndarray, shape (P,)
         c, N s/m.
+    attachment : physics.attachments.Attachment, optional
+        Body-frame points of rotating bodies where the ends act (None: the centres); ``d`` and
+        the relative velocity are then those of the points.
     """
 
     i: np.ndarray
     j: np.ndarray
     damping: np.ndarray
+    attachment: attachments.Attachment | None = None
 
     name: ClassVar[str] = "dampers"
     array_of_tables: ClassVar[bool] = True
 
     @classmethod
     def from_scene(cls, tables, bodies) -> Dampers:
-        """``[[forces.dampers]]``: ``bodies = ["a", "b"]`` and ``damping`` (N s/m)."""
-        i, j, c = [], [], []
+        """``[[forces.dampers]]``: ``bodies = ["a", "b"]``, ``damping`` (N s/m) and ``offsets``
+        (body-frame points of the two ends, m, on rotating bodies: :mod:`.attachments`)."""
         for d in tables:
-            d.allow("bodies", "damping")
-            a, b = bodies.pair(d)
-            i.append(a)
-            j.append(b)
-            c.append(d.number("damping", REQUIRED, nonnegative=True))
-        return cls(np.array(i), np.array(j), np.array(c))
+            d.allow("bodies", "damping", "offsets")
+        pairs = [bodies.pair(d) for d in tables]
+        offsets = attachments.read_offsets(tables, bodies, pairs)
+        c = [d.number("damping", REQUIRED, nonnegative=True) for d in tables]
+        i, j = np.array([a for a, _ in pairs]), np.array([b for _, b in pairs])
+        return cls(i, j, np.array(c), attachments.initial_attachment(offsets, i, j, bodies))
 
     def _terms(self, xp, q, v):
         delta = rows(xp, q, self.j) - rows(xp, q, self.i)
+        u = rows(xp, v, self.j) - rows(xp, v, self.i)
+        if self.attachment is not None:  # between the points, which move with v + omega x R r
+            delta = delta + (self.attachment.arms[:, 1] - self.attachment.arms[:, 0])
+            u = u + (self.attachment.velocities[:, 1] - self.attachment.velocities[:, 0])
         length = norm(xp, delta)
         d = safe_unit(xp, delta, length)
-        u = rows(xp, v, self.j) - rows(xp, v, self.i)
         return d, length, u
 
-    def force(self, xp, q, v, m):
+    def pair_force(self, xp, q, v):
+        """The force on each damper's first end, (P, 3), N (the second gets minus it)."""
         d, _, u = self._terms(xp, q, v)
-        f = (self.damping * dot(xp, u, d))[:, None] * d
-        return scatter_pairs(xp, q.shape[0], self.i, self.j, f)
+        return damper_tension(self.damping, dot(xp, u, d))[:, None] * d
+
+    def force(self, xp, q, v, m):
+        return scatter_pairs(xp, q.shape[0], self.i, self.j, self.pair_force(xp, q, v))
 
     def jacobian(self, xp, q, v, m):
         blocks, n = self.jacobian_blocks(xp, q, v, m), q.shape[0]
@@ -67,20 +79,17 @@ class Dampers(Force):
     def jacobian_blocks(self, xp, q, v, m, definite=False):
         """One block per damper: d f_i / d v_j = c d d^T and d f_i / d q_j = c [(d . u) P + d u^T P] / l.
 
-        ``u`` is the relative velocity, P = I - d d^T. With ``definite``, the position block
-        (not symmetric, and indefinite) is left out, as Baraff and Witkin do with their
-        damping forces (1998, section 5).
+        ``u`` is the relative velocity, P = I - d d^T (the laws: :mod:`.pair_laws`). With
+        ``definite``, the position block (not symmetric, and indefinite) is left out, as Baraff
+        and Witkin do with their damping forces (1998, section 5).
         """
         d, length, u = self._terms(xp, q, v)
-        c = self.damping[:, None, None]
         ddT = d[:, :, None] * d[:, None, :]
-        dv_block = c * ddT
+        dv_block = damper_velocity_block(self.damping, 1.0)[:, None, None] * ddT
         if definite:
             return PairJacobian(self.i, self.j, None, dv_block)
-        # d/d delta of (d . u) d, with d d / d delta = P / l and P = I - d d^T:
-        # [ (d . u) P + d u^T P ] / l
+        e, b = damper_position_block(self.damping, inverse_length(xp, length), dot(xp, u, d), 1.0)
         proj = xp.eye(3, dtype=q.dtype) - ddT
-        du = xp.sum(d * u, axis=1)[:, None, None]
-        inv_l = xp.where(length > 0, 1 / xp.where(length > 0, length, 1), 0)[:, None, None]
-        dq_block = c * inv_l * (du * proj + d[:, :, None] * (u[:, None, :] @ proj))
+        w = (u[:, None, :] @ proj)[:, 0]  # P u, the relative velocity across the pair
+        dq_block = b[:, None, None] * proj + e[:, None, None] * (d[:, :, None] * w[:, None, :])
         return PairJacobian(self.i, self.j, dq_block, dv_block)

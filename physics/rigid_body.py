@@ -75,22 +75,37 @@ def principal_inertia(shape: str, mass: float, radius: float, size=None, length:
         return np.array([across, across, 0.5 * m_c * r2 + 0.4 * m_s * r2])
 
 
+def _first_bad(values, bad) -> str:
+    """The first offending row of ``values`` for a one-line message: ``[I1, I2, I3]``, and for many
+    bodies which one and how many (a scene of 10^5 bodies must not print them all)."""
+    values, bad = np.asarray(values), np.asarray(bad)
+    if values.ndim <= 1:
+        return str(values.tolist())
+    rows = np.flatnonzero(bad.reshape(-1))
+    first = values.reshape(-1, values.shape[-1])[rows[0]].tolist()
+    return f"{first} (row {rows[0]}, the first of {rows.size} such among {bad.size} bodies)"
+
+
 def check_inertia(inertia) -> np.ndarray:
     """``inertia`` as float64 (..., 3) principal moments, or one line saying why it is no body's.
 
     The moments must be finite and positive and obey the triangle inequality (each at most
     the sum of the other two: I3 = sum m (x^2 + y^2) <= I1 + I2 = sum m (x^2 + y^2 + 2 z^2)).
+    For many bodies the line names the first offending one and how many there are.
     """
     inertia = np.asarray(inertia, dtype=float)
     if inertia.shape[-1:] != (3,):
         raise InertiaError(f"inertia must be three principal moments [I1, I2, I3] kg m^2, got shape {inertia.shape}")
-    if not np.all(np.isfinite(inertia)):
-        raise InertiaError(f"inertia must be finite, got {inertia.tolist()}")
-    if not np.all(inertia > 0):
-        raise InertiaError(f"inertia must be > 0 kg m^2 in every moment, got {inertia.tolist()}")
+    finite = np.all(np.isfinite(inertia), axis=-1)
+    if not np.all(finite):
+        raise InertiaError(f"inertia must be finite, got {_first_bad(inertia, ~finite)}")
+    positive = np.all(inertia > 0, axis=-1)
+    if not np.all(positive):
+        raise InertiaError(f"inertia must be > 0 kg m^2 in every moment, got {_first_bad(inertia, ~positive)}")
     ordered = np.sort(inertia, axis=-1)
-    if np.any(ordered[..., 0] + ordered[..., 1] < ordered[..., 2] * (1 - TRIANGLE_SLACK)):
-        raise InertiaError(f"inertia {inertia.tolist()} breaks the triangle inequality (the two smaller "
+    broken = ordered[..., 0] + ordered[..., 1] < ordered[..., 2] * (1 - TRIANGLE_SLACK)
+    if np.any(broken):
+        raise InertiaError(f"inertia {_first_bad(inertia, broken)} breaks the triangle inequality (the two smaller "
                            "moments must sum to at least the largest): no body has these moments")
     return inertia
 
@@ -98,12 +113,15 @@ def check_inertia(inertia) -> np.ndarray:
 def check_orientation(orientation) -> np.ndarray:
     """``orientation`` [w, x, y, z] normalised, or one line: a zero or non-finite quaternion."""
     q = np.asarray(orientation, dtype=float)
-    if q.shape[-1:] != (4,) or not np.all(np.isfinite(q)):
-        raise InertiaError("orientation must be a finite quaternion [w, x, y, z], "
-                           f"got {np.asarray(orientation).tolist()}")
+    if q.shape[-1:] != (4,):
+        raise InertiaError(f"orientation must be a finite quaternion [w, x, y, z], got shape {q.shape}")
+    finite = np.all(np.isfinite(q), axis=-1)
+    if not np.all(finite):
+        raise InertiaError(f"orientation must be a finite quaternion [w, x, y, z], got {_first_bad(q, ~finite)}")
     scale = np.max(np.abs(q), axis=-1, keepdims=True)  # scaled first: no overflow or underflow
     if not np.all(scale > 0):
-        raise InertiaError("orientation must be a non-zero quaternion [w, x, y, z], got [0, 0, 0, 0]")
+        raise InertiaError("orientation must be a non-zero quaternion [w, x, y, z], got "
+                           f"{_first_bad(q, scale[..., 0] == 0)}")
     q = q / scale
     return q / np.linalg.norm(q, axis=-1, keepdims=True)
 

@@ -107,6 +107,12 @@ class SceneBodies:
     positions : ndarray, shape (N, 3)
         Initial positions, m.
     pinned : bool ndarray, shape (N,)
+    rotating : bool ndarray, shape (N,), optional
+        The bodies that rotate (:mod:`.rigid_body`; None: none of them).
+    orientations : ndarray, shape (N, 4), optional
+        Initial orientations [w, x, y, z], the identity for a point mass.
+    angular_velocities : ndarray, shape (N, 3), optional
+        Initial angular velocities, world frame, rad/s (zero for a point mass).
     """
 
     names: tuple[str, ...]
@@ -116,6 +122,9 @@ class SceneBodies:
     pinned: np.ndarray
     #: body name -> index (a list lookup would be O(n^2) in total)
     index: dict[str, int] = dataclasses.field(repr=False, default_factory=dict)
+    rotating: np.ndarray | None = None
+    orientations: np.ndarray | None = None
+    angular_velocities: np.ndarray | None = None
 
     @property
     def n(self) -> int:
@@ -334,8 +343,14 @@ class _SceneBuilder:
 
     def bodies(self) -> SceneBodies:
         """The bodies declared so far, for the forces' tables."""
+        n = len(self.names)
+        rotating, orientations, angular_velocities = np.zeros(n, bool), np.zeros((n, 4)), np.zeros((n, 3))
+        orientations[:, 0] = 1.0  # a point mass keeps the identity
+        for k, _, _, orientation, angular_velocity in self.rotating:
+            rotating[k], orientations[k], angular_velocities[k] = True, orientation, angular_velocity
         return SceneBodies(tuple(self.names), np.array(self.masses), np.array(self.radii),
-                           np.array(self.positions).reshape(-1, 3), np.array(self.pinned), self.index)
+                           np.array(self.positions).reshape(-1, 3), np.array(self.pinned), self.index,
+                           rotating, orientations, angular_velocities)
 
     def add_forces(self, forces: Table):
         """The [forces] table: each key is a registered force, which reads its own table.

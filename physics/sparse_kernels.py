@@ -9,8 +9,8 @@ a dozen (P, 3, 3) temporaries per force for the blocks (:meth:`Springs.jacobian_
 25 ms); here one loop over the pairs computes each pair's separation, length and
 direction once and from them its force and its 3x3 block, added where they go
 (2.5 ms for both; 0.9 ms for the forces alone, without the blocks' 27 scattered
-additions per pair). The kernel repeats the forces' formulas, written out once more
-for the compiler; ``tests/test_implicit_sparse.py`` holds it equal to the NumPy forces
+additions per pair). The kernel evaluates the laws the NumPy forces evaluate, compiled
+(:mod:`.pair_laws`); ``tests/test_implicit_sparse.py`` holds it equal to the NumPy forces
 and blocks.
 
 Springs and dampers on the same pairs (a cloth's, from :func:`.soft_body.connect`) are
@@ -29,8 +29,16 @@ from typing import NamedTuple
 import numpy as np
 from numba import njit
 
+from . import pair_laws
 from .dampers import Dampers
 from .springs import Springs
+
+_spring_tension = pair_laws.compiled(pair_laws.spring_tension)
+_spring_transverse = pair_laws.compiled(pair_laws.spring_transverse)
+_spring_block = pair_laws.compiled(pair_laws.spring_block)
+_damper_tension = pair_laws.compiled(pair_laws.damper_tension)
+_damper_velocity_block = pair_laws.compiled(pair_laws.damper_velocity_block)
+_damper_position_block = pair_laws.compiled(pair_laws.damper_position_block)
 
 
 class PairColumns(NamedTuple):
@@ -77,8 +85,8 @@ def _add(data, slots, p, s):  # pragma: no cover - compiled
 
 @njit(cache=True)
 def _pair_system(pairs, q, v, terms, force, data, slots):  # pragma: no cover - compiled
-    # Springs where stiffness is given (size > 0), dampers where damping is. With d the
-    # unit vector from i to j, l the length, u = v_j - v_i:
+    # Springs where stiffness is given (size > 0), dampers where damping is (the laws: pair_laws).
+    # With d the unit vector from i to j, l the length, u = v_j - v_i:
     #   force on i (-it on j): [k (l - L) + c (d . u)] d
     #   spring block d f_i / d q_j = k [d d^T + t (I - d d^T)], t = 1 - L / l (definite: t >= 0)
     #   damper blocks: d f_i / d v_j = c d d^T, and the symmetric part of d f_i / d q_j,
@@ -99,22 +107,22 @@ def _pair_system(pairs, q, v, terms, force, data, slots):  # pragma: no cover - 
         s = a = b = e = 0.0
         w0 = w1 = w2 = 0.0
         if springs:
-            s += stiffness[p] * (length - rest_length[p])
-            t = 1.0 - rest_length[p] * inverse_length
+            s += _spring_tension(stiffness[p], length, rest_length[p])
+            t = _spring_transverse(rest_length[p], inverse_length)
             if definite and t < 0:
                 t = 0.0
-            k = coefficient_q * stiffness[p]
-            a += k * (1.0 - t)
-            b += k * t
+            axial, across = _spring_block(stiffness[p], t, coefficient_q)
+            a += axial
+            b += across
         if dampers:
             u0, u1, u2 = v[bj, 0] - v[bi, 0], v[bj, 1] - v[bi, 1], v[bj, 2] - v[bi, 2]
             du = d0 * u0 + d1 * u1 + d2 * u2
-            s += damping[p] * du
-            a += coefficient_v * damping[p]
+            s += _damper_tension(damping[p], du)
+            a += _damper_velocity_block(damping[p], coefficient_v)
             if not definite:
-                e = coefficient_q * damping[p] * inverse_length
-                a -= e * du
-                b += e * du
+                e, along = _damper_position_block(damping[p], inverse_length, du, coefficient_q)
+                a -= along
+                b += along
                 w0, w1, w2 = u0 - du * d0, u1 - du * d1, u2 - du * d2
         if with_force:
             force[bi, 0] += s * d0
@@ -168,8 +176,11 @@ class PairGroup:
 
 
 def has_kernel(force) -> bool:
-    """Whether ``force`` (exactly a Springs or a Dampers, not a subclass) has a compiled kernel here."""
-    return type(force) in (Springs, Dampers)
+    """Whether ``force`` (exactly a Springs or a Dampers, not a subclass, between centres) has a compiled kernel here.
+
+    Forces attached at body-frame points (:mod:`.attachments`) go through their NumPy blocks.
+    """
+    return type(force) in (Springs, Dampers) and force.attachment is None
 
 
 #: each model's groups, found on first use: {model: tuple of PairGroup}
@@ -182,8 +193,8 @@ def pair_groups(model) -> tuple[PairGroup, ...]:
     Only forces with a kernel (:func:`has_kernel`); a force without a partner is a group alone.
     """
     if model not in _GROUPS:
-        springs = [f for f in model.forces if type(f) is Springs]
-        dampers = [f for f in model.forces if type(f) is Dampers]
+        springs = [f for f in model.forces if type(f) is Springs and has_kernel(f)]
+        dampers = [f for f in model.forces if type(f) is Dampers and has_kernel(f)]
         groups = []
         for s in springs:
             partner = next((d for d in dampers if np.array_equal(d.i, s.i) and np.array_equal(d.j, s.j)), None)

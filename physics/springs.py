@@ -7,9 +7,11 @@ from typing import ClassVar
 
 import numpy as np
 
-from ._array import norm, rows, safe_unit, scatter_pair_blocks, scatter_pairs
+from . import attachments
+from ._array import inverse_length, norm, rows, safe_unit, scatter_pair_blocks, scatter_pairs
 from .force import Force
 from .jacobian_blocks import PairJacobian
+from .pair_laws import spring_block, spring_potential, spring_tension, spring_transverse
 from .scene_toml import REQUIRED
 
 
@@ -32,40 +34,49 @@ class Springs(Force):
         k, N/m.
     rest_length : ndarray, shape (P,)
         l_rest, m.
+    attachment : physics.attachments.Attachment, optional
+        Body-frame points of rotating bodies where the ends act (None: the centres); ``d`` and
+        ``l`` are then those of the points.
     """
 
     i: np.ndarray
     j: np.ndarray
     stiffness: np.ndarray
     rest_length: np.ndarray
+    attachment: attachments.Attachment | None = None
 
     name: ClassVar[str] = "springs"
     array_of_tables: ClassVar[bool] = True
 
     @classmethod
     def from_scene(cls, tables, bodies) -> Springs:
-        """``[[forces.springs]]``: ``bodies = ["a", "b"]``, ``stiffness`` (N/m) and ``rest_length``
-        (m; default: the initial distance, so the spring starts relaxed)."""
-        i, j, k, rest = [], [], [], []
+        """``[[forces.springs]]``: ``bodies = ["a", "b"]``, ``stiffness`` (N/m), ``rest_length``
+        (m; default: the initial distance, so the spring starts relaxed) and ``offsets``
+        (body-frame points of the two ends, m, on rotating bodies: :mod:`.attachments`)."""
         for s in tables:
-            s.allow("bodies", "stiffness", "rest_length")
-            a, b = bodies.pair(s)
-            i.append(a)
-            j.append(b)
-            k.append(s.number("stiffness", REQUIRED, positive=True))
-            initial = float(np.linalg.norm(bodies.positions[b] - bodies.positions[a]))
-            rest.append(s.number("rest_length", initial, nonnegative=True))
-        return cls(np.array(i), np.array(j), np.array(k), np.array(rest))
+            s.allow("bodies", "stiffness", "rest_length", "offsets")
+        pairs = [bodies.pair(s) for s in tables]
+        offsets = attachments.read_offsets(tables, bodies, pairs)
+        k = [s.number("stiffness", REQUIRED, positive=True) for s in tables]
+        rest = [s.number("rest_length", attachments.point_distance(offsets, n, pair, bodies), nonnegative=True)
+                for n, (s, pair) in enumerate(zip(tables, pairs))]
+        i, j = np.array([a for a, _ in pairs]), np.array([b for _, b in pairs])
+        return cls(i, j, np.array(k), np.array(rest), attachments.initial_attachment(offsets, i, j, bodies))
 
     def _geometry(self, xp, q):
         delta = rows(xp, q, self.j) - rows(xp, q, self.i)
+        if self.attachment is not None:  # between the points: x_j + R_j r_j - (x_i + R_i r_i)
+            delta = delta + (self.attachment.arms[:, 1] - self.attachment.arms[:, 0])
         length = norm(xp, delta)
         return safe_unit(xp, delta, length), length
 
-    def force(self, xp, q, v, m):
+    def pair_force(self, xp, q, v):
+        """The force on each spring's first end, (P, 3), N (the second gets minus it)."""
         d, length = self._geometry(xp, q)
-        f = (self.stiffness * (length - self.rest_length))[:, None] * d
-        return scatter_pairs(xp, q.shape[0], self.i, self.j, f)
+        return spring_tension(self.stiffness, length, self.rest_length)[:, None] * d
+
+    def force(self, xp, q, v, m):
+        return scatter_pairs(xp, q.shape[0], self.i, self.j, self.pair_force(xp, q, v))
 
     def jacobian(self, xp, q, v, m):
         return scatter_pair_blocks(xp, q.shape[0], self.i, self.j, self.jacobian_blocks(xp, q, v, m).dq), None
@@ -75,19 +86,18 @@ class Springs(Force):
 
         With ``definite``, a compressed spring's transverse term, negative where
         l < L (a compressed spring buckles sideways), is left out, so that every block is
-        positive semidefinite (Choi and Ko, "Stable but responsive cloth", 2002).
+        positive semidefinite (Choi and Ko, "Stable but responsive cloth", 2002). The laws:
+        :mod:`.pair_laws`.
         """
-        # f_i = k (l - L) d with d = delta / l, delta = q_j - q_i: the axial term k d d^T and
-        # the geometric stiffness k (1 - L / l) (I - d d^T)
         d, length = self._geometry(xp, q)
-        transverse = 1 - xp.where(length > 0, self.rest_length / xp.where(length > 0, length, 1), 0)
+        transverse = spring_transverse(self.rest_length, inverse_length(xp, length))
         if definite:
             transverse = xp.maximum(transverse, 0)
+        axial, across = spring_block(self.stiffness, transverse, 1.0)
         ddT = d[:, :, None] * d[:, None, :]
-        eye = xp.eye(3, dtype=q.dtype)
-        block = self.stiffness[:, None, None] * (ddT + transverse[:, None, None] * (eye - ddT))
+        block = axial[:, None, None] * ddT + across[:, None, None] * xp.eye(3, dtype=q.dtype)
         return PairJacobian(self.i, self.j, block, None)
 
     def potential(self, xp, q, m):
         _, length = self._geometry(xp, q)
-        return 0.5 * xp.sum(self.stiffness * (length - self.rest_length) ** 2)
+        return xp.sum(spring_potential(self.stiffness, length, self.rest_length))

@@ -1,12 +1,14 @@
-"""Each formula of the collision pipeline is defined once, and every path calls that definition.
+"""Each formula of the collisions and of the pair forces is defined once, and every path calls that definition.
 
 The sphere's contacts and times of impact (:mod:`steplab.physics.collision.sphere_contacts`),
-the rest speed (:func:`steplab.physics.collision.resting.rest_speed`) and the impulse
+the rest speed (:func:`steplab.physics.collision.resting.rest_speed`), the approach speed
+(:mod:`steplab.physics.collision.approach`) and the impulse
 (:mod:`steplab.physics.collision.compiled_response`) are compiled kernels; the NumPy
 narrow phase, the contact solver's buffer, the event loop's re-test and its response all
-call them. These tests fail when a path gets its own copy again: by the names each module
-calls, by the numbers (against the lecture's formulas, written out here), and, for the
-solver's reached position, by who computes it.
+call them. The spring and damper laws (:mod:`steplab.physics.pair_laws`) are evaluated by the
+NumPy/JAX forces and compiled into the sparse Newton kernel. These tests fail when a path gets
+its own copy again: by the names each module calls, by the numbers (against the lecture's
+formulas, written out here), and, for the solver's reached position, by who computes it.
 """
 
 from __future__ import annotations
@@ -21,15 +23,15 @@ import re
 import numpy as np
 import pytest
 from steplab.integrators.semi_implicit_euler import SemiImplicitEuler
-from steplab.physics import Gravity, Model
+from steplab.physics import Dampers, Gravity, Model, Springs, dampers, pair_laws, sparse_kernels, springs
 from steplab.physics.collision import CollisionWorld, Plane
 from steplab.physics.collision.shapes import Sphere
 
 # the modules by their full names: the package re-exports some functions under the same names
-(chords, compiled_response, contact_buffer, narrow_phase, resting, response, retest, solver_step, sphere_contacts, step,
- time_of_impact) = (importlib.import_module(f"steplab.physics.collision.{name}") for name in (
-    "chords", "compiled_response", "contact_buffer", "narrow_phase", "resting", "response", "retest", "solver_step",
-    "sphere_contacts", "step", "time_of_impact"))
+(approach, chords, compiled_response, contact_buffer, narrow_phase, resting, response, retest, solver_step,
+ sphere_contacts, step, time_of_impact) = (importlib.import_module(f"steplab.physics.collision.{name}") for name in (
+    "approach", "chords", "compiled_response", "contact_buffer", "narrow_phase", "resting", "response", "retest",
+    "solver_step", "sphere_contacts", "step", "time_of_impact"))
 
 #: (module, the definitions it must call and may not write again)
 CALLERS = [
@@ -37,7 +39,8 @@ CALLERS = [
     (contact_buffer, ["sphere_sphere", "sphere_plane", "plane_height"]),
     (retest, ["sphere_sphere", "sphere_plane", "plane_height", "sphere_sphere_entry", "sphere_plane_entry_of",
               "rest_speed", "state_at"]),
-    (compiled_response, ["sphere_sphere", "sphere_plane"]),
+    (compiled_response, ["sphere_sphere", "sphere_plane", "approach_speed"]),
+    (contact_buffer, ["approach_speed"]),
     (time_of_impact, ["first_entry_rows", "sphere_plane_entry_rows", "sphere_sphere_entry_rows"]),
     (response, ["impulse_rows", "resolve_rows"]),
     (step, ["rest_speed"]),
@@ -51,7 +54,8 @@ DEFINITIONS = {
         "sphere_sphere", "sphere_plane", "plane_height", "first_entry_rows", "sphere_sphere_entry",
         "sphere_plane_entry_rows", "sphere_plane_entry_of", "sphere_sphere_rows", "sphere_plane_rows",
         "sphere_sphere_entry_rows")},
-    "rest_speed": resting, "impulse_rows": compiled_response, "resolve_rows": compiled_response, "state_at": chords}
+    "rest_speed": resting, "impulse_rows": compiled_response, "resolve_rows": compiled_response, "state_at": chords,
+    "approach_speed": approach}
 
 
 @pytest.mark.parametrize("module, names", CALLERS, ids=[m.__name__.rsplit(".", 1)[1] for m, _ in CALLERS])
@@ -155,3 +159,65 @@ def test_the_solvers_reached_position_is_its_integrators_step():
     for k in range(3):
         y, _ = stepper(0.01 * k, y, 0.01, None)
     assert _CountingEuler.calls == [0.0, 0.01, 0.02]  # once per step, from its start
+
+
+#: each law's pattern, as its copies wrote it (these patterns find every copy the code had at 1a4c08d:
+#: springs.py, dampers.py and sparse_kernels.py); the laws' module is the only one to write them
+LAW_PATTERNS = {"spring_tension": r"\(length - [\w.]*rest_length", "spring_transverse": r"1(\.0)? - [^#\n]*rest_length",
+                "damper_tension": r"damping[\w.\[\]]* \* (dot\(|du\b|approach\b)"}
+
+
+def test_no_module_but_the_pair_laws_writes_a_spring_or_damper_law():
+    folder = pathlib.Path(pair_laws.__file__).parent
+    for path in sorted(folder.rglob("*.py")):
+        text = path.read_text()
+        found = [name for name, pattern in LAW_PATTERNS.items() if re.search(pattern, text)]
+        if path.name == "pair_laws.py":
+            assert len(found) == len(LAW_PATTERNS)  # the patterns do find the definitions
+        else:
+            assert not found, f"{path.relative_to(folder)} writes {found} again"
+
+
+@pytest.mark.parametrize("module, names", [
+    (springs, ["spring_tension", "spring_potential", "spring_transverse", "spring_block"]),
+    (dampers, ["damper_tension", "damper_velocity_block", "damper_position_block"]),
+    (sparse_kernels, ["spring_tension", "spring_transverse", "spring_block", "damper_tension",
+                      "damper_velocity_block", "damper_position_block"]),
+], ids=["springs", "dampers", "sparse_kernels"])
+def test_the_forces_and_the_kernel_evaluate_the_pair_laws(module, names):
+    used = {node.attr if isinstance(node, ast.Attribute) else node.id
+            for node in ast.walk(ast.parse(inspect.getsource(module))) if isinstance(node, ast.Name | ast.Attribute)}
+    for name in names:
+        assert name in used, f"{module.__name__} no longer evaluates pair_laws.{name}"
+        if hasattr(module, name):
+            assert getattr(module, name) is getattr(pair_laws, name), f"{module.__name__}.{name} is a copy"
+
+
+def test_the_kernel_and_the_numpy_forces_are_hookes_and_the_dashpots_law(rng):
+    # written out here as the lecture does: F = [k (l - L) + c (d . u)] d on the first body
+    n, p = 12, 30
+    i, j = rng.integers(0, n, p), rng.integers(0, n, p)
+    i, j = i[i != j], j[i != j]
+    k, rest, c = rng.uniform(1, 100, i.size), rng.uniform(0.1, 2, i.size), rng.uniform(0, 3, i.size)
+    q, v = rng.normal(size=(n, 3)), rng.normal(size=(n, 3))
+    delta = q[j] - q[i]
+    length = np.linalg.norm(delta, axis=1)
+    d = delta / length[:, None]
+    f = (k * (length - rest) + c * np.sum((v[j] - v[i]) * d, axis=1))[:, None] * d
+    expected = np.zeros((n, 3))
+    np.add.at(expected, i, f)
+    np.add.at(expected, j, -f)
+    springs_and_dampers = [Springs(i, j, k, rest), Dampers(i, j, c)]
+    numpy_force = sum(force.force(np, q, v, np.ones(n)) for force in springs_and_dampers)
+    kernel_force = np.zeros((n, 3))
+    sparse_kernels.PairGroup(*springs_and_dampers).add_forces(kernel_force, q, v)
+    np.testing.assert_allclose(numpy_force, expected, rtol=1e-12, atol=1e-12)
+    np.testing.assert_allclose(kernel_force, expected, rtol=1e-12, atol=1e-12)
+
+
+def test_the_approach_speed_is_the_relative_velocity_along_the_normal(rng):
+    for _ in range(10):
+        v_a, v_b, n = rng.normal(size=3), rng.normal(size=3), rng.normal(size=3)
+        speed = approach.approach_speed(tuple(v_a), tuple(v_b), tuple(n))
+        assert speed == (v_a[0] - v_b[0]) * n[0] + (v_a[1] - v_b[1]) * n[1] + (v_a[2] - v_b[2]) * n[2]
+        assert np.isclose(speed, (v_a - v_b) @ n, rtol=1e-14, atol=1e-15)

@@ -13,6 +13,7 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
+from .approach import AT_REST, approach_speed
 from .sphere_contacts import dot3, row3, row3_of, sphere_plane, sphere_sphere, sub3
 
 
@@ -92,7 +93,7 @@ def impact_terms(y, i, j, radii, accelerations, planes):
     Body ``i`` against body ``j`` (:func:`.sphere_contacts.sphere_sphere`) or, for ``j < 0``,
     the plane ``-1 - j`` of ``planes`` (a :class:`.retest.Planes`, as a tuple;
     :func:`.sphere_contacts.sphere_plane`), in state ``y`` (2, N, 3); the approach speed and
-    the pressing acceleration are :func:`.response.normal_speed` of the velocities and of the
+    the pressing acceleration are :func:`.approach.approach_speed` of the velocities and of the
     ``accelerations`` along the normal. Returns ``(normal (3,), depth, speed, pressing)``.
     """
     normal = np.empty(3)
@@ -102,10 +103,10 @@ def impact_terms(y, i, j, radii, accelerations, planes):
         n, depth = sphere_sphere(sub3(q_b, q_a), radii[i] + radii[j])
     else:
         plane = -1 - j
-        v_b = a_b = (0.0, 0.0, 0.0)
+        v_b = a_b = AT_REST
         normals, offsets, _ = planes
         n, depth, _ = sphere_plane(q_a, radii[i], row3(normals, plane), offsets[plane])
     normal[0], normal[1], normal[2] = n
-    speed = dot3(sub3(v_a, v_b), n)
-    pressing = dot3(sub3(a_a, a_b), n)
+    speed = approach_speed(v_a, v_b, n)
+    pressing = approach_speed(a_a, a_b, n)
     return normal, depth, speed, pressing

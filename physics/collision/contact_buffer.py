@@ -24,6 +24,7 @@ from typing import NamedTuple
 import numpy as np
 from numba import njit
 
+from .approach import AT_REST, approach_speed
 from .pairs import SweptSpheres, near_shapes
 from .shapes import DEFAULT_MATERIAL
 from .sphere_contacts import plane_height, row3, sphere_plane, sphere_sphere, sub3
@@ -187,8 +188,8 @@ def _pair_and_plane_contacts(pi, pj, bodies, swept, planes, materials, stride):
             ci[row], cj[row], shape[row], key[row] = b, c, -1, b * stride + c
             normal[row, 0], normal[row, 1], normal[row, 2] = n0, n1, n2
             separation[row] = -depth
-            normal_speed[row] = (v[c, 0] - v[b, 0]) * n0 + (v[c, 1] - v[b, 1]) * n1 + (v[c, 2] - v[b, 2]) * n2
-            pressing[row] = (a[b, 0] - a[c, 0]) * n0 + (a[b, 1] - a[c, 1]) * n1 + (a[b, 2] - a[c, 2]) * n2
+            normal_speed[row] = approach_speed(row3(v, c), row3(v, b), (n0, n1, n2))  # (v_j - v_i) . n
+            pressing[row] = approach_speed(row3(a, b), row3(a, c), (n0, n1, n2))
             mass[row] = 1.0 / (inverse_masses[b] + inverse_masses[c])
             e[row] = restitution[material[b], material[c]]
             mu[row] = friction[material[b], material[c]]
@@ -201,8 +202,9 @@ def _pair_and_plane_contacts(pi, pj, bodies, swept, planes, materials, stride):
             ci[row], cj[row], shape[row], key[row] = b, -1, plane[k], b * stride + n + plane[k]
             normal[row, 0], normal[row, 1], normal[row, 2] = n0, n1, n2
             separation[row] = -depth
-            normal_speed[row] = -(v[b, 0] * n0 + v[b, 1] * n1 + v[b, 2] * n2)
-            pressing[row] = a[b, 0] * n0 + a[b, 1] * n1 + a[b, 2] * n2
+            # (0 - v_i) . n written as -((v_i - 0) . n): the same bits as before, -0.0 at rest included
+            normal_speed[row] = -approach_speed(row3(v, b), AT_REST, (n0, n1, n2))
+            pressing[row] = approach_speed(row3(a, b), AT_REST, (n0, n1, n2))
             mass[row] = 1.0 / inverse_masses[b]
             e[row] = restitution[material[b], materials.shape[plane[k]]]
             mu[row] = friction[material[b], materials.shape[plane[k]]]

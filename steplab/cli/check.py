@@ -53,8 +53,8 @@ def command(args) -> int:
 
         r = report["rotation"]
         grid = f"omega dt from {OMEGA_DT_GRID[0]:g} to {OMEGA_DT_GRID[-1]:g}"
-        limit = {None: f"no limit ({grid})", 0: f"none (grows at every {grid})"}.get(
-            r["dt_max"], f"dt_max = {r['dt_max']:.4g} s")
+        limit = (f"no limit ({grid})" if r["dt_max"] is None else f"none (grows at every {grid})"
+                 if r["dt_max"] == 0 else f"dt_max = {r['dt_max']:.4g} s")
         print(f"{scene.name}: rotation {r['method']}, measured along each spinning body's own spin (stable: energy "
               f"within +{100 * ENERGY_GROWTH:g} % over {STEPS} steps): {limit}; at dt = {dt:g} s "
               f"{'stable' if r['stable'] else 'UNSTABLE'}")

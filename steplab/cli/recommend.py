@@ -42,6 +42,11 @@ def command(args) -> int:
 
     scene = load_scene(args.scene)
     rotation = rotation_named(scene, args)
+    from steplab.physics.attachments import attached_forces
+
+    if attached_forces(scene.model):  # its references and candidates step the translation alone
+        raise ValueError(f"scene {scene.name}: springs or dampers at body-frame points (offsets) couple the "
+                         "rotation with the translation, which recommend does not measure yet; use steplab run")
     _, t_end = time_span(scene, args)
     integrators = None
     if args.integrators is not None:
@@ -52,12 +57,9 @@ def command(args) -> int:
             raise ValueError("--integrators: give at least one fixed-step integrator")
     world = collision_world(scene, args.detector, "numpy")
     if world is not None:
-        return _with_collisions(args, scene, t_end, world, integrators)
-    result = recommend(problem_of(scene, t_end), args.tol, dt_max=args.dt_max, integrators=integrators)
-    if scene.rigid_bodies is not None and result["dt"] is not None:  # the tolerance is on the translation only
-        from .check import rotation_limit
-
-        result["rotation"] = rotation_limit(rotation, scene.rigid_bodies, result["dt"])
+        return _with_collisions(args, scene, t_end, world, integrators, rotation)
+    result = _with_rotation(recommend(problem_of(scene, t_end), args.tol, dt_max=args.dt_max,
+                                      integrators=integrators), scene, rotation)
     if args.json:
         print(json.dumps(result, indent=2))
         return 0
@@ -68,15 +70,29 @@ def command(args) -> int:
         print(f"{scene.name}: {result['integrator']} with dt = {result['dt']:.6g} s ({result['steps']} steps) "
               f"reaches error {result['error']:.3g} m <= {args.tol:g} m in {result['seconds'] * 1e3:.3g} ms "
               "(compiled, median)")
+    _print_rotation(result)
+    return 0
+
+
+def _with_rotation(result: dict, scene, rotation) -> dict:
+    """``result`` with, for a scene with rotating bodies, whether ``rotation`` is stable at its dt
+    (the tolerance is on the translation only; the rotation method's limit is its own)."""
+    if scene.rigid_bodies is not None and result.get("dt") is not None:
+        from .check import rotation_limit
+
+        result["rotation"] = rotation_limit(rotation, scene.rigid_bodies, result["dt"])
+    return result
+
+
+def _print_rotation(result: dict) -> None:
     if "rotation" in result:
         r = result["rotation"]
         print(f"  rotation {r['method']}: {'stable' if r['stable'] else 'UNSTABLE'} at this dt (its dt_max: "
               f"{'no limit' if r['dt_max'] is None else format(r['dt_max'], '.4g') + ' s'}); the tolerance "
               "bounds the translation only")
-    return 0
 
 
-def _with_collisions(args, scene, t_end, world, integrators) -> int:
+def _with_collisions(args, scene, t_end, world, integrators, rotation) -> int:
     """``recommend`` measured with the scene's collisions; status 1 with the evidence when nothing passes."""
     from steplab.studies.recommend_collisions import NoCollisionStepError, recommend_with_collisions
 
@@ -91,6 +107,7 @@ def _with_collisions(args, scene, t_end, world, integrators) -> int:
             raise
         print(json.dumps(err.evidence | {"error": str(err)}, indent=2))
         return EXIT_DIVERGED
+    r = _with_rotation(r, scene, rotation)
     if args.json:
         print(json.dumps(r, indent=2))
         return 0
@@ -104,4 +121,5 @@ def _with_collisions(args, scene, t_end, world, integrators) -> int:
           f"against dt = {2 * ref['dt']:.3g} s ({plural(ref['impacts_at_2dt'], 'impact')} there)")
     if "note" in r:
         print(f"  note: {r['note']}")
+    _print_rotation(r)
     return 0

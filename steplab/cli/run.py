@@ -71,14 +71,20 @@ def command(args) -> int:
         print(f"steplab run: warning: {warning}", file=sys.stderr)
     run_warnings = [] if warning is None else [warning]
     end = {"n_steps": args.steps} if args.steps is not None else {"t_end": t_end}
-    kept = []  # the run's collision step, whose log tells what happened before a stop
+    kept = []  # the run's collision step, whose log tells what happened before a stop (or its attached step)
     energy_start = float(scene.model.energy(scene.y0, scene.rigid_bodies))  # with the spin's 1/2 omega . I omega
     settings = RunSettings(scene, integrator, dt, world, args.precision, energy_start, run_warnings)
+    stepper = None if world is None else _keeping(world.stepper, kept)
+    attached = _attached(scene, world, args.backend)
+    if attached:  # forces at body-frame points: the rotation steps with the translation
+        from steplab.integrators.attached import attached_stepper
+
+        stepper = attached_stepper(scene.rigid_bodies, rotation_method, kept)
     try:
         traj = simulate(scene.model, integrator, scene.y0, scene.t_start, dt=dt, **end, backend=args.backend,
                         dtype=np.dtype(args.precision), save_every=args.save_every,
                         max_steps=args.max_steps or MAX_STEPS, progress=not args.json and sys.stderr.isatty(),
-                        stepper=None if world is None else _keeping(world.stepper, kept))
+                        stepper=stepper)
     except Exception as err:
         if world is None:
             raise
@@ -90,7 +96,10 @@ def command(args) -> int:
             print(json.dumps(stopped_summary(settings, err, kept[0].log if kept else None), indent=2))
         return fail(args.command, str(err), EXIT_DIVERGED)
     rotation = None
-    if scene.rigid_bodies is not None:  # beside the translation, at its saved times; a divergence is status 1
+    if attached:  # the energy at the end with the lever arms at the final orientations
+        rotation = kept[0].rotation_trajectory(traj)
+        settings = dataclasses.replace(settings, scene=dataclasses.replace(scene, model=kept[0].final_model()))
+    elif scene.rigid_bodies is not None:  # beside the translation, at its saved times; a divergence is status 1
         from steplab.integrators.scene_rotation import rotate_scene
 
         rotation = rotate_scene(scene, traj, rotation_method, backend=args.backend)
@@ -133,6 +142,21 @@ def integrator_named(name: str):
             sys.path.append(str(path.resolve().parent))
         name = f"{path.stem}:{attribute}"
     return get_integrator(name)
+
+
+def _attached(scene, world, backend: str) -> bool:
+    """Whether ``scene`` has springs or dampers at body-frame points (refused on JAX and with collisions, for now)."""
+    from steplab.physics.attachments import attached_forces
+
+    if not attached_forces(scene.model):
+        return False
+    if backend != "numpy":
+        raise ValueError("springs and dampers at body-frame points (offsets) run on the NumPy backend; "
+                         "use --backend numpy")
+    if world is not None:
+        raise ValueError("springs and dampers at body-frame points (offsets) do not run with collisions yet; "
+                         "use --detector none")
+    return True
 
 
 def _keeping(make_step, kept: list):

@@ -1,0 +1,134 @@
+"""Springs and dampers attached at body-frame points of rotating bodies: lever arms and torques.
+
+A pair force may act, at either end, at a point r fixed in a rotating body (in its body frame,
+relative to the centre of mass) instead of at its centre. That point is at x + R(q) r in the
+world and moves with v + omega x R(q) r. The force F there moves the centre as if it acted at
+the centre, and it turns the body with the torque (R r) x F (:func:`.rigid_body.torque_of_forces`).
+A spring's length, and so its potential 1/2 k (l - L)^2, is measured between the two points: the
+energy of a run is the kinetic energy of both kinds plus that potential.
+
+In a scene file, ``offsets = [[x, y, z], [x, y, z]]`` in a ``[[forces.springs]]`` or
+``[[forces.dampers]]`` element gives one body-frame point per end, m (default: the centres). A
+non-zero offset on a body that does not rotate is refused. A spring to a fixed world point is a
+spring to a pinned point mass there (``pinned = true``), with a zero offset at that end.
+
+A force carries its points as an :class:`Attachment`, with their lever arms R(q) r at the
+orientations it is evaluated at; :func:`model_at` gives the model at other orientations. The
+rotation and the translation are then coupled: :mod:`steplab.integrators.attached` steps them
+together. A force without offsets has no attachment and does exactly what it did before.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from typing import NamedTuple
+
+import numpy as np
+
+from . import quaternion as quat
+from .rigid_body import torque_of_forces
+
+#: what a scene is told when it attaches off-centre to a point mass
+NEEDS_ROTATION = ("a point attachment needs a rotating body: give it a shape, inertia, orientation or "
+                  "angular_velocity")
+
+
+class Attachment(NamedTuple):
+    """Where a pair force acts on its two ends, and the lever arms there now.
+
+    offsets : ndarray, shape (P, 2, 3)
+        Body-frame points of the first and second end, relative to the centres of mass, m.
+    arms : ndarray, shape (P, 2, 3)
+        The same points relative to the centres in the world frame, R(q) r, m.
+    velocities : ndarray, shape (P, 2, 3)
+        Their velocities relative to the centres, omega x R(q) r, m/s.
+    """
+
+    offsets: np.ndarray
+    arms: np.ndarray
+    velocities: np.ndarray
+
+
+def attachment_at(offsets, i, j, orientations, angular_velocities) -> Attachment:
+    """The :class:`Attachment` of pairs (i, j) at body-frame ``offsets`` (P, 2, 3) for the bodies'
+    ``orientations`` (N, 4) and world ``angular_velocities`` (N, 3) (identity and zero for a point mass)."""
+    arms = np.stack([quat.rotate(np, orientations[i], offsets[:, 0]), quat.rotate(np, orientations[j], offsets[:, 1])],
+                    axis=1)
+    velocities = np.stack([quat.cross(np, angular_velocities[i], arms[:, 0]),
+                           quat.cross(np, angular_velocities[j], arms[:, 1])], axis=1)
+    return Attachment(offsets, arms, velocities)
+
+
+def read_offsets(tables, bodies, pairs) -> np.ndarray | None:
+    """The ``offsets`` of each element of ``[[forces.springs]]`` or ``[[forces.dampers]]``, (P, 2, 3);
+    None when no element gives any (every force acts at the centres, as before).
+
+    ``pairs`` are the elements' (i, j). A non-zero offset on a body that does not rotate is one
+    line naming the body (:data:`NEEDS_ROTATION`).
+    """
+    if not any("offsets" in t.data for t in tables):
+        return None
+    offsets = np.zeros((len(tables), 2, 3))
+    rotating = bodies.rotating if bodies.rotating is not None else np.zeros(bodies.n, bool)
+    for k, (t, pair) in enumerate(zip(tables, pairs)):
+        if "offsets" not in t.data:
+            continue
+        points = t.vectors("offsets", maximum=2)
+        if len(points) != 2:
+            t.fail(f"must be two body-frame points [[x, y, z], [x, y, z]], one per end, got {len(points)}", "offsets")
+        for end, body in enumerate(pair):
+            if np.any(points[end] != 0) and not rotating[body]:
+                t.fail(f"puts an end off the centre of {bodies.names[body]!r}, which does not rotate: "
+                       f"{NEEDS_ROTATION}", "offsets")
+        offsets[k] = points
+    return offsets
+
+
+def initial_attachment(offsets, i, j, bodies) -> Attachment | None:
+    """The attachment at the scene's initial orientations (None without offsets)."""
+    if offsets is None:
+        return None
+    return attachment_at(offsets, i, j, bodies.orientations, bodies.angular_velocities)
+
+
+def point_distance(offsets, k: int, pair, bodies) -> float:
+    """The initial distance between the two points of element ``k`` (``offsets`` None: the centres), m:
+    its default rest length."""
+    a, b = pair
+    delta = bodies.positions[b] - bodies.positions[a]
+    if offsets is not None:
+        delta = delta + (quat.rotate(np, bodies.orientations[b], offsets[k, 1])
+                         - quat.rotate(np, bodies.orientations[a], offsets[k, 0]))
+    return float(np.linalg.norm(delta))
+
+
+def attached_forces(model) -> tuple:
+    """The forces of ``model`` that act at body-frame points (those with an attachment)."""
+    return tuple(f for f in model.forces if getattr(f, "attachment", None) is not None)
+
+
+def model_at(model, orientations, angular_velocities):
+    """``model`` with every attached force's lever arms at these ``orientations`` (N, 4) and world
+    ``angular_velocities`` (N, 3); the other forces are the same objects (a model of the same class:
+    the model imports the forces, which import this module, so it is not imported here)."""
+    forces = [dataclasses.replace(f, attachment=attachment_at(f.attachment.offsets, f.i, f.j, orientations,
+                                                              angular_velocities))
+              if getattr(f, "attachment", None) is not None else f for f in model.forces]
+    return type(model)(np.asarray(model.masses), np.asarray(model.radii), forces, model.pinned, model.names,
+                       model.xp, model.dtype)
+
+
+def torques(model, q, v, orientations) -> np.ndarray:
+    """The torque about each body's centre, world frame, (N, 3), N m, of ``model``'s attached forces
+    at positions ``q`` and velocities ``v`` (N, 3), their arms at ``orientations`` (N, 4).
+
+    Each pair's force F on its first end (-F on its second) at the body-frame point r gives
+    (R r) x F (:func:`.rigid_body.torque_of_forces`); a point mass's entries are zero.
+    """
+    total = np.zeros_like(np.asarray(q, dtype=float))
+    for f in attached_forces(model):
+        force = f.pair_force(np, q, v)
+        offsets = f.attachment.offsets
+        np.add.at(total, f.i, torque_of_forces(np, orientations[f.i], offsets[:, 0], force))
+        np.add.at(total, f.j, torque_of_forces(np, orientations[f.j], offsets[:, 1], -force))
+    return total

@@ -1,0 +1,299 @@
+"""Springs and dampers at body-frame points: torques, the physical pendulum, energy, dissipation.
+
+References are independent of the code: the torque (R r) x F with R from scipy's rotation
+matrix and F from Hooke's law written out; the physical pendulum's period from the small
+oscillations of the linearised model (scipy.linalg.eigh), which tends to the closed form
+2 pi sqrt(I_pivot / (m g d)) as the spring stiffens; the energy of a conservative system.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+import scipy.linalg
+from scipy.spatial.transform import Rotation
+from steplab.integrators import simulate
+from steplab.integrators.attached import AttachedStep, attached_stepper
+from steplab.integrators.rotation_registry import get_rotation
+from steplab.physics import attachments
+from steplab.physics.scene import SceneError, load_scene, parse_scene
+
+G = 9.81
+#: the cube of the pendulum: mass, edge, and its corner's distance from the centre
+MASS, EDGE = 1.0, 0.1
+D = EDGE * np.sqrt(3) / 2
+I_CM = MASS * EDGE**2 / 6  # a cube's moment about any axis through its centre
+#: the body diagonal (1, 1, 1) / sqrt(3) turned onto +z: the corner straight above the centre
+CORNER_UP = Rotation.from_rotvec(np.arccos(1 / np.sqrt(3)) * np.array([1.0, -1.0, 0.0]) / np.sqrt(2))
+
+
+def closed_form_period():
+    """T = 2 pi sqrt(I_pivot / (m g d)), I_pivot = I_cm + m d^2: the rigid pivot."""
+    return 2 * np.pi * np.sqrt((I_CM + MASS * D**2) / (MASS * G * D))
+
+
+def slow_mode(stiffness):
+    """The pendulum's slow mode on a zero-length spring of ``stiffness``: (period, y' / theta').
+
+    Swinging about x, the centre's y and the angle theta; the corner moves by y - d theta. About
+    the equilibrium (the spring stretched by m g / k) the potential is 1/2 k (y - d theta)^2 +
+    1/2 m g d theta^2, the kinetic energy 1/2 m y'^2 + 1/2 I theta'^2.
+    """
+    k = stiffness
+    stiffness_matrix = np.array([[k, -k * D], [-k * D, k * D * D + MASS * G * D]])
+    omega2, modes = scipy.linalg.eigh(stiffness_matrix, np.diag([MASS, I_CM]))
+    return 2 * np.pi / np.sqrt(omega2[0]), modes[0, 0] / modes[1, 0]
+
+
+def pendulum_scene(stiffness, amplitude=0.01, damping=0.0, integrator="velocity-verlet", rotation="dlm"):
+    """The cube hung at a corner from a pinned anchor at the origin, swinging in its slow mode."""
+    period, ratio = slow_mode(stiffness)
+    omega = amplitude * 2 * np.pi / period
+    w, x, y, z = (float(c) for c in np.roll(CORNER_UP.as_quat(), 1))
+    omega, velocity, height = float(omega), float(ratio * omega), float(-D - MASS * G / stiffness)
+    damper = f"""
+[[forces.dampers]]
+bodies = ["anchor", "cube"]
+damping = {float(damping)!r}
+offsets = [[0.0, 0.0, 0.0], [0.05, 0.05, 0.05]]
+""" if damping else ""
+    return parse_scene(f"""
+[simulation]
+integrator = "{integrator}"
+rotation = "{rotation}"
+dt = 0.001
+t_end = 1.0
+
+[[bodies]]
+name = "anchor"
+mass = 1.0
+radius = 0.01
+position = [0.0, 0.0, 0.0]
+pinned = true
+
+[[bodies]]
+name = "cube"
+mass = {MASS!r}
+radius = 0.09
+position = [0.0, 0.0, {height!r}]
+shape = "box"
+size = [{EDGE}, {EDGE}, {EDGE}]
+orientation = [{w!r}, {x!r}, {y!r}, {z!r}]
+angular_velocity = [{omega!r}, 0.0, 0.0]
+velocity = [0.0, {velocity!r}, 0.0]
+
+[forces.gravity]
+
+[[forces.springs]]
+bodies = ["anchor", "cube"]
+stiffness = {float(stiffness)!r}
+rest_length = 0.0
+offsets = [[0.0, 0.0, 0.0], [0.05, 0.05, 0.05]]
+{damper}""", "pendulum")
+
+
+def run(scene, dt, t_end, integrator=None, rotation=None, save_every=1):
+    """The coupled run: the translation trajectory and the AttachedStep that stepped it."""
+    kept = []
+    stepper = attached_stepper(scene.rigid_bodies, get_rotation(rotation or scene.rotation), kept)
+    trajectory = simulate(scene.model, integrator or scene.integrator, scene.y0, 0.0, dt=dt, t_end=t_end,
+                          stepper=stepper, save_every=save_every)
+    return trajectory, kept[0]
+
+
+def measured_period(trajectory):
+    """The time of the centre's second crossing of y = 0 upwards (the first is t = 0), linearly interpolated."""
+    t, y = trajectory.t, trajectory.positions[:, 1, 1]
+    up = np.flatnonzero((y[:-1] < 0) & (y[1:] >= 0))[0]
+    return t[up] - y[up] * (t[up + 1] - t[up]) / (y[up + 1] - y[up])
+
+
+def energies(scene, trajectory, step: AttachedStep):
+    """model.energy along the run: the potential at the attachment points plus both kinetic energies."""
+    rotation = step.rotation_trajectory(trajectory)
+    out = []
+    for k in range(len(trajectory.t)):
+        bodies = rotation.at(k)
+        model, _ = step.model_at(bodies.orientations, bodies.body_angular_velocities())
+        out.append(float(model.energy(trajectory.y[k], bodies)))
+    return np.array(out)
+
+
+def test_the_torque_of_a_spring_at_an_offset_is_r_cross_f(rng):
+    scene = pendulum_scene(1e3)
+    model, (anchor, cube) = scene.model, (0, 1)
+    for _ in range(5):
+        q = rng.normal(size=(2, 3))
+        rotation = Rotation.random(random_state=rng.integers(2**31))
+        orientations = np.array([[1.0, 0.0, 0.0, 0.0], np.roll(rotation.as_quat(), 1)])
+        at = attachments.model_at(model, orientations, np.zeros((2, 3)))
+        torque = attachments.torques(at, q, np.zeros((2, 3)), orientations)
+        # by hand: the corner at x + R r, Hooke's law of a zero-length spring on the cube, (R r) x F
+        arm = rotation.as_matrix() @ np.array([0.05, 0.05, 0.05])
+        force_on_cube = -1e3 * (q[cube] + arm - q[anchor])
+        np.testing.assert_allclose(torque[cube], np.cross(arm, force_on_cube), rtol=1e-13, atol=1e-13)
+        assert np.all(torque[anchor] == 0)  # a point mass: no torque
+        net = at.net_force(0.0, q, np.zeros((2, 3)))  # the centre feels the force at the corner, and gravity
+        np.testing.assert_allclose(net[cube], force_on_cube + np.array([0, 0, -G * MASS]), rtol=1e-13, atol=1e-12)
+
+
+def test_the_physical_pendulum_swings_with_its_closed_form_period_at_second_order():
+    # velocity Verlet with dlm: the error of the period falls as dt^2 towards the linearised model's
+    # period, which tends to the closed form as the spring stiffens (the stretch m g / k lengthens
+    # the pendulum: 4e-3 at k = 1e4, falling as 1 / k)
+    lengthening = [slow_mode(k)[0] / closed_form_period() - 1 for k in (1e4, 1e6, 1e8)]
+    assert 0 < lengthening[2] < 1e-6 and lengthening[0] / lengthening[1] == pytest.approx(100, rel=0.05)
+    stiffness = 1e4
+    exact, _ = slow_mode(stiffness)
+    # a 1 mrad swing: the amplitude's own lengthening, theta^2 / 16, is 6e-8
+    errors = [abs(measured_period(run(pendulum_scene(stiffness, amplitude=1e-3), dt, 0.8)[0]) - exact)
+              for dt in (4e-3, 2e-3)]
+    assert errors[1] < 3e-5 * exact
+    assert 2**1.8 < errors[0] / errors[1] < 2**2.2, errors  # order 2
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("integrator, rotation", [("velocity-verlet", "dlm"),
+                                                  ("semi-implicit-euler", "exponential-map")])
+def test_the_pendulum_period_converges_at_second_order(integrator, rotation):
+    # the period's error is second order for both: symplectic Euler's phase error is O(dt^2) on an
+    # oscillator, though its positions are first order (measured: -6.140e-5, -1.527e-5, -3.763e-6
+    # relative at dt = 4, 2, 1 ms, for both compositions alike to 1e-12)
+    stiffness = 1e4
+    exact, _ = slow_mode(stiffness)
+    dts = np.array([4e-3, 2e-3, 1e-3, 5e-4])
+    errors = np.array([abs(measured_period(run(pendulum_scene(stiffness, amplitude=1e-3), dt, 0.8, integrator,
+                                               rotation)[0]) - exact) for dt in dts])
+    slope = np.polyfit(np.log(dts), np.log(errors), 1)[0]
+    assert abs(slope - 2) < 0.2, (slope, errors)
+
+
+def test_energy_of_a_spring_hung_box_is_kept_by_verlet_with_dlm():
+    # a larger swing (0.3 rad) on a softer spring: the energy error stays O(dt^2) and bounded
+    scene = pendulum_scene(2e3, amplitude=0.3)
+    drift = []
+    for dt in (2e-3, 1e-3):  # over most of a swing, the energy every 10 ms
+        trajectory, step = run(scene, dt, 0.5, save_every=round(0.01 / dt))
+        energy = energies(scene, trajectory, step)
+        drift.append(np.max(np.abs(energy - energy[0])))
+    swing = MASS * G * D * (1 - np.cos(0.3))  # the energy that goes back and forth, J
+    assert drift[1] < 1e-4 * swing
+    assert 2**1.5 < drift[0] / drift[1] < 2**2.5, drift  # second order, no drift
+
+
+def test_a_damper_at_an_offset_dissipates_energy_monotonically():
+    # no gravity, no spring: a spinning, drifting cube tied at a corner to a pinned anchor by a
+    # dashpot alone; its energy is kinetic (translation and rotation) and only the damper changes it
+    scene = parse_scene("""
+[simulation]
+dt = 0.001
+t_end = 1.0
+[[bodies]]
+name = "anchor"
+mass = 1.0
+radius = 0.01
+position = [0.0, 0.0, 0.0]
+pinned = true
+[[bodies]]
+name = "cube"
+mass = 1.0
+radius = 0.09
+position = [0.0, 0.0, -0.5]
+velocity = [0.3, 0.2, -0.1]
+angular_velocity = [1.0, 2.0, 3.0]
+shape = "box"
+size = [0.1, 0.1, 0.1]
+[[forces.dampers]]
+bodies = ["anchor", "cube"]
+damping = 10.0
+offsets = [[0.0, 0.0, 0.0], [0.05, 0.05, 0.05]]
+""", "dashpot")
+    trajectory, step = run(scene, 1e-3, 0.5, "semi-implicit-euler", "exponential-map")
+    energy = energies(scene, trajectory, step)
+    assert np.all(np.diff(energy) < 0)
+    # what it loses is the dashpot's power c (d . u)^2 at the corner, written out here (anchor at rest)
+    rotation = step.rotation_trajectory(trajectory)
+    arms = Rotation.from_quat(np.roll(rotation.orientations[:, 0], -1, axis=-1)).apply([0.05, 0.05, 0.05])
+    corner = trajectory.positions[:, 1] + arms
+    speed = trajectory.velocities[:, 1] + np.cross(rotation.angular_velocities[:, 0], arms)
+    power = 10.0 * np.sum(corner * speed, axis=1) ** 2 / np.sum(corner * corner, axis=1)
+    lost = np.sum(0.5 * (power[1:] + power[:-1]) * np.diff(trajectory.t))
+    assert energy[0] - energy[-1] == pytest.approx(lost, rel=2e-2)
+    assert lost > 0.05 * energy[0]
+
+
+def test_the_built_in_scene_swings_with_the_period_its_description_states():
+    scene = load_scene("spring-pendulum")
+    assert "0.6527 s" in scene.description and f"{closed_form_period():.4f}" == "0.6527"
+    trajectory, step = run(scene, scene.dt, 0.7)
+    # a 0.1 rad swing: the period is longer by theta^2 / 16 = 6e-4, the stretch of the spring by 6e-4
+    assert measured_period(trajectory) == pytest.approx(closed_form_period(), rel=3e-3)
+    assert step.rotation_trajectory(trajectory).orientations.shape == (len(trajectory.t), 1, 4)
+
+
+def test_scenes_without_offsets_keep_their_forces():
+    scene = load_scene("cloth")
+    assert all(getattr(f, "attachment", None) is None for f in scene.model.forces)
+    assert attachments.attached_forces(scene.model) == ()
+
+
+@pytest.mark.parametrize("offsets, message", [
+    ("[[0.1, 0.0, 0.0], [0.0, 0.0, 0.0]]", "forces.springs[0].offsets: puts an end off the centre of 'anchor', which "
+                                           "does not rotate: a point attachment needs a rotating body: give it a "
+                                           "shape, inertia, orientation or angular_velocity"),
+    ("[[0.0, 0.0, 0.0]]", "forces.springs[0].offsets: must be two body-frame points"),
+    ("[[0.0, 0.0, 0.0], [0.0, 0.0, 0.0], [0.0, 0.0, 0.0]]", "forces.springs[0].offsets: has 3 entries"),
+])
+def test_bad_offsets_are_one_line(offsets, message):
+    text = f"""
+[simulation]
+dt = 0.01
+t_end = 1.0
+[[bodies]]
+name = "anchor"
+mass = 1.0
+radius = 0.1
+position = [0.0, 0.0, 0.0]
+pinned = true
+[[bodies]]
+name = "box"
+mass = 1.0
+radius = 0.1
+position = [0.0, 0.0, -1.0]
+shape = "box"
+size = [0.1, 0.1, 0.1]
+[[forces.springs]]
+bodies = ["anchor", "box"]
+stiffness = 10.0
+offsets = {offsets}
+"""
+    with pytest.raises(SceneError) as err:
+        parse_scene(text, "bad.toml")
+    assert message in str(err.value) and "\n" not in str(err.value)
+
+
+def test_steplab_run_couples_the_rotation_and_refuses_what_it_cannot_couple(capsys):
+    from steplab.cli import main
+
+    assert main(["run", "spring-pendulum", "--t-end", "0.1", "--integrator", "velocity-verlet", "--rotation", "dlm",
+                 "--json"]) == 0
+    import json
+
+    record = json.loads(capsys.readouterr().out)
+    assert record["rotation"].startswith("dlm") and record["rotating_bodies"] == ["cube"]
+    assert abs(record["energy_relative_change"]) < 1e-6  # the potential at the corner, both kinetic energies
+    for argv, message in ((["--backend", "jax"], "run on the NumPy backend"), (["--detector", "swept"],
+                                                                                 "do not run with collisions")):
+        assert main(["run", "spring-pendulum", "--t-end", "0.01", *argv]) == 2
+        assert message in capsys.readouterr().err
+    assert main(["recommend", "spring-pendulum", "--tol", "1e-3"]) == 2
+    assert "recommend does not measure yet" in capsys.readouterr().err
+
+
+def test_the_free_rotation_beside_the_translation_refuses_an_attached_scene():
+    from steplab.integrators.scene_rotation import rotate_scene
+
+    scene = load_scene("spring-pendulum")
+    trajectory = simulate(scene.model, "semi-implicit-euler", scene.y0, 0.0, dt=scene.dt, n_steps=2)
+    with pytest.raises(ValueError, match="step its translation and rotation together"):
+        rotate_scene(scene, trajectory)
