@@ -78,18 +78,19 @@ import dataclasses
 
 import numpy as np
 
+from . import compiled_loop
 from .changed_pairs import SweptGrid
 from .chords import Chords
 from .compiled_response import impact_terms, resolve_pair
 from .coupling import Coupling
 from .detectors import StartState, earliest_impact, pair_times, start_state
-from .events import Collision, CollisionLog
+from .events import Collision, CollisionLog, ImpactRows
 from .impact_cap import ImpactCapError
 from .impact_queue import ImpactQueue
 from .pairs import BodyPairs, ShapePairs, candidates, changed_candidates
 from .response import normal_speed, resolve
 from .resting import rest_speed, settle
-from .retest import Bodies, Planes, retest_spheres_and_planes
+from .retest import Bodies, Planes, Split, retest_spheres_and_planes
 
 #: bodies closer than this many rounding units of the largest coordinate are touching
 SLOP_ULPS = 100
@@ -147,6 +148,13 @@ class CollisionStep:
         self._active = np.ones(len(self.radii), bool)  # bodies not removed (removal is for good)
         self._bodies = tuple(Bodies(self.radii, self.inverse_masses, self._active, self.field))
         self._is_changed = np.zeros(len(self.radii), bool)  # scratch: the bodies of one re-test
+        #: the incremental loop's impacts in one compiled call per step (:mod:`.compiled_loop`)
+        self.compiled_loop = (self.world.compiled_loop and self.compiled_retest
+                              and compiled_loop.applies(self.world, self.integrator, self.field, planes))
+        if self.compiled_loop:
+            self._materials = _material_tables(self.world, len(self.radii), planes)
+            self._heap = np.empty(1024, np.int64)  # the compiled call's buffers, kept from step to step
+            self._logged = np.empty(256, compiled_loop.LOGGED)
 
     def __call__(self, t, y, dt, carry):
         """Advance ``y`` (2, N, 3) from ``t`` by ``dt`` with collisions; returns ``(y, carry)``."""
@@ -163,6 +171,8 @@ class CollisionStep:
         ignored = set(log.cancelled_pairs)  # pairs a prologue cancelled, until they separate
         # Forces, integration, broadphase and the pairs' start states: the whole step, once
         y_end, carry_end, slop, groups, starts = self._sweep(t, y, dt, carry)
+        if self.compiled_loop and not ignored and not log.removed:
+            return self._compiled(t, y, dt, y_end, carry_end, slop, groups, starts)
         # Narrowphase, once per pair: every candidate's time of impact, in the queue
         queue = ImpactQueue(len(radii))
         chords = Chords(y, y_end, t, t_end, radii, slop)
@@ -206,6 +216,40 @@ class CollisionStep:
             if carry_end is not None:  # the carry of the state the step ends in
                 carry_end = integrator.init(model, t_end, y_end)
         return self._finish(groups, starts, y_end, carry_end, t_end, ignored, slop)
+
+    def _compiled(self, t, y, dt, y_end, carry_end, slop, groups, starts):
+        """:meth:`_incremental` after the sweep, its impacts resolved in one compiled call
+        (:func:`.compiled_loop.resolve_impacts`): the same stages, the same numbers."""
+        from .compiled_loop import CAP_REACHED, N_ENTRIES, N_LOGGED, N_WATCHED, RESOLVED, RESTING, TestedPairs, new_sizes
+
+        log, t_end = self.log, t + dt
+        chords = Chords(y, y_end, t, t_end, self.radii, slop)
+        grid = SweptGrid(chords.centers, chords.reach)
+        # Narrowphase, once per pair: every candidate's time of impact, as the rows of the queue
+        tested = TestedPairs()
+        self._test(tested, groups, starts, t, y, y_end, dt, dt, self._accelerations(t, chords))
+        entries, watched, n_watched = tested.arrays()
+        sizes = new_sizes(tested.n, self.cap)
+        sizes[N_WATCHED] = n_watched
+        stamps = np.zeros(len(self.radii), np.int64)
+        # Respond, earliest first, re-testing what each impact changed: one call
+        entries, self._heap, _, self._logged = compiled_loop.resolve_impacts(
+            chords.arrays, chords.now, (grid.arrays, grid.links), self._bodies, (self.planes, self._materials),
+            tuple(Split(t, dt, slop, self.world.rest_speed)),
+            (entries, self._heap, watched, stamps, self._is_changed, sizes), self._logged)
+        if sizes[N_LOGGED]:
+            log.add_impacts(ImpactRows(self._logged[:sizes[N_LOGGED]].copy(), tuple(self.model.names),
+                                       self.world.shapes, self.world.properties))
+        log.resting_corrections += int(sizes[RESTING])
+        resolved = int(sizes[RESOLVED])
+        if sizes[CAP_REACHED]:
+            raise ImpactCapError(t, resolved, self.cap)
+        log.most_impacts_in_a_step = max(log.most_impacts_in_a_step, resolved)
+        if resolved:
+            groups, starts = compiled_loop.current_groups(entries[:sizes[N_ENTRIES]], stamps, self.world.shapes)
+            if carry_end is not None:  # the carry of the state the step ends in
+                carry_end = self.integrator.init(self.model, t_end, y_end)
+        return self._finish(groups, starts, y_end, carry_end, t_end, set(), slop)
 
     def _retest(self, queue, chords, grid, moved, t, t_end, dt, slop):
         """The changed bodies' pairs, found and tested in one kernel (:mod:`.retest`), into the queue."""
@@ -524,6 +568,17 @@ class ConstantField:
 
     def vector_field(self, t, y):
         return np.stack([y[1], self.acceleration(t, y[0], y[1])])
+
+
+def _material_tables(world, n_bodies, planes) -> tuple:
+    """Each body's and plane's material number, and (restitution, friction) of each pair of materials
+    (:meth:`.world.CollisionWorld.properties` as arrays, for :mod:`.compiled_loop`)."""
+    body_names = [world.material(b) for b in range(n_bodies)]
+    names = sorted(set(body_names) | {p.material for p in planes})
+    number = {name: k for k, name in enumerate(names)}
+    table = np.array([[world.pair_properties.lookup(a, b) for b in names] for a in names], dtype=float)
+    return (np.array([number[m] for m in body_names], np.int64), np.array([number[p.material] for p in planes],
+            np.int64), np.ascontiguousarray(table[..., 0]), np.ascontiguousarray(table[..., 1]))
 
 
 def _pair_bodies(pairs) -> np.ndarray:
