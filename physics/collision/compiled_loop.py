@@ -444,8 +444,8 @@ def _retest_watched(chords, now, bodies, planes, split, rows, watched, n_watched
         qa = row3_of(now, 0, a)
         if b >= 0:
             qb = row3_of(now, 0, b)
-            x.s = sphere_sphere_entry(sub3(qa, qb), sub3(sub3(row3_of(y_end, 0, a), qa), sub3(row3_of(y_end, 0, b), qb)),
-                                      radii[a] + radii[b])
+            chord = sub3(sub3(row3_of(y_end, 0, a), qa), sub3(row3_of(y_end, 0, b), qb))
+            x.s = sphere_sphere_entry(sub3(qa, qb), chord, radii[a] + radii[b])
         else:
             plane = -1 - b
             h0 = plane_height(qa, row3(normals, plane), offsets[plane]) - radii[a]

@@ -89,7 +89,7 @@ from .impact_cap import ImpactCapError
 from .impact_queue import ImpactQueue
 from .pairs import BodyPairs, ShapePairs, candidates, changed_candidates
 from .response import normal_speed, resolve
-from .resting import rest_speed, settle
+from .resting import rest_speed, settle, settle_spheres_and_planes
 from .retest import Bodies, Planes, Split, retest_spheres_and_planes
 
 #: bodies closer than this many rounding units of the largest coordinate are touching
@@ -220,7 +220,7 @@ class CollisionStep:
     def _compiled(self, t, y, dt, y_end, carry_end, slop, groups, starts):
         """:meth:`_incremental` after the sweep, its impacts resolved in one compiled call
         (:func:`.compiled_loop.resolve_impacts`): the same stages, the same numbers."""
-        from .compiled_loop import CAP_REACHED, N_ENTRIES, N_LOGGED, N_WATCHED, RESOLVED, RESTING, TestedPairs, new_sizes
+        from .compiled_loop import CAP_REACHED, N_ENTRIES, N_LOGGED, N_WATCHED, RESOLVED, RESTING, TestedPairs
 
         log, t_end = self.log, t + dt
         chords = Chords(y, y_end, t, t_end, self.radii, slop)
@@ -229,7 +229,7 @@ class CollisionStep:
         tested = TestedPairs()
         self._test(tested, groups, starts, t, y, y_end, dt, dt, self._accelerations(t, chords))
         entries, watched, n_watched = tested.arrays()
-        sizes = new_sizes(tested.n, self.cap)
+        sizes = compiled_loop.new_sizes(tested.n, self.cap)
         sizes[N_WATCHED] = n_watched
         stamps = np.zeros(len(self.radii), np.int64)
         # Respond, earliest first, re-testing what each impact changed: one call
@@ -348,7 +348,10 @@ class CollisionStep:
     def _finish(self, groups, starts, y_end, carry_end, t_end, ignored, slop):
         """Resting contacts: bodies pressed into a surface are put back on it."""
         log = self.log
-        corrections = settle(self.world, groups, starts, y_end, self.radii, self.inverse_masses, slop, ignored)
+        if self.compiled_loop and not ignored and not log.removed:
+            corrections = _settle_compiled(groups, starts, y_end, self, slop)
+        else:
+            corrections = settle(self.world, groups, starts, y_end, self.radii, self.inverse_masses, slop, ignored)
         if corrections:
             log.resting_corrections += corrections
             carry_end = self.integrator.init(self.model, t_end, y_end)
@@ -568,6 +571,21 @@ class ConstantField:
 
     def vector_field(self, t, y):
         return np.stack([y[1], self.acceleration(t, y[0], y[1])])
+
+
+def _settle_compiled(groups, starts, y, step, slop) -> int:
+    """:func:`.resting.settle` through its compiled form (spheres and planes), the groups as arrays."""
+    if not groups:
+        return 0
+    i = np.concatenate([pairs.i for pairs in groups])
+    j = np.concatenate([pairs.j if isinstance(pairs, BodyPairs) else np.full(len(pairs), -1 - pairs.index)
+                        for pairs in groups])
+    resting = np.concatenate([start.resting for start in starts])
+    first = np.concatenate(([0], np.cumsum([len(pairs) for pairs in groups])))
+    body_material, plane_material, _, friction = step._materials
+    return settle_spheres_and_planes(y, (i, j, resting, first), step.radii, step.inverse_masses,
+                                     (step.planes[0], step.planes[1]), (body_material, plane_material, friction),
+                                     float(slop))
 
 
 def _material_tables(world, n_bodies, planes) -> tuple:
