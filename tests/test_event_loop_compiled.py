@@ -140,3 +140,18 @@ def test_a_killed_run_leaves_whole_collision_logs(tmp_path):
         process.wait()
         log = target.with_name(f"killed{k}.collisions.csv")
         assert not log.exists() or log.read_bytes() == clean
+
+
+def test_the_bench_times_a_crowded_pit_beside_mujoco():
+    from steplab.bench.collisions import crowded_pit
+    from steplab.bench.config import QUICK
+    from steplab.bench.record import Record
+
+    pytest.importorskip("mujoco")
+    config = dataclasses.replace(QUICK, crowded_pit=(60, 0.6, 4), collision_repeats=1)
+    record = Record(config, quick=True)
+    crowded_pit(config, record)
+    pit = record.data["collisions"]["crowded_pit_60"]
+    assert pit["impacts"] > 0 and pit["seconds_per_impact"] > 0
+    assert record.data["ratios"]["vs_mujoco_crowded_pit_60"] > 0
+    assert set(record.data["targets"]) >= {"crowded_pit_60_us_per_impact", "vs_mujoco_crowded_pit_60"}
