@@ -24,13 +24,15 @@ class CrowdedPit:
     def setup_cache(self):
         try:
             import mujoco  # noqa: F401
+
             from steplab.bench.collisions import crowded_pit
         except ImportError:  # no MuJoCo, or a steplab before the crowded pit
             raise NotImplementedError("needs MuJoCo and steplab.bench.collisions.crowded_pit") from None
-        from steplab.bench import QUICK, Record
-        from steplab.bench.collisions import WARM_UP_PIT
-        from steplab.bench.ball_pit_scene import ball_pit
         from steplab.integrators import simulate
+
+        from steplab.bench import QUICK, Record
+        from steplab.bench.ball_pit_scene import ball_pit
+        from steplab.bench.collisions import WARM_UP_PIT
 
         warm = ball_pit(WARM_UP_PIT[0])  # every kernel compiled before the clock starts
         simulate(warm.model, warm.integrator, warm.y0, 0.0, dt=warm.dt, n_steps=WARM_UP_PIT[1],
