@@ -58,6 +58,14 @@ looked at (:mod:`.overlap`), and its brackets belong to the sub-step. So with ov
 testing the incremental loop tests every candidate pair again at every split (with
 neither the broadphase nor the integration run again) and gives the full loop's log.
 
+For the scenes games are made of (spheres and planes, swept testing, constant forces,
+semi-implicit Euler, no prologue, epilogue or trigger that asks to see an impact as it
+happens) the incremental loop's impacts run in one compiled call per step
+(:mod:`.compiled_loop`) and its resting contacts in another
+(:func:`.resting.settle_spheres_and_planes`): the same stages in the same order, so the
+same collision log and trajectories bit for bit (tests/test_event_loop_compiled.py).
+``CollisionWorld(compiled_loop=False)`` keeps the Python loop, the reference of that test.
+
 At most ``max_impacts_per_step`` collisions are resolved in a step (the default scales
 with the bodies, :mod:`.impact_cap`); a step holding more raises
 :class:`.impact_cap.ImpactCapError` instead of leaving them unresolved.
