@@ -84,17 +84,16 @@ def new_sizes(n_entries: int, cap: int) -> np.ndarray:
     return sizes
 
 
-def applies(world, integrator, field, planes) -> bool:
-    """Whether a scene's incremental step can run compiled: spheres and planes only, none a
-    trigger, swept testing, constant forces, semi-implicit Euler, no prologue but the
-    built-in one (which only cancels triggers) and no epilogue."""
-    from steplab.integrators.semi_implicit_euler import SemiImplicitEuler
-
+def applies(world, field, planes) -> bool:
+    """Whether a scene's incremental step can run compiled (its integrator aside, see
+    :func:`.step.steps_as_semi_implicit_euler`): spheres and planes only, none a trigger, swept
+    testing, constant forces, no prologue but the built-in one (which only cancels triggers)
+    and no epilogue."""
     from .events import cancel_triggers
 
-    return (world.detector == "swept" and field is not None and type(integrator) is SemiImplicitEuler
-            and len(planes) == len(world.shapes) and not any(p.trigger for p in planes)
-            and tuple(world.prologues) in ((), (cancel_triggers,)) and not world.epilogues)
+    return (world.detector == "swept" and field is not None and len(planes) == len(world.shapes)
+            and not any(p.trigger for p in planes) and tuple(world.prologues) in ((), (cancel_triggers,))
+            and not world.epilogues)
 
 
 class TestedPairs:

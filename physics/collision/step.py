@@ -157,8 +157,9 @@ class CollisionStep:
         self._bodies = tuple(Bodies(self.radii, self.inverse_masses, self._active, self.field))
         self._is_changed = np.zeros(len(self.radii), bool)  # scratch: the bodies of one re-test
         #: the incremental loop's impacts in one compiled call per step (:mod:`.compiled_loop`)
-        self.compiled_loop = (self.world.compiled_loop and self.compiled_retest
-                              and compiled_loop.applies(self.world, self.integrator, self.field, planes))
+        self.compiled_loop = (self.world.compiled_loop and self.compiled_retest and self.event_loop == "incremental"
+                              and compiled_loop.applies(self.world, self.field, planes)
+                              and steps_as_semi_implicit_euler(self.integrator))
         if self.compiled_loop:
             self._materials = _material_tables(self.world, len(self.radii), planes)
             self._heap = np.empty(1024, np.int64)  # the compiled call's buffers, kept from step to step
@@ -562,6 +563,22 @@ def rest_of_step_is_unchanged(integrator) -> bool:
     except (AttributeError, NotImplementedError, TypeError):  # needs more of the model than its field
         return False
     return bool(np.allclose(y2, y1, rtol=1e-12, atol=1e-15))
+
+
+def steps_as_semi_implicit_euler(integrator) -> bool:
+    """Whether the integrator's step under a constant field is v' = v + h a, q' = q + h v' bit for
+    bit: the rest of the step :mod:`.compiled_loop` computes for the bodies an impact moved."""
+    if integrator.implicit:
+        return False
+    a = np.array([[0.3, -0.7, -9.81], [1.0 / 3.0, 2.0 / 7.0, -9.81]])
+    y, h = np.array([[[0.1, 0.2, 0.3], [-1.1, 0.7, 2.9]], [[1.0, -2.0, 0.5], [0.1, 1.0 / 3.0, -4.0]]]), 0.0123
+    model = ConstantField(a)
+    try:
+        stepped = np.asarray(integrator.step(model, 0.0, y, h, integrator.init(model, 0.0, y))[0])
+    except (AttributeError, NotImplementedError, TypeError):  # needs more of the model than its field
+        return False
+    v = y[1] + h * a
+    return stepped.shape == y.shape and np.array_equal(stepped, np.stack([y[0] + h * v, v]))
 
 
 class ConstantField:
