@@ -100,31 +100,34 @@ class TestedPairs:
     """The step's first tests, collected as :data:`ENTRY` rows: the queue :meth:`.step.CollisionStep._test`
     fills (``add`` as :meth:`.impact_queue.ImpactQueue.add`) before the compiled call."""
 
+    #: the fields ``add`` collects, in the order of its columns
+    FIELDS = ("i", "j", "rank", "s", "lo", "t_sub", "h", "speed", "rest", "in_contact", "nx", "ny", "nz")
+
     def __init__(self):
-        self.parts, self.watched, self.n = [], [], 0
+        self.columns, self.watched, self.n = [], [], 0
 
     def add(self, pairs, start, s, lo, t_sub: float, h: float, watch=None) -> None:
-        rows = np.zeros(len(pairs), ENTRY)
-        rows["i"] = pairs.i
+        k = len(pairs)
         if hasattr(pairs, "j"):
-            rows["j"] = pairs.j
+            j, rank = pairs.j, np.zeros(k, np.int64)
         else:
-            rows["j"], rows["rank"] = -1 - pairs.index, 1 + pairs.index
-        rows["s"], rows["lo"], rows["t_sub"], rows["h"] = s, lo, t_sub, h
-        rows["time"] = t_sub + np.asarray(s) * h
-        rows["speed"], rows["rest"], rows["in_contact"], rows["valid"] = start.speed, start.rest_speed, \
-            start.in_contact, True
-        rows["nx"], rows["ny"], rows["nz"] = start.normal.T
-        self.parts.append(rows)
+            j, rank = np.full(k, -1 - pairs.index), np.full(k, 1 + pairs.index)
+        self.columns.append((pairs.i, j, rank, s, lo, np.full(k, t_sub), np.full(k, h), start.speed,
+                             np.broadcast_to(start.rest_speed, (k,)), start.in_contact, *start.normal.T))
         if watch is not None:
             self.watched.append(self.n + np.flatnonzero(watch))
-        self.n += len(pairs)
+        self.n += k
 
     def arrays(self):
-        """``(entries, watched)``, each with room to grow (the stamps are all 0 at a step's start)."""
-        entries = np.empty(2 * self.n + 64, ENTRY)
-        if self.parts:
-            entries[:self.n] = np.concatenate(self.parts)
+        """``(entries, watched, n_watched)``: the rows and the watched rows' numbers, each with room to
+        grow (their stamps are 0, as every body's at a step's start)."""
+        entries = np.zeros(2 * self.n + 64, ENTRY)
+        if self.columns:
+            rows = entries[:self.n]
+            for name, parts in zip(self.FIELDS, zip(*self.columns)):
+                rows[name] = np.concatenate(parts)
+            rows["time"] = rows["t_sub"] + rows["s"] * rows["h"]
+            rows["valid"] = True
         watched = np.concatenate(self.watched) if self.watched else np.zeros(0, np.int64)
         room = np.empty(2 * len(watched) + 64, np.int64)
         room[:len(watched)] = watched
@@ -139,25 +142,27 @@ def current_groups(rows, stamps, shapes) -> tuple[list, list]:
     from .detectors import StartState
     from .pairs import BodyPairs, ShapePairs
 
-    body = rows["j"] >= 0
-    ok = rows["valid"] & (stamps[rows["i"]] == rows["stamp_i"])
-    ok[body] &= stamps[rows["j"][body]] == rows["stamp_j"][body]
+    i, j = rows["i"], rows["j"]
+    body = j >= 0
+    ok = rows["valid"] & (stamps[i] == rows["stamp_i"])
+    ok[body] &= stamps[j[body]] == rows["stamp_j"][body]
     groups, starts = [], []
 
-    def start(part):
-        return StartState(part["in_contact"], part["speed"], np.stack([part["nx"], part["ny"], part["nz"]], axis=1),
-                          part["rest"])
+    def start(index):
+        normal = np.stack([rows["nx"][index], rows["ny"][index], rows["nz"][index]], axis=1)
+        return StartState(rows["in_contact"][index], rows["speed"][index], normal, rows["rest"][index])
 
-    pairs = rows[ok & body]
-    if len(pairs):
-        pairs = pairs[np.lexsort((pairs["j"], pairs["i"]))]
-        groups.append(BodyPairs(pairs["i"].copy(), pairs["j"].copy()))
-        starts.append(start(pairs))
-    on_planes = rows[ok & ~body]
-    for index in np.unique(-1 - on_planes["j"]):
-        part = on_planes[on_planes["j"] == -1 - index]
-        part = part[np.argsort(part["i"], kind="stable")]
-        groups.append(ShapePairs(int(index), shapes[index], part["i"].copy()))
+    index = np.flatnonzero(ok & body)
+    if index.size:
+        index = index[np.lexsort((j[index], i[index]))]
+        groups.append(BodyPairs(i[index], j[index]))
+        starts.append(start(index))
+    index = np.flatnonzero(ok & ~body)
+    plane = -1 - j[index]
+    index = index[np.lexsort((i[index], plane))]  # by plane, then body
+    plane = -1 - j[index]
+    for part in np.split(index, np.flatnonzero(np.diff(plane)) + 1) if index.size else []:
+        groups.append(ShapePairs(int(-1 - j[part[0]]), shapes[-1 - j[part[0]]], i[part]))
         starts.append(start(part))
     return groups, starts
 
@@ -278,7 +283,7 @@ def resolve_impacts(chords, now, grid, bodies, world, split, queue, log):
     for e in range(n_entries):  # the step's first tests
         if np.isfinite(entries[e].s):
             heap, n_heap = _push(heap, n_heap, entries, e)
-    y_rest = np.empty((2, 2, 3))
+    y_rest = np.empty((2, 2, 3))  # the new end states of an impact's bodies
     while True:
         h = t_end - t
         e = -1

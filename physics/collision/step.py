@@ -156,7 +156,8 @@ class CollisionStep:
         self._active = np.ones(len(self.radii), bool)  # bodies not removed (removal is for good)
         self._bodies = tuple(Bodies(self.radii, self.inverse_masses, self._active, self.field))
         self._is_changed = np.zeros(len(self.radii), bool)  # scratch: the bodies of one re-test
-        #: the incremental loop's impacts in one compiled call per step (:mod:`.compiled_loop`)
+        #: the incremental loop's impacts in one compiled call per step (:mod:`.compiled_loop`; off
+        #: with the compiled re-test, which it contains)
         self.compiled_loop = (self.world.compiled_loop and self.compiled_retest and self.event_loop == "incremental"
                               and compiled_loop.applies(self.world, self.field, planes)
                               and steps_as_semi_implicit_euler(self.integrator))
@@ -180,7 +181,7 @@ class CollisionStep:
         ignored = set(log.cancelled_pairs)  # pairs a prologue cancelled, until they separate
         # Forces, integration, broadphase and the pairs' start states: the whole step, once
         y_end, carry_end, slop, groups, starts = self._sweep(t, y, dt, carry)
-        if self.compiled_loop and not ignored and not log.removed:
+        if self.compiled_loop and self.compiled_retest and not ignored and not log.removed:
             return self._compiled(t, y, dt, y_end, carry_end, slop, groups, starts)
         # Narrowphase, once per pair: every candidate's time of impact, in the queue
         queue = ImpactQueue(len(radii))
@@ -357,7 +358,7 @@ class CollisionStep:
     def _finish(self, groups, starts, y_end, carry_end, t_end, ignored, slop):
         """Resting contacts: bodies pressed into a surface are put back on it."""
         log = self.log
-        if self.compiled_loop and not ignored and not log.removed:
+        if self.compiled_loop and self.compiled_retest and not ignored and not log.removed:
             corrections = _settle_compiled(groups, starts, y_end, self, slop)
         else:
             corrections = settle(self.world, groups, starts, y_end, self.radii, self.inverse_masses, slop, ignored)
