@@ -127,7 +127,7 @@ class ImpactRows:
         for r in self.rows:
             body, other = int(r["body"]), int(r["other"])
             shape = self.shapes[-1 - other] if other < 0 else None
-            restitution, friction = self.properties(body, shape if shape else other)
+            restitution, friction = self.properties(body, other if shape is None else shape)
             impulse = float(np.linalg.norm(np.array([r["lx"], r["ly"], r["lz"]])))  # as the Python loop's
             events.append(Collision(t=float(r["t"]), body=body, other=shape.name if shape else other,
                                     body_name=self.body_names[body],
