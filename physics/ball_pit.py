@@ -39,11 +39,14 @@ def box_side(n: int) -> float:
     return round(math.sqrt(FLOOR_AREA_PER_BALL * n), 1)
 
 
-def ball_pit_toml(n: int, seed: int, t_end: float = 1.0, detector: str = "swept") -> str:
-    """The scene file of ``n`` balls falling into a box, one simulated second at dt = 1/60 s."""
+def ball_pit_toml(n: int, seed: int, t_end: float = 1.0, detector: str = "swept", side: float | None = None) -> str:
+    """The scene file of ``n`` balls falling into a box, one simulated second at dt = 1/60 s.
+
+    ``side``: the floor's side, m (default :func:`box_side`: the sparse pits; 6 m for 2,000
+    balls is the crowded pit, 12 % of the layer's volume filled)."""
     if n < 1:
         raise ValueError(f"a ball pit needs at least one ball, got n = {n}")
-    half = box_side(n) / 2
+    half = (box_side(n) if side is None else side) / 2
     inner = half - RADIUS  # centres start at least one radius inside the walls
     walls = "".join(
         f'\n[[collisions.planes]]\nname = "{name}"\nnormal = {normal}\noffset = {-half!r}\n'
@@ -81,6 +84,7 @@ offset = 0.0
 {walls}'''
 
 
-def ball_pit(n: int, seed: int, t_end: float = 1.0, detector: str = "swept"):
+def ball_pit(n: int, seed: int, t_end: float = 1.0, detector: str = "swept", side: float | None = None):
     """The scene of :func:`ball_pit_toml`, loaded (a :class:`steplab.physics.scene.Scene`)."""
-    return parse_scene(ball_pit_toml(n, seed, t_end, detector), label=f"<ball pit of {n}>", name=f"ball-pit-{n}")
+    return parse_scene(ball_pit_toml(n, seed, t_end, detector, side), label=f"<ball pit of {n}>",
+                       name=f"ball-pit-{n}")

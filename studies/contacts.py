@@ -23,7 +23,10 @@ against the event loop or an analytic answer:
 - **tunnelling**: speculative contacts on the tunnelling study's wall, against the analytic
   miss rates of overlap testing;
 - **cost**: wall time per step against the number of bodies, up to 10^5, for both methods
-  on the bench's ball pits. This part times: it runs last, alone.
+  on the bench's ball pits. This part times: it runs last, alone;
+- **inelastic collapse** (McNamara and Young 1994): a crowded pit coming to rest, its impacts
+  per simulated second and the event loop's cost per impact against the rest speed below
+  which a touching pair stops bouncing. Timed too, after the cost.
 """
 
 from __future__ import annotations
@@ -36,8 +39,9 @@ import numpy as np
 from steplab.integrators import get_integrator, simulate
 from steplab.integrators.simulate import DivergenceError
 from steplab.physics import Gravity, Model, Springs
+from steplab.physics.ball_pit import RESTITUTION as RESTITUTION_PIT
 from steplab.physics.ball_pit import ball_pit
-from steplab.physics.collision import Box, CollisionWorld, PairProperties, Plane
+from steplab.physics.collision import Box, CollisionWorld, ImpactCapError, PairProperties, Plane
 from steplab.physics.collision.solver_batch import run_batch
 from steplab.physics.collision.solver_settings import ContactSolver
 
@@ -71,6 +75,9 @@ def parameters(quick: bool) -> dict:
         "tunnelling_ratios": np.round(np.geomspace(0.1, 50, 12 if not quick else 6), 4).tolist(),
         "tunnelling_shots": 50 if not quick else 12, "seed": 20240611,
         "cost_sizes": [1_000, 10_000, 100_000] if not quick else [500, 2_000], "cost_steps": 10 if not quick else 5,
+        # the crowded pit (balls, box side in m, steps of 1/60 s) and the rest speeds it is run at, m/s
+        "collapse_pit": [2_000, 6.0, 60] if not quick else [200, 1.2, 30],
+        "collapse_rest_speeds": [0.3, 0.1, 0.03, 0.01, 3e-3, 1e-3, 3e-4, 1e-4] if not quick else [0.1, 0.01, 1e-3],
     }
 
 
@@ -307,6 +314,42 @@ def cost(params, progress) -> dict:
     return {"rows": rows, "dt": 1 / 60}
 
 
+# --- inelastic collapse ----------------------------------------------------------------------
+
+
+def collapse(params, progress) -> dict:
+    """The crowded pit with the event loop at each rest speed: impacts, and the wall time they cost.
+
+    A pile of balls at eps < 1 coming to rest is a chain of ever smaller impacts: a ball
+    bouncing alone on the floor from v needs log(v / v_rest) / log(1 / eps) bounces to fall
+    below the rest speed v_rest, and balls squeezed between others collapse inelastically,
+    ever more impacts in ever less time (McNamara and Young 1994), cut off only by v_rest. A
+    step that needs more than the cap stops the run (``cap_reached_s``, the step's start).
+    """
+    balls, side, steps = params["collapse_pit"]
+    scene = ball_pit(balls, params["seed"], side=side)
+    simulate(scene.model, SIE, scene.y0, 0.0, dt=scene.dt, n_steps=1, collisions=scene.collisions)  # compile
+    rows = []
+    for rest in params["collapse_rest_speeds"]:
+        world = dataclasses.replace(scene.collisions, rest_speed=rest)
+        row = {"rest_speed": rest, "cap_reached_s": None}
+        start = time.perf_counter()
+        try:
+            traj = simulate(scene.model, SIE, scene.y0, 0.0, dt=scene.dt, n_steps=steps, save_every=10**9,
+                            collisions=world)
+        except ImpactCapError as error:
+            row["cap_reached_s"] = error.t
+        else:
+            wall, log = time.perf_counter() - start, traj.collisions
+            row.update(impacts=log.count(), impacts_per_second=log.count() / (steps * scene.dt), wall_s=wall,
+                       us_per_impact=1e6 * wall / max(log.count(), 1),
+                       most_impacts_in_a_step=log.most_impacts_in_a_step, resting_corrections=log.resting_corrections)
+        rows.append(row)
+        progress(f"collapse, rest speed {rest:g} m/s")
+    return {"balls": balls, "side": side, "steps": steps, "dt": scene.dt, "restitution": RESTITUTION_PIT,
+            "rows": rows}
+
+
 def compute(params: dict, progress=None) -> dict:
     progress = progress or (lambda message: None)
     record = {}
@@ -315,6 +358,7 @@ def compute(params: dict, progress=None) -> dict:
         record[name] = part(params)
         progress(name)
     record["cost"] = cost(params, progress)
+    record["collapse"] = collapse(params, progress)
     return record
 
 
@@ -412,7 +456,38 @@ def plot(record: dict, out) -> list[str]:
           title="Cost per step (ball pits of steplab bench)")
     b.legend(fontsize=8)
     names += plotting.save_figure(fig, out, "contacts_tunnelling_cost")
+    if "collapse" in record:
+        names += _plot_collapse(record["collapse"], out)
     return names
+
+
+def _plot_collapse(part: dict, out) -> list[str]:
+    import matplotlib.pyplot as plt
+
+    rows = [row for row in part["rows"] if row["cap_reached_s"] is None]
+    capped = [row["rest_speed"] for row in part["rows"] if row["cap_reached_s"] is not None]
+    fig, (a, b) = plt.subplots(1, 2, figsize=(12, 4.4))
+    rest = [row["rest_speed"] for row in rows]
+    a.plot(rest, [row["impacts_per_second"] for row in rows], "o-", color="tab:blue", label="event loop, impacts")
+    a.plot(rest, [row["resting_corrections"] / (part["steps"] * part["dt"]) for row in rows], "s--",
+           color="tab:gray", label="resting contacts settled")
+    for x in capped:
+        a.axvline(x, color="tab:red", ls=":", label="impact cap reached" if x == capped[0] else None)
+    a.set(xscale="log", yscale="log", xlabel="rest speed (m/s)", ylabel="per simulated second",
+          title=f"Inelastic collapse: {part['balls']:,} balls in a {part['side']:g} m box")
+    a.invert_xaxis()
+    a.legend(fontsize=8, loc="best")
+    b.plot(rest, [row["us_per_impact"] for row in rows], "o-", color="tab:blue", label="wall time per impact")
+    b.set(xscale="log", xlabel="rest speed (m/s)", ylabel="wall time per impact (us)", ylim=(0, None),
+          title="The event loop's cost (the impacts' wall time, all stages)")
+    b.invert_xaxis()
+    twin = b.twinx()
+    twin.plot(rest, [row["wall_s"] for row in rows], "s--", color="tab:orange", label="wall time of the run")
+    twin.set(ylabel=f"wall time for {part['steps'] * part['dt']:g} simulated s (s)", ylim=(0, None))
+    lines = b.get_legend_handles_labels()[0] + twin.get_legend_handles_labels()[0]
+    b.legend(lines, [line.get_label() for line in lines], fontsize=8, loc="lower left")
+    fig.tight_layout()
+    return plotting.save_figure(fig, out, "contacts_collapse")
 
 
 def summary(record: dict) -> list[tuple[str, str]]:

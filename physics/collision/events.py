@@ -109,13 +109,42 @@ class ImpactBlock:
         return events
 
 
+@dataclasses.dataclass(frozen=True)
+class ImpactRows:
+    """The event loop's impacts of one step as rows (:data:`.compiled_loop.LOGGED`), made into
+    :class:`Collision` objects only when read: what the Python loop logs, field for field."""
+
+    rows: np.ndarray
+    body_names: tuple  # the model's names
+    shapes: tuple  # the world's static shapes
+    properties: object  # (body, other body or shape) -> (restitution, friction), the world's
+
+    def __len__(self) -> int:
+        return len(self.rows)
+
+    def collisions(self) -> list[Collision]:
+        events = []
+        for r in self.rows:
+            body, other = int(r["body"]), int(r["other"])
+            shape = self.shapes[-1 - other] if other < 0 else None
+            restitution, friction = self.properties(body, other if shape is None else shape)
+            impulse = float(np.linalg.norm(np.array([r["lx"], r["ly"], r["lz"]])))  # as the Python loop's
+            events.append(Collision(t=float(r["t"]), body=body, other=shape.name if shape else other,
+                                    body_name=self.body_names[body],
+                                    other_name=shape.name if shape else self.body_names[other],
+                                    normal=np.array([r["nx"], r["ny"], r["nz"]]), impact_speed=float(r["speed"]),
+                                    restitution=restitution, friction=friction,
+                                    bracket=(float(r["t_lo"]), float(r["t_hi"])), impulse=impulse))
+        return events
+
+
 @dataclasses.dataclass
 class CollisionLog:
     """Everything the collision stage did during one run."""
 
     _events: list[Collision] = dataclasses.field(default_factory=list, repr=False)
     #: impacts not yet made into Collision objects, in order, after ``_events``
-    _blocks: list[ImpactBlock] = dataclasses.field(default_factory=list, repr=False)
+    _blocks: list[ImpactBlock | ImpactRows] = dataclasses.field(default_factory=list, repr=False)
     #: bodies an epilogue removed from collision detection (they fly on untouched)
     removed: set[int] = dataclasses.field(default_factory=set)
     #: the most impacts resolved in one step
@@ -136,7 +165,7 @@ class CollisionLog:
         self._blocks.clear()
         return self._events
 
-    def add_impacts(self, block: ImpactBlock) -> None:
+    def add_impacts(self, block: ImpactBlock | ImpactRows) -> None:
         """Append a step's impacts as columns (see :class:`ImpactBlock`)."""
         if len(block):
             self._blocks.append(block)

@@ -24,8 +24,10 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
+from .compiled_response import resolve_pair
 from .pairs import BodyPairs
 from .response import normal_speed, resolve
+from .sphere_contacts import dot3, row3, row3_of, sphere_plane, sphere_sphere, sub3
 
 #: an impact slower than what the forces pressing the pair together add over this many
 #: steps does not bounce (eps = 0): it ends the endless series of ever smaller bounces
@@ -89,5 +91,63 @@ def settle(world, groups, starts, y, radii, inverse_masses, slop: float, ignored
         corrections += sum(len(b) for b in settled)
         bodies = np.concatenate(settled)
         if len(np.unique(bodies)) == len(bodies):
+            break  # no body settled twice: no contact disturbed another
+    return corrections
+
+
+@njit(cache=True)
+def settle_spheres_and_planes(y, contacts, radii, inverse_masses, planes, friction, slop):
+    """:func:`settle` compiled, for spheres and planes (no triggers, none ignored): the same passes,
+    decisions and responses in the same order (the incremental event loop's compiled step calls it).
+
+    ``contacts`` = (i, j, resting, first): the groups' pairs concatenated, ``j = -1 - k`` for the
+    plane k, ``resting`` the start states' :attr:`.detectors.StartState.resting`, ``first`` (G + 1,)
+    where each group begins; ``planes`` = (normals, offsets); ``friction`` = (body material (N,),
+    plane material (P,), friction (M, M)). Returns the corrections made.
+    """
+    i, j, resting, first = contacts
+    normals, offsets = planes
+    body_material, plane_material, mu = friction
+    pressed = np.zeros(i.shape[0], np.bool_)
+    settled = np.zeros(radii.shape[0], np.int64)  # how often each body was settled in a pass
+    normal = np.empty(3)
+    corrections = 0
+    for _ in range(RESTING_PASSES):
+        count, twice = 0, False
+        for g in range(first.shape[0] - 1):
+            # which of the group's pairs are pressed, from the state as the group starts
+            for p in range(first[g], first[g + 1]):
+                a, b = i[p], j[p]
+                if b >= 0:
+                    n, depth = sphere_sphere(sub3(row3_of(y, 0, b), row3_of(y, 0, a)), radii[a] + radii[b])
+                    v_b = row3_of(y, 1, b)
+                else:
+                    n, depth, _ = sphere_plane(row3_of(y, 0, a), radii[a], row3(normals, -1 - b), offsets[-1 - b])
+                    v_b = (0.0, 0.0, 0.0)
+                approach = dot3(sub3(row3_of(y, 1, a), v_b), n)
+                pressed[p] = depth > slop or (resting[p] and depth >= -slop and approach > 0)
+            # each pressed pair put back in touch, one after the other, from its contact now
+            for p in range(first[g], first[g + 1]):
+                if not pressed[p]:
+                    continue
+                a, b = i[p], j[p]
+                if b >= 0:
+                    n, depth = sphere_sphere(sub3(row3_of(y, 0, b), row3_of(y, 0, a)), radii[a] + radii[b])
+                    m = body_material[b]
+                else:
+                    n, depth, _ = sphere_plane(row3_of(y, 0, a), radii[a], row3(normals, -1 - b), offsets[-1 - b])
+                    m = plane_material[-1 - b]
+                normal[0], normal[1], normal[2] = n
+                resolve_pair(y, a, b, inverse_masses, normal, depth, 0.0, mu[body_material[a], m])
+                for body in (a, b):
+                    if body >= 0:
+                        count += 1
+                        settled[body] += 1
+                        twice = twice or settled[body] > 1
+        if count == 0:
+            break
+        corrections += count
+        settled[:] = 0
+        if not twice:
             break  # no body settled twice: no contact disturbed another
     return corrections

@@ -80,7 +80,7 @@ def retest_spheres_and_planes(grid, chords, bodies, planes, split, changed, is_c
     normals, offsets, triggers = planes
     t, dt, slop, rest_floor = split
     y_end = chords[1]
-    _, centers, reach, _, _, _, _, _, _ = grid
+    _, centers, reach, _, _, _, _, _, _, _ = grid
     pairs = _query(grid, inverse_masses, active, changed, is_changed)
     n_planes = normals.shape[0]
     m = pairs.shape[0] + n_planes * changed.shape[0]

@@ -58,6 +58,14 @@ looked at (:mod:`.overlap`), and its brackets belong to the sub-step. So with ov
 testing the incremental loop tests every candidate pair again at every split (with
 neither the broadphase nor the integration run again) and gives the full loop's log.
 
+For the scenes games are made of (spheres and planes, swept testing, constant forces,
+semi-implicit Euler, no prologue, epilogue or trigger that asks to see an impact as it
+happens) the incremental loop's impacts run in one compiled call per step
+(:mod:`.compiled_loop`) and its resting contacts in another
+(:func:`.resting.settle_spheres_and_planes`): the same stages in the same order, so the
+same collision log and trajectories bit for bit (tests/test_event_loop_compiled.py).
+``CollisionWorld(compiled_loop=False)`` keeps the Python loop, the reference of that test.
+
 At most ``max_impacts_per_step`` collisions are resolved in a step (the default scales
 with the bodies, :mod:`.impact_cap`); a step holding more raises
 :class:`.impact_cap.ImpactCapError` instead of leaving them unresolved.
@@ -78,18 +86,19 @@ import dataclasses
 
 import numpy as np
 
+from . import compiled_loop
 from .changed_pairs import SweptGrid
 from .chords import Chords
 from .compiled_response import impact_terms, resolve_pair
 from .coupling import Coupling
 from .detectors import StartState, earliest_impact, pair_times, start_state
-from .events import Collision, CollisionLog
+from .events import Collision, CollisionLog, ImpactRows
 from .impact_cap import ImpactCapError
 from .impact_queue import ImpactQueue
 from .pairs import BodyPairs, ShapePairs, candidates, changed_candidates
 from .response import normal_speed, resolve
-from .resting import rest_speed, settle
-from .retest import Bodies, Planes, retest_spheres_and_planes
+from .resting import rest_speed, settle, settle_spheres_and_planes
+from .retest import Bodies, Planes, Split, retest_spheres_and_planes
 
 #: bodies closer than this many rounding units of the largest coordinate are touching
 SLOP_ULPS = 100
@@ -147,6 +156,15 @@ class CollisionStep:
         self._active = np.ones(len(self.radii), bool)  # bodies not removed (removal is for good)
         self._bodies = tuple(Bodies(self.radii, self.inverse_masses, self._active, self.field))
         self._is_changed = np.zeros(len(self.radii), bool)  # scratch: the bodies of one re-test
+        #: the incremental loop's impacts in one compiled call per step (:mod:`.compiled_loop`; off
+        #: with the compiled re-test, which it contains)
+        self.compiled_loop = (self.world.compiled_loop and self.compiled_retest and self.event_loop == "incremental"
+                              and compiled_loop.applies(self.world, self.field, planes)
+                              and steps_as_semi_implicit_euler(self.integrator))
+        if self.compiled_loop:
+            self._materials = _material_tables(self.world, len(self.radii), planes)
+            self._heap = np.empty(1024, np.int64)  # the compiled call's buffers, kept from step to step
+            self._logged = np.empty(256, compiled_loop.LOGGED)
 
     def __call__(self, t, y, dt, carry):
         """Advance ``y`` (2, N, 3) from ``t`` by ``dt`` with collisions; returns ``(y, carry)``."""
@@ -163,6 +181,8 @@ class CollisionStep:
         ignored = set(log.cancelled_pairs)  # pairs a prologue cancelled, until they separate
         # Forces, integration, broadphase and the pairs' start states: the whole step, once
         y_end, carry_end, slop, groups, starts = self._sweep(t, y, dt, carry)
+        if self.compiled_loop and self.compiled_retest and not ignored and not log.removed:
+            return self._compiled(t, y, dt, y_end, carry_end, slop, groups, starts)
         # Narrowphase, once per pair: every candidate's time of impact, in the queue
         queue = ImpactQueue(len(radii))
         chords = Chords(y, y_end, t, t_end, radii, slop)
@@ -206,6 +226,40 @@ class CollisionStep:
             if carry_end is not None:  # the carry of the state the step ends in
                 carry_end = integrator.init(model, t_end, y_end)
         return self._finish(groups, starts, y_end, carry_end, t_end, ignored, slop)
+
+    def _compiled(self, t, y, dt, y_end, carry_end, slop, groups, starts):
+        """:meth:`_incremental` after the sweep, its impacts resolved in one compiled call
+        (:func:`.compiled_loop.resolve_impacts`): the same stages, the same numbers."""
+        from .compiled_loop import CAP_REACHED, N_ENTRIES, N_LOGGED, N_WATCHED, RESOLVED, RESTING, TestedPairs
+
+        log, t_end = self.log, t + dt
+        chords = Chords(y, y_end, t, t_end, self.radii, slop)
+        grid = SweptGrid(chords.centers, chords.reach)
+        # Narrowphase, once per pair: every candidate's time of impact, as the rows of the queue
+        tested = TestedPairs()
+        self._test(tested, groups, starts, t, y, y_end, dt, dt, self._accelerations(t, chords))
+        entries, watched, n_watched = tested.arrays()
+        sizes = compiled_loop.new_sizes(tested.n, self.cap)
+        sizes[N_WATCHED] = n_watched
+        stamps = np.zeros(len(self.radii), np.int64)
+        # Respond, earliest first, re-testing what each impact changed: one call
+        entries, self._heap, _, self._logged = compiled_loop.resolve_impacts(
+            chords.arrays, chords.now, (grid.arrays, grid.links), self._bodies, (self.planes, self._materials),
+            tuple(Split(t, dt, slop, self.world.rest_speed)),
+            (entries, self._heap, watched, stamps, self._is_changed, sizes), self._logged)
+        if sizes[N_LOGGED]:
+            log.add_impacts(ImpactRows(self._logged[:sizes[N_LOGGED]].copy(), tuple(self.model.names),
+                                       self.world.shapes, self.world.properties))
+        log.resting_corrections += int(sizes[RESTING])
+        resolved = int(sizes[RESOLVED])
+        if sizes[CAP_REACHED]:
+            raise ImpactCapError(t, resolved, self.cap)
+        log.most_impacts_in_a_step = max(log.most_impacts_in_a_step, resolved)
+        if resolved:
+            groups, starts = compiled_loop.current_groups(entries[:sizes[N_ENTRIES]], stamps, self.world.shapes)
+            if carry_end is not None:  # the carry of the state the step ends in
+                carry_end = self.integrator.init(self.model, t_end, y_end)
+        return self._finish(groups, starts, y_end, carry_end, t_end, set(), slop)
 
     def _retest(self, queue, chords, grid, moved, t, t_end, dt, slop):
         """The changed bodies' pairs, found and tested in one kernel (:mod:`.retest`), into the queue."""
@@ -304,7 +358,10 @@ class CollisionStep:
     def _finish(self, groups, starts, y_end, carry_end, t_end, ignored, slop):
         """Resting contacts: bodies pressed into a surface are put back on it."""
         log = self.log
-        corrections = settle(self.world, groups, starts, y_end, self.radii, self.inverse_masses, slop, ignored)
+        if self.compiled_loop and self.compiled_retest and not ignored and not log.removed:
+            corrections = _settle_compiled(groups, starts, y_end, self, slop)
+        else:
+            corrections = settle(self.world, groups, starts, y_end, self.radii, self.inverse_masses, slop, ignored)
         if corrections:
             log.resting_corrections += corrections
             carry_end = self.integrator.init(self.model, t_end, y_end)
@@ -509,6 +566,22 @@ def rest_of_step_is_unchanged(integrator) -> bool:
     return bool(np.allclose(y2, y1, rtol=1e-12, atol=1e-15))
 
 
+def steps_as_semi_implicit_euler(integrator) -> bool:
+    """Whether the integrator's step under a constant field is v' = v + h a, q' = q + h v' bit for
+    bit: the rest of the step :mod:`.compiled_loop` computes for the bodies an impact moved."""
+    if integrator.implicit:
+        return False
+    a = np.array([[0.3, -0.7, -9.81], [1.0 / 3.0, 2.0 / 7.0, -9.81]])
+    y, h = np.array([[[0.1, 0.2, 0.3], [-1.1, 0.7, 2.9]], [[1.0, -2.0, 0.5], [0.1, 1.0 / 3.0, -4.0]]]), 0.0123
+    model = ConstantField(a)
+    try:
+        stepped = np.asarray(integrator.step(model, 0.0, y, h, integrator.init(model, 0.0, y))[0])
+    except (AttributeError, NotImplementedError, TypeError):  # needs more of the model than its field
+        return False
+    v = y[1] + h * a
+    return stepped.shape == y.shape and np.array_equal(stepped, np.stack([y[0] + h * v, v]))
+
+
 class ConstantField:
     """The model seen by some bodies when every force is constant: a(t, q, v) = their rows of the field."""
 
@@ -524,6 +597,32 @@ class ConstantField:
 
     def vector_field(self, t, y):
         return np.stack([y[1], self.acceleration(t, y[0], y[1])])
+
+
+def _settle_compiled(groups, starts, y, step, slop) -> int:
+    """:func:`.resting.settle` through its compiled form (spheres and planes), the groups as arrays."""
+    if not groups:
+        return 0
+    i = np.concatenate([pairs.i for pairs in groups])
+    j = np.concatenate([pairs.j if isinstance(pairs, BodyPairs) else np.full(len(pairs), -1 - pairs.index)
+                        for pairs in groups])
+    resting = np.concatenate([start.resting for start in starts])
+    first = np.concatenate(([0], np.cumsum([len(pairs) for pairs in groups])))
+    body_material, plane_material, _, friction = step._materials
+    return settle_spheres_and_planes(y, (i, j, resting, first), step.radii, step.inverse_masses,
+                                     (step.planes[0], step.planes[1]), (body_material, plane_material, friction),
+                                     float(slop))
+
+
+def _material_tables(world, n_bodies, planes) -> tuple:
+    """Each body's and plane's material number, and (restitution, friction) of each pair of materials
+    (:meth:`.world.CollisionWorld.properties` as arrays, for :mod:`.compiled_loop`)."""
+    body_names = [world.material(b) for b in range(n_bodies)]
+    names = sorted(set(body_names) | {p.material for p in planes})
+    number = {name: k for k, name in enumerate(names)}
+    table = np.array([[world.pair_properties.lookup(a, b) for b in names] for a in names], dtype=float)
+    return (np.array([number[m] for m in body_names], np.int64), np.array([number[p.material] for p in planes],
+            np.int64), np.ascontiguousarray(table[..., 0]), np.ascontiguousarray(table[..., 1]))
 
 
 def _pair_bodies(pairs) -> np.ndarray:

@@ -59,6 +59,10 @@ class CollisionWorld:
         One of :data:`EVENT_LOOPS`: ``"auto"`` (default: ``"incremental"`` where it gives the
         full loop's results to round-off, else ``"full"``), ``"incremental"`` or ``"full"``,
         the reference that re-tests everything after every impact (see :mod:`.step`).
+    compiled_loop : bool
+        The incremental loop's impacts in one compiled call per step where the scene allows it
+        (:func:`.compiled_loop.applies`; the same numbers bit for bit); False: the Python loop,
+        kept as the reference the compiled one is tested and timed against.
     method : str
         One of :data:`.methods.COLLISION_METHODS`: ``"event"`` (default), the lecture's event
         loop, exact, every impact at its time (:mod:`.step`); ``"solver"``, the engines' way,
@@ -80,6 +84,7 @@ class CollisionWorld:
     prologues: tuple[Callable, ...] = (cancel_triggers,)
     epilogues: tuple[Callable, ...] = ()
     event_loop: str = "auto"
+    compiled_loop: bool = True
     method: str = "event"
     solver: ContactSolver = dataclasses.field(default_factory=ContactSolver)
 

@@ -43,9 +43,10 @@ def write_scene_files(folder, sizes=SCENE_FILE_SIZES) -> None:
         (Path(folder) / scene_file_name(n)).write_text(ball_pit_toml(n))
 
 
-def ball_pit(n: int, seed: int = SEED, t_end: float = 1.0, detector: str = "swept"):
-    """The scene of :func:`ball_pit_toml`, loaded (a :class:`steplab.physics.scene.Scene`)."""
-    return _physics.ball_pit(n, seed, t_end, detector)
+def ball_pit(n: int, seed: int = SEED, t_end: float = 1.0, detector: str = "swept", side: float | None = None):
+    """The scene of :func:`ball_pit_toml`, loaded (a :class:`steplab.physics.scene.Scene`); ``side``
+    the box's, m (default :func:`box_side`)."""
+    return _physics.ball_pit(n, seed, t_end, detector, side)
 
 
 def mujoco_model(scene, iterations: int = 10) -> str:

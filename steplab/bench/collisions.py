@@ -29,6 +29,9 @@ from .config import REAL_TIME_TARGETS, SOLVER_ENGINE_TARGETS, SOLVER_REAL_TIME_T
 from .engines import engine_runs, peer_names
 from .record import Record, size_label
 
+#: the crowded pit's targets (issue 27): microseconds per impact of the event loop, and its wall time over MuJoCo's
+CROWDED_US_PER_IMPACT, CROWDED_VS_MUJOCO = 20.0, 3.0
+
 #: the pit run first, to compile every kernel of the event loop: (balls, steps); Numba
 #: compiles a kernel per type signature, not size, and in 30 steps these balls fall onto
 #: the floor and hit each other, so every path of the loop has been taken
@@ -47,6 +50,56 @@ def ball_pits(config: Config, record: Record, progress) -> None:
     for balls, steps in config.collision_runs:
         _ball_pit(balls, steps, config, record)
         progress(f"collisions, {balls:,} balls: done")
+    if config.crowded_pit:
+        crowded_pit(config, record)
+        progress(f"collisions, crowded pit of {config.crowded_pit[0]:,} balls: done")
+
+
+def crowded_pit(config: Config, record: Record) -> None:
+    """The crowded pit: the event loop (its compiled step) and MuJoCo, interleaved in one run.
+
+    ``config.crowded_pit`` = (balls, side, steps): the full run's 2,000 balls in a 6 m box pile up
+    and come to rest, 59,312 impacts in their first simulated second.
+
+    Recorded: the impacts, the wall time per impact, and the ratio ``vs_mujoco_crowded_pit_2000``
+    of the wall times (MuJoCo's soft contacts cost the same whatever the impacts; the event loop
+    resolves each one at its time), with the issue's targets.
+    """
+    from steplab.integrators import simulate
+
+    balls, side, steps = config.crowded_pit
+    scene = ball_pit(balls, side=side)
+    label, finals = f"crowded_pit_{size_label(balls)}", {}
+    what = (f"{balls:,} balls falling into a {side:g} m box (crowded), {scene.integrator}, {steps} steps of "
+            f"dt = 1/{round(1 / scene.dt)} s, {scene.collisions.detector} event loop (compiled step)")
+
+    def steplab():
+        finals["steplab"] = simulate(scene.model, scene.integrator, scene.y0, scene.t_start, dt=scene.dt,
+                                     n_steps=steps, save_every=steps, collisions=scene.collisions)
+
+    calls = {"steplab": steplab}
+    engines, not_compared = engine_runs(scene, ("mujoco",))
+    for engine in engines:
+        engine.run(1)
+        calls[engine.name] = lambda engine=engine: engine.run(steps)
+    t = interleaved_times(calls, config.collision_repeats, warm_up=False)
+    log = finals["steplab"].collisions
+    impacts = log.count()
+    per_impact = t["steplab"].minimum / max(impacts, 1)
+    record.data["collisions"][label] = {
+        "what": what, "balls": balls, "steps": steps, "box_side": side, "impacts": impacts,
+        "seconds_per_impact": per_impact, "not_compared": not_compared,
+        "contenders": {name: {"settings": engines[0].settings if name != "steplab" else "steplab, compiled event loop",
+                              **_speed(times, steps, scene.dt)} for name, times in t.items()}}
+    record.data["targets"][f"{label}_us_per_impact"] = {
+        "target": CROWDED_US_PER_IMPACT, "us_per_impact": 1e6 * per_impact,
+        "met": 1e6 * per_impact <= CROWDED_US_PER_IMPACT, "what": f"event loop, wall microseconds per impact, {what}"}
+    for engine in engines:
+        name = f"vs_{engine.name}_{label}"
+        record.compare(name, "collisions", what, engine.settings, t["steplab"], t[engine.name], None,
+                       impacts=impacts, steplab_seconds_per_impact=per_impact)
+        ratio = record.data["ratios"][name]
+        record.data["targets"][name] = {"target": CROWDED_VS_MUJOCO, "ratio": ratio, "met": ratio <= CROWDED_VS_MUJOCO}
 
 
 def balls_inside(q, side: float) -> int:

@@ -87,6 +87,9 @@ class Config:
     #: the largest pit the engines are set up for: MuJoCo's compiler takes time quadratic
     #: in the free bodies (12 s for 10^4) and its broadphase 2 bytes per pair (20 GB for 10^5)
     collision_peer_max_balls: int = 10_000
+    #: the crowded pit beside MuJoCo (:func:`.collisions.crowded_pit`): (balls, side of the box in m,
+    #: steps of dt = 1/60 s), the full run's 2,000 balls in a 6 m box for one second; None: left out
+    crowded_pit: tuple[int, float, int] | None = None
     #: implicit Euler on the cloth (:mod:`.implicit`): search both methods' largest useful dt
     #: (about 30 s), or time them at dt = 0.2 s / these step counts, the last full run's finding
     implicit_search: bool = False
@@ -97,6 +100,7 @@ class Config:
 FULL = Config(small_steps=100_000, particles=1_000_000, cloth_side=160, broadphase_n=100_000, periods=100,
               max_log2_steps=22, batch=256, batch_steps=2_500, repeats=9, python_repeats=3, python_steps=100_000,
               collision_runs=((1_000, 60), (2_000, 60), (10_000, 60), (100_000, 6)), collision_repeats=3,
+              crowded_pit=(2_000, 6.0, 60),
               implicit_search=True, max_rounds=60, round_budget_seconds=30.0)
 #: the systems the targets are stated for, with fewer rounds, smaller batches, 20 oscillator
 #: periods for the accuracy match and 10^4 steps for the Python loop: under a minute; the

@@ -1,0 +1,459 @@
+"""The incremental event loop's impacts, compiled: one Numba call resolves every impact of a step.
+
+The incremental loop (:mod:`.step`) tests the step's candidate pairs once, then resolves
+the impacts earliest first; after each one only the moved bodies are re-integrated and
+their pairs re-tested. Per impact that is a heap update, two chords, a few dozen sphere
+tests and one response: microseconds of arithmetic, which a round of Python per impact
+(objects, dispatch, small NumPy calls) turns into hundreds. Here the whole sequence runs
+in one compiled call per step, for the scenes games are made of: spheres in a room of
+planes, swept testing, forces constant over the step, semi-implicit Euler, and no
+prologue, epilogue or trigger that asks to see an impact as it happens (those scenes take
+the Python loop, which calls back into them; :func:`applies`).
+
+What the call does per impact is the Python loop's, step for step and in the same order,
+calling the same kernels (the one definition of each formula):
+
+- the earliest valid pair of the queue (:data:`ENTRY` rows, a binary heap of their numbers
+  keyed as :class:`.impact_queue.ImpactQueue` keys its heap: time, then body pairs before
+  planes, then the pair, then the order the pairs were tested in; lazy deletion by stamps);
+- its bodies placed on their chords (:func:`.chords.state_at`), its contact and approach
+  (:func:`.compiled_response.impact_terms`), resting or impact (:func:`.resting.rest_speed`),
+  the response (:func:`.compiled_response.resolve_pair`, through ``impulse_of``);
+- the moved bodies' rest of the step (semi-implicit Euler under the constant field:
+  v' = v + h a, q' = q + h v', the integrator's own expressions), their new chords and
+  swept bounds (:func:`.chords._restart`), the grid (:func:`.changed_pairs._place`);
+- their pairs re-tested (:func:`.retest.retest_spheres_and_planes`) and the watched
+  resting contacts tested again (:meth:`.impact_queue.ImpactQueue.take_watched`, with the
+  NumPy path's rest speeds: :func:`_retest_watched`);
+- the impact appended to the log's columns (:data:`LOGGED`).
+
+The arrays it appends to (the pair rows, the heap, the watched list, the log) grow by
+doubling inside the call, so no impact is ever dropped; a step that reaches the cap
+returns to Python, which raises :class:`.impact_cap.ImpactCapError` as the Python loop does.
+The numbers are the Python loop's bit for bit (tests/test_event_loop_compiled.py compares
+logs and trajectories on the collision scenes and on random rooms).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from numba import njit
+
+from .changed_pairs import _place
+from .chords import _restart, state_at
+from .compiled_response import impact_terms, resolve_pair
+from .resting import rest_speed
+from .retest import retest_spheres_and_planes
+from .sphere_contacts import (
+    dot3,
+    plane_height,
+    row3,
+    row3_of,
+    sphere_plane,
+    sphere_plane_entry_of,
+    sphere_sphere,
+    sphere_sphere_entry,
+    sub3,
+)
+
+#: one tested pair: bodies ``i`` and ``j`` (``j = -1 - k`` for the plane k), its heap rank (0 for
+#: body pairs, 1 + k for the plane k: body pairs first, planes in the world's order), the stamps
+#: of its bodies when tested, its times ``s`` and ``lo`` as fractions of the sub-step
+#: ``[t_sub, t_sub + h]`` and ``time`` = t_sub + s h, its start state (touching, approach speed,
+#: normal, rest speed) and whether it is still valid (not taken for a re-test)
+ENTRY = np.dtype([("i", np.int64), ("j", np.int64), ("rank", np.int64), ("stamp_i", np.int64),
+                  ("stamp_j", np.int64), ("s", np.float64), ("lo", np.float64), ("t_sub", np.float64),
+                  ("h", np.float64), ("time", np.float64), ("speed", np.float64), ("nx", np.float64),
+                  ("ny", np.float64), ("nz", np.float64), ("rest", np.float64), ("in_contact", np.bool_),
+                  ("valid", np.bool_)], align=True)
+#: one logged impact: time, bodies (``other = -1 - k`` for the plane k), normal, approach speed,
+#: the impulse Lambda on ``body`` and the bracket
+LOGGED = np.dtype([("t", np.float64), ("body", np.int64), ("other", np.int64), ("nx", np.float64),
+                   ("ny", np.float64), ("nz", np.float64), ("speed", np.float64), ("lx", np.float64),
+                   ("ly", np.float64), ("lz", np.float64), ("t_lo", np.float64), ("t_hi", np.float64)],
+                  align=True)
+
+#: the counters of :func:`resolve_impacts` (``sizes``), by position
+N_ENTRIES, N_HEAP, N_WATCHED, N_LOGGED, RESOLVED, RESTING, CAP, CAP_REACHED = range(8)
+
+
+def new_sizes(n_entries: int, cap: int) -> np.ndarray:
+    """The counters of a step's call: ``n_entries`` pairs tested (none queued yet), the cap."""
+    sizes = np.zeros(8, np.int64)
+    sizes[N_ENTRIES], sizes[CAP] = n_entries, cap
+    return sizes
+
+
+def applies(world, field, planes) -> bool:
+    """Whether a scene's incremental step can run compiled (its integrator aside, see
+    :func:`.step.steps_as_semi_implicit_euler`): spheres and planes only, none a trigger, swept
+    testing, constant forces, no prologue but the built-in one (which only cancels triggers)
+    and no epilogue."""
+    from .events import cancel_triggers
+
+    return (world.detector == "swept" and field is not None and len(planes) == len(world.shapes)
+            and not any(p.trigger for p in planes) and tuple(world.prologues) in ((), (cancel_triggers,))
+            and not world.epilogues)
+
+
+class TestedPairs:
+    """The step's first tests, collected as :data:`ENTRY` rows: the queue :meth:`.step.CollisionStep._test`
+    fills (``add`` as :meth:`.impact_queue.ImpactQueue.add`) before the compiled call."""
+
+    #: the fields ``add`` collects, in the order of its columns
+    FIELDS = ("i", "j", "rank", "s", "lo", "t_sub", "h", "speed", "rest", "in_contact", "nx", "ny", "nz")
+
+    def __init__(self):
+        self.columns, self.watched, self.n = [], [], 0
+
+    def add(self, pairs, start, s, lo, t_sub: float, h: float, watch=None) -> None:
+        k = len(pairs)
+        if hasattr(pairs, "j"):
+            j, rank = pairs.j, np.zeros(k, np.int64)
+        else:
+            j, rank = np.full(k, -1 - pairs.index), np.full(k, 1 + pairs.index)
+        self.columns.append((pairs.i, j, rank, s, lo, np.full(k, t_sub), np.full(k, h), start.speed,
+                             np.broadcast_to(start.rest_speed, (k,)), start.in_contact, *start.normal.T))
+        if watch is not None:
+            self.watched.append(self.n + np.flatnonzero(watch))
+        self.n += k
+
+    def arrays(self):
+        """``(entries, watched, n_watched)``: the rows and the watched rows' numbers, each with room to
+        grow (their stamps are 0, as every body's at a step's start)."""
+        entries = np.zeros(2 * self.n + 64, ENTRY)
+        if self.columns:
+            rows = entries[:self.n]
+            for name, parts in zip(self.FIELDS, zip(*self.columns)):
+                rows[name] = np.concatenate(parts)
+            rows["time"] = rows["t_sub"] + rows["s"] * rows["h"]
+            rows["valid"] = True
+        watched = np.concatenate(self.watched) if self.watched else np.zeros(0, np.int64)
+        room = np.empty(2 * len(watched) + 64, np.int64)
+        room[:len(watched)] = watched
+        return entries, room, len(watched)
+
+
+def current_groups(rows, stamps, shapes) -> tuple[list, list]:
+    """The current pairs of ``rows`` (valid, their bodies unchanged since tested) as the full
+    re-test's groups with their start states (:meth:`.impact_queue.ImpactQueue.current_groups`):
+    one :class:`.pairs.BodyPairs` in lexicographic order, then one :class:`.pairs.ShapePairs` per
+    plane in the world's order, bodies ascending."""
+    from .detectors import StartState
+    from .pairs import BodyPairs, ShapePairs
+
+    i, j = rows["i"], rows["j"]
+    body = j >= 0
+    ok = rows["valid"] & (stamps[i] == rows["stamp_i"])
+    ok[body] &= stamps[j[body]] == rows["stamp_j"][body]
+    groups, starts = [], []
+
+    def start(index):
+        normal = np.stack([rows["nx"][index], rows["ny"][index], rows["nz"][index]], axis=1)
+        return StartState(rows["in_contact"][index], rows["speed"][index], normal, rows["rest"][index])
+
+    index = np.flatnonzero(ok & body)
+    if index.size:
+        index = index[np.lexsort((j[index], i[index]))]
+        groups.append(BodyPairs(i[index], j[index]))
+        starts.append(start(index))
+    index = np.flatnonzero(ok & ~body)
+    plane = -1 - j[index]
+    index = index[np.lexsort((i[index], plane))]  # by plane, then body
+    plane = -1 - j[index]
+    for part in np.split(index, np.flatnonzero(np.diff(plane)) + 1) if index.size else []:
+        groups.append(ShapePairs(int(-1 - j[part[0]]), shapes[-1 - j[part[0]]], i[part]))
+        starts.append(start(part))
+    return groups, starts
+
+
+# --- the heap: entry numbers, earliest first --------------------------------------------------
+
+
+@njit(cache=True, inline="always")
+def _before(entries, a, b):
+    """Whether entry a comes before entry b: (time, rank, i, j, order tested), ImpactQueue's heap key."""
+    x, y = entries[a], entries[b]
+    if x.time != y.time:
+        return x.time < y.time
+    if x.rank != y.rank:
+        return x.rank < y.rank
+    if x.i != y.i:
+        return x.i < y.i
+    jx = x.j if x.j >= 0 else 0
+    jy = y.j if y.j >= 0 else 0
+    if jx != jy:
+        return jx < jy
+    return a < b
+
+
+@njit(cache=True)
+def _push(heap, n, entries, e):
+    """Push entry ``e`` onto the heap of ``n`` (grown when full); returns ``(heap, n + 1)``."""
+    if n == heap.shape[0]:
+        heap = _grown(heap, n)
+    k = n
+    while k > 0:
+        parent = (k - 1) >> 1
+        if not _before(entries, e, heap[parent]):
+            break
+        heap[k] = heap[parent]
+        k = parent
+    heap[k] = e
+    return heap, n + 1
+
+
+@njit(cache=True)
+def _pop(heap, n, entries):
+    """Remove the earliest entry; returns ``(it, n - 1)``."""
+    top = heap[0]
+    n -= 1
+    last = heap[n]
+    k = 0
+    while True:
+        child = 2 * k + 1
+        if child >= n:
+            break
+        if child + 1 < n and _before(entries, heap[child + 1], heap[child]):
+            child += 1
+        if not _before(entries, heap[child], last):
+            break
+        heap[k] = heap[child]
+        k = child
+    if n > 0:
+        heap[k] = last
+    return top, n
+
+
+@njit(cache=True)
+def _grown(a, n):
+    """``a`` with twice the room, its first ``n`` elements kept."""
+    b = np.empty(2 * a.shape[0] + 16, a.dtype)
+    b[:n] = a[:n]
+    return b
+
+
+@njit(cache=True, inline="always")
+def _current(entries, stamps, e):
+    x = entries[e]
+    if not x.valid or stamps[x.i] != x.stamp_i:
+        return False
+    return x.j < 0 or stamps[x.j] == x.stamp_j
+
+
+@njit(cache=True, inline="always")
+def _append(entries, n, a, b, stamps, t, h):
+    """A new row for the pair (a, b) tested on [t, t + h], stamped now; returns ``(entries, n + 1)``."""
+    if n == entries.shape[0]:
+        entries = _grown(entries, n)
+    x = entries[n]
+    x.i, x.j = a, b
+    x.rank = 0 if b >= 0 else -b  # 1 + the plane's number
+    x.stamp_i = stamps[a]
+    x.stamp_j = stamps[b] if b >= 0 else 0
+    x.t_sub, x.h, x.valid = t, h, True
+    return entries, n + 1
+
+
+# --- the step's impacts ---------------------------------------------------------------------
+
+
+@njit(cache=True)
+def resolve_impacts(chords, now, grid, bodies, world, split, queue, log):
+    """Every impact of the step, earliest first, until none is left or the cap is reached.
+
+    ``chords`` a :class:`.chords.ChordArrays`, ``now`` the chords' state array, ``grid`` =
+    (:class:`.changed_pairs.GridArrays`, links), ``bodies`` a :class:`.retest.Bodies`, ``world`` =
+    (:class:`.retest.Planes`, (body material (N,), plane material (P,), restitution (M, M),
+    friction (M, M))), ``split`` a :class:`.retest.Split` at the step's start, ``queue`` =
+    (entries, heap, watched, stamps (N,), is_changed (N,), sizes) and ``log`` the
+    :data:`LOGGED` rows; all plain tuples. ``sizes`` (:func:`new_sizes`) is updated in place.
+    Returns ``(entries, heap, watched, log)``, grown where they filled up.
+    """
+    radii, inverse_masses, _, acc = bodies
+    planes, materials = world
+    body_material, plane_material, restitution, friction = materials
+    t, dt, slop, floor = split
+    t_end = chords[3]
+    grid_arrays, links = grid
+    centers, reach = grid_arrays[1], grid_arrays[2]
+    entries, heap, watched, stamps, is_changed, sizes = queue
+    n_entries, n_heap, n_watched, n_log = sizes[N_ENTRIES], sizes[N_HEAP], sizes[N_WATCHED], sizes[N_LOGGED]
+    resolved, resting, cap = 0, sizes[RESTING], sizes[CAP]
+    for e in range(n_entries):  # the step's first tests
+        if np.isfinite(entries[e].s):
+            heap, n_heap = _push(heap, n_heap, entries, e)
+    y_rest = np.empty((2, 2, 3))  # the new end states of an impact's bodies
+    while True:
+        h = t_end - t
+        e = -1
+        while n_heap > 0:
+            top, n_heap = _pop(heap, n_heap, entries)
+            if _current(entries, stamps, top):
+                e = top
+                break
+        if e < 0:
+            break
+        if resolved == cap:
+            sizes[CAP_REACHED] = 1
+            break
+        # The impact as a fraction of what is left of the step (ImpactQueue's PairTable.impact)
+        x = entries[e]
+        if t == x.t_sub:
+            s, lo = x.s, x.lo
+        else:
+            f = (x.t_sub + x.s * x.h - t) / h
+            s = f if f > 0.0 else 0.0
+            f = (x.t_sub + x.lo * x.h - t) / h
+            f = f if f > 0.0 else 0.0
+            lo = f if f < s else s
+        a, b = x.i, x.j
+        t_hit = t + s * h
+        # Its bodies at the impact, on their chords (at the detector's own fraction where tested)
+        for body in (a, b):
+            if body >= 0:
+                q, v = state_at(chords, body, t_hit, x.s if chords[2][body] == x.t_sub else -1.0)
+                now[0, body, 0], now[0, body, 1], now[0, body, 2] = q
+                now[1, body, 0], now[1, body, 1], now[1, body, 2] = v
+        normal, depth, speed, pressing = impact_terms(now, a, b, radii, acc, planes)
+        mb = body_material[b] if b >= 0 else plane_material[-1 - b]
+        eps, mu = restitution[body_material[a], mb], friction[body_material[a], mb]
+        settling = speed <= rest_speed(floor, pressing, dt)
+        if settling:
+            eps = 0.0  # a resting contact, not a bounce
+        t_lo = t + lo * h
+        t = t + s * (t_end - t)
+        # Respond
+        lam = resolve_pair(now, a, b, inverse_masses, normal, depth, eps, mu)
+        if settling or speed <= 0:  # settling, or grazing: no collision
+            resting += 1
+        else:
+            if n_log == log.shape[0]:
+                log = _grown(log, n_log)
+            r = log[n_log]
+            r.t, r.body, r.other, r.speed, r.t_lo, r.t_hi = t_hit, a, b, speed, t_lo, t_hit
+            r.nx, r.ny, r.nz, r.lx, r.ly, r.lz = normal[0], normal[1], normal[2], lam[0], lam[1], lam[2]
+            n_log += 1
+        resolved += 1
+        # Only what the impact changed: its bodies' rest of the step, their chords, bounds and stamps
+        moved = np.array([a, b]) if b >= 0 else np.array([a])
+        h = t_end - t
+        for p in range(moved.shape[0]):  # semi-implicit Euler under the constant field
+            m = moved[p]
+            for k in range(3):
+                y_rest[1, p, k] = now[1, m, k] + h * acc[m, k]
+                y_rest[0, p, k] = now[0, m, k] + h * y_rest[1, p, k]
+        _restart(chords, now, (centers, reach, radii), moved, t, y_rest, slop)
+        _place(grid_arrays, links, moved)
+        for m in moved:
+            stamps[m] += 1
+        # Their pairs, re-tested on [t, t_end]
+        for m in moved:
+            is_changed[m] = True
+        i_new, j_new, in_contact, speeds, normals, rests, times, watch = retest_spheres_and_planes(
+            grid_arrays, chords, bodies, planes, (t, dt, slop, floor), moved, is_changed)
+        for m in moved:
+            is_changed[m] = False
+        for p in range(i_new.shape[0]):
+            entries, n_entries = _append(entries, n_entries, i_new[p], j_new[p], stamps, t, h)
+            y = entries[n_entries - 1]
+            y.s, y.lo, y.time = times[p], times[p], t + times[p] * h
+            y.speed, y.rest, y.in_contact = speeds[p], rests[p], in_contact[p]
+            y.nx, y.ny, y.nz = normals[p, 0], normals[p, 1], normals[p, 2]
+            if np.isfinite(times[p]):
+                heap, n_heap = _push(heap, n_heap, entries, n_entries - 1)
+            if watch[p]:
+                if n_watched == watched.shape[0]:
+                    watched = _grown(watched, n_watched)
+                watched[n_watched] = n_entries - 1
+                n_watched += 1
+        # Resting contacts speeding up along their chords: tested again at every impact
+        taken = np.empty(n_watched, np.int64)
+        n_taken = 0
+        for w in range(n_watched):
+            if _current(entries, stamps, watched[w]):
+                entries[watched[w]].valid = False
+                taken[n_taken] = watched[w]
+                n_taken += 1
+        n_watched = 0
+        if n_taken:
+            first = n_entries
+            for w in range(n_taken):
+                z = entries[taken[w]]
+                entries, n_entries = _append(entries, n_entries, z.i, z.j, stamps, t, h)
+            n_watched, watched = _retest_watched(chords, now, bodies, planes, (t, dt, slop, floor),
+                                                 entries[first:n_entries], watched, n_watched)
+            for e in range(first, n_entries):
+                entries[e].time = t + entries[e].s * h
+                if np.isfinite(entries[e].s):
+                    heap, n_heap = _push(heap, n_heap, entries, e)
+            for w in range(n_watched):
+                watched[w] += first
+    sizes[N_ENTRIES], sizes[N_HEAP], sizes[N_WATCHED], sizes[N_LOGGED] = n_entries, n_heap, n_watched, n_log
+    sizes[RESOLVED], sizes[RESTING] = resolved, resting
+    return entries, heap, watched, log
+
+
+@njit(cache=True)
+def _retest_watched(chords, now, bodies, planes, split, rows, watched, n_watched):
+    """The watched pairs ``rows`` (new :data:`ENTRY` rows, bodies and stamps set) tested on [t, t_end]
+    as the NumPy path tests them (:meth:`.step.CollisionStep._test`): the start state at ``t``,
+    rest speeds only when some pair touches and approaches (else 0), an impact now for a touching
+    pair approaching faster, the swept time of impact for a pair apart. Their times are written
+    into ``rows``; the ones to watch again are appended to ``watched`` as numbers into ``rows``.
+    Returns ``(n_watched, watched)``."""
+    radii, _, _, acc = bodies
+    normals, offsets, _ = planes
+    t, dt, slop, floor = split
+    y_end = chords[1]
+    k = rows.shape[0]
+    for p in range(k):  # every body's state at t first, as Chords.at before the tests
+        for body in (rows[p].i, rows[p].j):
+            if body >= 0:
+                q, v = state_at(chords, body, t, -1.0)
+                now[0, body, 0], now[0, body, 1], now[0, body, 2] = q
+                now[1, body, 0], now[1, body, 1], now[1, body, 2] = v
+    pressed = False
+    for p in range(k):
+        x = rows[p]
+        a, b = x.i, x.j
+        qa, va = row3_of(now, 0, a), row3_of(now, 1, a)
+        if b >= 0:
+            qb, vb = row3_of(now, 0, b), row3_of(now, 1, b)
+            n, depth = sphere_sphere(sub3(qb, qa), radii[a] + radii[b])
+        else:
+            vb = (0.0, 0.0, 0.0)
+            n, depth, _ = sphere_plane(qa, radii[a], row3(normals, -1 - b), offsets[-1 - b])
+        x.nx, x.ny, x.nz = n
+        x.in_contact = depth >= -slop
+        x.speed = dot3(sub3(va, vb), n)
+        pressed = pressed or (x.in_contact and x.speed > 0)
+    for p in range(k):
+        x = rows[p]
+        a, b = x.i, x.j
+        n = (x.nx, x.ny, x.nz)
+        acc_b = row3(acc, b) if b >= 0 else (0.0, 0.0, 0.0)
+        x.rest = rest_speed(floor, dot3(sub3(row3(acc, a), acc_b), n), dt) if pressed else 0.0
+        x.lo = 0.0
+        if x.in_contact:
+            x.s = 0.0 if x.speed > x.rest else np.inf
+            if not x.speed > x.rest:  # resting: watched again when its approach ends the step faster
+                end_b = row3_of(y_end, 1, b) if b >= 0 else (0.0, 0.0, 0.0)
+                if dot3(sub3(row3_of(y_end, 1, a), end_b), n) > x.rest:
+                    if n_watched == watched.shape[0]:
+                        watched = _grown(watched, n_watched)
+                    watched[n_watched] = p
+                    n_watched += 1
+            continue
+        qa = row3_of(now, 0, a)
+        if b >= 0:
+            qb = row3_of(now, 0, b)
+            chord = sub3(sub3(row3_of(y_end, 0, a), qa), sub3(row3_of(y_end, 0, b), qb))
+            x.s = sphere_sphere_entry(sub3(qa, qb), chord, radii[a] + radii[b])
+        else:
+            plane = -1 - b
+            h0 = plane_height(qa, row3(normals, plane), offsets[plane]) - radii[a]
+            h1 = plane_height(row3_of(y_end, 0, a), row3(normals, plane), offsets[plane]) - radii[a]
+            x.s = sphere_plane_entry_of(h0, h1)
+        x.lo = x.s
+    return n_watched, watched
