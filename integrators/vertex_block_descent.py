@@ -52,7 +52,7 @@ class VBD(PositionBased):
     def init(self, model, t, y):
         from .block_descent import VertexSprings
 
-        c, external, inverse_mass = super().init(model, t, y)
+        c, external, inverse_mass = self.constraints(model)
         if np.any(c.compliance == 0.0):
             p = int(np.flatnonzero(c.compliance == 0.0)[0])
             raise ValueError(f"{self.name}: the spring between bodies {c.i[p]} and {c.j[p]} has stiffness = inf, "

@@ -241,3 +241,20 @@ def test_check_says_a_position_based_method_has_no_dt_limit(capsys):
     status, out, err = run(capsys, "check", "cloth", "--integrator", "xpbd")
     assert status == 0 and err == "" and "stable at every dt" in out
     assert XPBD().stability_limit() is None  # what the line says is the class's theory
+
+
+def test_the_benchmark_step_is_the_integrators_step_in_place():
+    from steplab.bench.systems import cloth_model
+    from steplab.integrators.position_based import cloth_benchmark_step
+    from steplab.physics.soft_body import grid
+
+    assert len(grid(160, 160, 1 / 160).edges) == 101_442  # the cloth: 25,600 particles
+    model, y0, springs = cloth_model(20)
+    for method in (XPBD(1, 1), PBD(3, 2)):
+        step = cloth_benchmark_step(model, y0, 5e-4, method)
+        step.advance(7)
+        expected = simulate(model, method, y0, 0.0, n_steps=7, dt=5e-4).y[-1]
+        assert step.y.tobytes() == expected.tobytes() and not np.array_equal(step.y, y0)
+    # the state read and written, and 2 indices + 3 coefficients per constraint, 1/m and a_ext per body read
+    assert step.bytes_read_and_written == 2 * 400 * 3 * 8
+    assert step.bytes_read == springs * 5 * 8 + 400 * 8 + 400 * 3 * 8
