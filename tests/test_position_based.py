@@ -244,9 +244,10 @@ def test_check_says_a_position_based_method_has_no_dt_limit(capsys):
 
 
 def test_the_benchmark_step_is_the_integrators_step_in_place():
-    from steplab.bench.systems import cloth_model
     from steplab.integrators.position_based import cloth_benchmark_step
     from steplab.physics.soft_body import grid
+
+    from steplab.bench.systems import cloth_model
 
     assert len(grid(160, 160, 1 / 160).edges) == 101_442  # the cloth: 25,600 particles
     model, y0, springs = cloth_model(20)
