@@ -1,7 +1,8 @@
 """The vertex block descent sweep of ``vbd`` (a Numba kernel): per vertex, one Newton step of its local potential.
 
 Implicit Euler on springs and dampers is the minimum over x of the incremental potential
-(Martin et al. 2011; Chen et al., "Vertex block descent", SIGGRAPH 2024, eq. 1-3)
+(the variational form of implicit Euler that Chen et al., "Vertex block descent", SIGGRAPH
+2024, start from)
 
     G(x) = sum_i m_i |x_i - y_i|^2 / (2 h^2) + sum_springs k (|x_i - x_j| - l_rest)^2 / 2 + damping,
     y = q + h v + h^2 a_ext (the inertial target),

@@ -77,8 +77,8 @@ def test_converged_vbd_is_implicit_eulers_step(seed, dt):
 @pytest.mark.parametrize("seed", [0, 1, 2])
 @pytest.mark.parametrize("method", [VBD(1, 1), VBD(4, 2)])
 def test_undamped_vbd_never_gains_energy(seed, method):
-    # each local Newton step lowers the incremental potential G(x) from the guess; for an
-    # unconverged sweep the energy still only falls as long as G ends below G(x_guess)
+    # converged, the step is implicit Euler's, which only dissipates; unconverged, each local step
+    # still lowers the incremental potential G, which this checks on the energy, step after step
     model, y0 = spring_net(seed)
     traj = simulate(model, method, y0, 0.0, n_steps=2000, dt=1e-2)
     energy = np.array([model.energy(y) for y in traj.y])
