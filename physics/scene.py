@@ -20,7 +20,7 @@ import numpy as np
 
 from steplab.core.registry import BUILTIN
 
-from . import rigid_body, soft_body
+from . import rigid_body, soft_body, stacks
 from .forces import FORCES
 from .model import Model
 from .scene_library import SCENES
@@ -167,7 +167,7 @@ class _SceneBuilder:
 
     def build(self, data, name: str, collisions: bool = True) -> Scene:
         root = Table(data, "", self.label)
-        root.allow("name", "description", "simulation", "bodies", "soft_bodies", "particles", "forces",
+        root.allow("name", "description", "simulation", "bodies", "soft_bodies", "particles", "stacks", "forces",
                    "collisions")
         sim = root.table("simulation")
         if sim is None:
@@ -181,8 +181,11 @@ class _SceneBuilder:
         for group in root.tables("particles"):
             self.add_particles(group)
             self._material(group)
+        for stack in root.tables("stacks"):
+            self.add_stack(stack)
+            self._material(stack)
         if not self.names:
-            root.fail("declares no bodies: add [[bodies]], [[soft_bodies]] or [[particles]]")
+            root.fail("declares no bodies: add [[bodies]], [[soft_bodies]], [[particles]] or [[stacks]]")
         forces = root.table("forces")
         if forces is not None:
             self.add_forces(forces)
@@ -331,6 +334,39 @@ class _SceneBuilder:
         velocities = directions * speed * rng.uniform(size=(count, 1))
         for k in range(count):
             self._append(t, f"{name}[{k}]", mass, radius, positions[k], velocities[k])
+
+    def add_stack(self, t: Table):
+        """A column or pyramid of boxes "name[0]", "name[1]", ... bottom row first (:mod:`.stacks`):
+        each a rotating box of ``size``, at rest, its radius the half diagonal (the sphere
+        that bounds it), its mass ``mass`` or, row by row from the bottom, ``masses``."""
+        t.allow("name", "kind", "rows", "size", "mass", "masses", "gap", "base", "material")
+        name, kind = t.string("name", REQUIRED), t.string("kind", REQUIRED, choices=stacks.KINDS)
+        rows = t.integer("rows", REQUIRED, 1, 1000)
+        size = t.vector("size", REQUIRED, positive=True)
+        if ("mass" in t.data) == ("masses" in t.data):
+            t.fail("needs either mass (every box) or masses (one per row, bottom up), not both" if "mass" in t.data
+                   else "missing required key mass (every box) or masses (one per row, bottom up)")
+        if "mass" in t.data:
+            row_masses = [t.number("mass", REQUIRED, positive=True)] * rows
+        else:
+            value = t.raw("masses")
+            if not isinstance(value, list) or len(value) != rows:
+                t.fail(f"must be a list of {rows} masses, one per row bottom up, got {short(value)}", "masses")
+            row_masses = [Table({f"[{k}]": m}, f"{t.where}.masses", self.label).number(f"[{k}]", positive=True)
+                          for k, m in enumerate(value)]
+        gap, base = t.number("gap", 0.0, nonnegative=True), t.vector("base", [0, 0, 0])
+        centres, row = stacks.stack_layout(kind, rows, size, gap, base)
+        radius = 0.5 * float(np.hypot(np.hypot(size[0], size[1]), size[2]))  # hypot: no overflow on the way
+        if not np.isfinite(radius):
+            t.fail(f"a box of edges {size.tolist()} m has no finite half diagonal (the numbers overflow)", "size")
+        for k, (centre, r) in enumerate(zip(centres, row)):
+            mass = row_masses[r]
+            self._append(t, f"{name}[{k}]", mass, radius, centre, np.zeros(3))
+            inertia = rigid_body.principal_inertia("box", mass, radius, size)
+            if not np.all(np.isfinite(inertia) & (inertia > 0)):
+                t.fail(f"the box's principal moments {inertia.tolist()} kg m^2 are not finite and positive "
+                       "(the numbers overflow or underflow)", "size")
+            self.rotating.append((len(self.names) - 1, "box", inertia, np.array([1.0, 0, 0, 0]), np.zeros(3)))
 
     def bodies(self) -> SceneBodies:
         """The bodies declared so far, for the forces' tables."""
