@@ -82,8 +82,9 @@ def missing() -> list[str]:
     return [cls.distribution for cls in ENGINES.values() if not cls.available()]
 
 
-def build(engine: str, model, collisions=None, dt: float = 0.01, y0=None, **options) -> EngineRun:
-    """The adapter of ``engine`` (a key of :data:`ENGINES`) built on a model and its collisions.
+def build(engine: str, model, collisions=None, dt: float = 0.01, y0=None, bodies=None, **options) -> EngineRun:
+    """The adapter of ``engine`` (a key of :data:`ENGINES`) built on a model, its collisions and
+    its rotating ``bodies`` (a :class:`steplab.physics.rigid_body.RigidBodies`, or None).
 
     Raises
     ------
@@ -94,12 +95,13 @@ def build(engine: str, model, collisions=None, dt: float = 0.01, y0=None, **opti
     ValueError
         An unknown engine (:class:`steplab.core.registry.UnknownNameError`) or option.
     """
-    return build_adapter(ENGINES.lookup(engine), model, collisions, dt, y0, **options)
+    return build_adapter(ENGINES.lookup(engine), model, collisions, dt, y0, bodies, **options)
 
 
 def build_scene(engine: str, scene, **options) -> EngineRun:
-    """The adapter of ``engine`` on a loaded :class:`steplab.physics.scene.Scene` (its dt and start)."""
-    return build(engine, scene.model, scene.collisions, scene.dt, scene.y0, **options)
+    """The adapter of ``engine`` on a loaded :class:`steplab.physics.scene.Scene` (its dt, start and
+    rotating bodies)."""
+    return build(engine, scene.model, scene.collisions, scene.dt, scene.y0, scene.rigid_bodies, **options)
 
 
 def run_scene(engine: str, scene, n_steps: int | None = None, save_every: int = 1, **options):

@@ -14,6 +14,10 @@
 - Restitution and friction: Box2D takes the larger restitution of the two fixtures and
   the geometric mean of the frictions, so static shapes get restitution 0 (each body's
   against them wins) and friction 1, and each body mu^2 (the mean is then mu).
+- Rotating bodies (the scene's ``rigid_bodies``) spin about the axis out of the plane: their
+  section by the plane is the fixture (a box, a circle; a capsule in the plane is a box and
+  two circles) and their mass and moment about that axis are set as the body's mass data.
+  Box2D turns a body by angle += dt omega (omega constant without torque).
 - Settings: ``continuous=False`` turns off Box2D's continuous physics (time of impact
   against static bodies); ``bullet=True`` makes every body a "bullet" (time of impact
   against moving bodies too).
@@ -96,9 +100,9 @@ class Box2DRun(PlanarRun):
     spin_attribute = "angularVelocity"
 
     def __init__(self, model, collisions=None, dt: float = 0.01, continuous: bool = True, bullet: bool = False,
-                 y0=None):
+                 y0=None, bodies=None):
         b2 = require("Box2D", ENGINE)
-        super().__init__(model, collisions, ENGINE, y0)
+        super().__init__(model, collisions, ENGINE, y0, bodies)
         parts, axes, y0 = self.parts, self.axes, self._y.copy()
         self.world = world = b2.b2World(gravity=tuple(parts.gravity[list(axes)]), doSleep=False)
         world.continuousPhysics = continuous
@@ -107,6 +111,7 @@ class Box2DRun(PlanarRun):
             ground = world.CreateStaticBody(userData=shape.name)
             ground.CreatePolygonFixture(vertices=corners, restitution=0.0, friction=1.0)
         self.bodies = []
+        rigid = {shape.body: shape for shape in self.rigid}
         for i in range(parts.n):
             position = tuple(y0[0, i, list(axes)])
             if parts.pinned[i]:
@@ -115,10 +120,17 @@ class Box2DRun(PlanarRun):
                 body = world.CreateDynamicBody(position=position, bullet=bullet, userData=i)
             e, mu = parts.against_shapes(i)
             r = float(parts.radii[i])
-            fixture = body.CreateCircleFixture(radius=r, density=float(parts.masses[i]) / (math.pi * r * r),
-                                               restitution=e, friction=mu * mu)
+            if i in rigid:
+                fixtures = self._fixtures(body, rigid[i], restitution=e, friction=mu * mu)
+            else:
+                fixtures = [body.CreateCircleFixture(radius=r, density=float(parts.masses[i]) / (math.pi * r * r),
+                                                     restitution=e, friction=mu * mu)]
             if not contacts:
-                fixture.filterData = b2.b2Filter(categoryBits=1, maskBits=0)
+                for fixture in fixtures:
+                    fixture.filterData = b2.b2Filter(categoryBits=1, maskBits=0)
+            if i in rigid and not parts.pinned[i]:
+                # the body's own mass and moment, not those of its fixtures' areas
+                body.massData = b2.b2MassData(mass=float(parts.masses[i]), center=(0.0, 0.0), I=self.moment(i, 0.0))
             self.bodies.append(body)
         for i, j, k, rest, c in parts.links:
             if rest is None or k == 0:
@@ -134,6 +146,17 @@ class Box2DRun(PlanarRun):
         self.moving = body_indices(parts)
         mode = "bullets" if bullet else "continuous physics" if continuous else "continuous physics off"
         self.settings = f"Box2D {version('Box2D')}, {mode}"
+
+    def _fixtures(self, body, shape, **material) -> list:
+        """The fixtures of a rotating body's section by the plane (:meth:`.base.PlanarRun.outline`)."""
+        outline = self.outline(shape)
+        if outline[0] == "circle":
+            return [body.CreateCircleFixture(radius=outline[1], density=1.0, **material)]
+        if outline[0] == "box":
+            return [body.CreatePolygonFixture(box=outline[1], density=1.0, **material)]
+        half, r = outline[1], outline[2]
+        return [body.CreatePolygonFixture(box=(r, half), density=1.0, **material),
+                *(body.CreateCircleFixture(radius=r, pos=(0.0, end), density=1.0, **material) for end in (-half, half))]
 
     def step(self, dt: float) -> None:
         self.world.Step(dt, VELOCITY_ITERATIONS, POSITION_ITERATIONS)

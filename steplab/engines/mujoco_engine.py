@@ -2,12 +2,17 @@
 
 The state is read and written through the free joints: ``qpos`` holds each moving body's
 position and a unit quaternion (w, x, y, z), ``qvel`` its linear and angular velocity
-(spheres: the rotation never changes where a centre goes, and starts at rest).
+(spheres: the rotation never changes where a centre goes, and starts at rest). A rotating
+body's orientation is its ``qpos`` quaternion as steplab's (body to world); the angular
+part of a free joint's ``qvel`` is in the *body* frame, omega_body = R^T omega_world, so it
+is rotated on the way in and out.
 """
 
 from __future__ import annotations
 
 import numpy as np
+
+from steplab.physics import quaternion as quat
 
 from .base import EngineRun, Setting, body_indices, require, scene_parts, version
 from .mjcf import ENGINE, mjcf
@@ -50,13 +55,13 @@ class MujocoRun(EngineRun):
 
     def __init__(self, model, collisions=None, dt: float = 0.01, integrator: str = "Euler",
                  solver: str | None = None, iterations: int | None = None, jacobian: str | None = None,
-                 y0=None):
+                 y0=None, bodies=None):
         mujoco = require("mujoco", ENGINE)
-        super().__init__(scene_parts(model, collisions, ENGINE))
+        super().__init__(scene_parts(model, collisions, ENGINE), model, bodies)
         n = self.parts.n
         y0 = np.zeros((2, n, 3)) if y0 is None else np.asarray(y0, float)
         self._mujoco = mujoco
-        self.xml = mjcf(model, y0, dt, collisions, integrator, solver, iterations, jacobian)
+        self.xml = mjcf(model, y0, dt, collisions, integrator, solver, iterations, jacobian, bodies=bodies)
         _quiet(mujoco)
         self.model = mujoco.MjModel.from_xml_string(self.xml)
         # MuJoCo puts a diverging simulation back at its start (auto-reset) and carries on;
@@ -64,6 +69,9 @@ class MujocoRun(EngineRun):
         self.model.opt.disableflags |= mujoco.mjtDisableBit.mjDSBL_AUTORESET
         self.data = mujoco.MjData(self.model)
         self.moving = body_indices(self.parts)
+        # each rotating body's row among the free joints (None: pinned, it never turns)
+        row = {int(i): r for r, i in enumerate(self.moving)}
+        self._rows = [row.get(shape.body) for shape in self.rigid]
         self._dt = dt
         self._y = y0.copy()
         solver_text = "" if solver is None else f", {solver}" + (f", {iterations} iterations" if iterations else "")
@@ -84,6 +92,26 @@ class MujocoRun(EngineRun):
         qvel = np.zeros((k, 6))
         qvel[:, :3] = self._y[1, self.moving]
         d.qpos[:], d.qvel[:] = qpos.ravel(), qvel.ravel()
+
+    def set_rotation(self, orientations, angular_velocities) -> None:
+        k = len(self.moving)
+        qpos, qvel = self.data.qpos.reshape(k, 7), self.data.qvel.reshape(k, 6)  # views of MuJoCo's arrays
+        q, omega = np.asarray(orientations, float), np.asarray(angular_velocities, float)
+        self._fixed = (q, omega)
+        for j, row in enumerate(self._rows):
+            if row is not None:
+                qpos[row, 3:] = q[j]
+                qvel[row, 3:] = quat.rotate_inverse(np, q[j], omega[j])
+
+    def rotation(self) -> tuple[np.ndarray, np.ndarray]:
+        k = len(self.moving)
+        qpos, qvel = self.data.qpos.reshape(k, 7), self.data.qvel.reshape(k, 6)
+        q, omega = (a.copy() for a in self._fixed)
+        for j, row in enumerate(self._rows):
+            if row is not None:
+                q[j] = qpos[row, 3:]
+                omega[j] = quat.rotate(np, q[j], qvel[row, 3:])
+        return q, omega
 
     def step(self, dt: float) -> None:
         if dt != self._dt:
