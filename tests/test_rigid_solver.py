@@ -18,6 +18,7 @@ from steplab.physics.collision import CollisionWorld, PairProperties, Plane
 from steplab.physics.collision import rigid_solver as rs
 from steplab.physics.collision.rigid_solver_step import RigidScene, RigidSolverStep
 from steplab.physics.rigid_body import RigidBodies, principal_inertia
+from steplab.physics.scene import parse_scene
 
 G = 9.81
 SPHERE, BOX = 0, 1
@@ -254,3 +255,52 @@ def test_warm_starting_by_feature_survives_a_reordering_of_the_contacts():
     assert ordered.y.tobytes() == shuffled.y.tobytes()
     assert a.orientation.tobytes() == b.orientation.tobytes()
     assert not np.array_equal(ordered.y, renamed.y)
+
+
+BOX_SCENE = """
+[simulation]
+dt = 0.0166666666666666667
+t_end = 0.5
+[[bodies]]
+name = "crate"
+mass = 2.0
+radius = 0.1
+shape = "box"
+size = [0.4, 0.3, 0.2]
+position = [0.0, 0.0, 0.3]
+orientation = [0.98, 0.1, 0.15, 0.0]
+angular_velocity = [1.0, -2.0, 0.5]
+[[bodies]]
+name = "ball"
+mass = 1.0
+radius = 0.1
+position = [1.0, 0.0, 0.1]
+velocity = [-1.0, 0.0, 0.0]
+[forces.gravity]
+[collisions]
+method = "{method}"
+friction = 0.4
+restitution = 0.3
+[[collisions.planes]]
+normal = [0.0, 0.0, 1.0]
+"""
+
+
+def test_the_event_loop_refuses_boxes_in_one_line_naming_the_solver(tmp_path, capsys):
+    from steplab.cli import main
+
+    path = tmp_path / "crate.toml"
+    path.write_text(BOX_SCENE.replace("{method}", "event"))
+    assert main(["run", str(path)]) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1
+    assert 'boxes and capsules need [collisions] method = "solver"' in err
+
+
+def test_a_scene_file_builds_the_rigid_world():
+    """The issue-25 keys give the solver its shapes: the box's half edges, the ball a point mass."""
+    scene = parse_scene(BOX_SCENE.replace("{method}", "solver"))
+    rigid = scene.collisions.rigid
+    assert rigid.kind.tolist() == [BOX, SPHERE] and rigid.has_corners
+    np.testing.assert_array_equal(rigid.half, [[0.2, 0.15, 0.1], [0.0, 0.0, 0.0]])
+    assert rigid.bodies.index.tolist() == [0] and rigid.rotation == "exponential-map"
