@@ -164,6 +164,7 @@ class _SceneBuilder:
         self.forces: list = []
         self.materials: list[str] = []
         self.rotating: list[tuple] = []  # (body index, shape, inertia, orientation, angular velocity)
+        self.half: dict[int, np.ndarray] = {}  # body index -> a box's half edges, a capsule's (0, 0, l / 2)
 
     def build(self, data, name: str, collisions: bool = True) -> Scene:
         root = Table(data, "", self.label)
@@ -205,7 +206,7 @@ class _SceneBuilder:
                       pinned=np.array(self.pinned), names=self.names)
         y0 = np.stack([np.array(self.positions), np.array(self.velocities)])
         table = root.table("collisions") if collisions else None
-        collisions = self.add_collisions(table) if table is not None else None
+        collisions = self.add_collisions(table, rotation) if table is not None else None
         return Scene(root.string("name", name), model, y0, integrator, dt, t_start, t_end,
                      root.string("description", ""), collisions, self.rigid_bodies(), rotation,
                      {} if settings is None else dict(settings.data))
@@ -247,6 +248,10 @@ class _SceneBuilder:
         rotation = rigid_body.from_scene_body(t, mass, radius)
         if rotation is not None:
             self.rotating.append((len(self.names) - 1, *rotation))
+            if rotation[0] == "box":
+                self.half[len(self.names) - 1] = 0.5 * t.vector("size", REQUIRED)
+            elif rotation[0] in ("capsule", "cylinder"):
+                self.half[len(self.names) - 1] = np.array([0.0, 0.0, 0.5 * t.number("length", REQUIRED)])
 
     def add_soft_body(self, t: Table):
         t.allow("name", "shape", "size", "center", "rows", "cols", "spacing", "origin", "shear",
@@ -397,7 +402,23 @@ class _SceneBuilder:
         material = t.string("material", DEFAULT_MATERIAL)
         self.materials += [material] * (len(self.names) - len(self.materials))
 
-    def add_collisions(self, c: Table):
+    def rigid_scene(self, c: Table, method: str, rotation: str | None):
+        """The rotating bodies' shapes and state for the contact solver (None: all point masses)."""
+        bodies = self.rigid_bodies()
+        if bodies is None:
+            return None
+        from .collision.rigid_solver_step import DEFAULT_ROTATION, KINDS, RigidScene
+
+        if method == "solver" and "cylinder" in bodies.shapes:
+            c.fail('the contact solver has no manifold for a cylinder; give the body shape = "capsule"', "method")
+        kind = np.zeros(len(self.names), np.int8)
+        kind[bodies.index] = [KINDS.get(shape, -1) for shape in bodies.shapes]
+        half = np.zeros((len(self.names), 3))
+        for body, extent in self.half.items():
+            half[body] = extent
+        return RigidScene(kind, np.array(self.radii), half, bodies, rotation or DEFAULT_ROTATION)
+
+    def add_collisions(self, c: Table, rotation: str | None = None):
         """The [collisions] table: detector, materials and static geometry (a CollisionWorld)."""
         from .broadphase import METHODS
         from .collision import world as collision_world
@@ -469,7 +490,7 @@ class _SceneBuilder:
             detector=detector, shapes=tuple(shape for _, shape in shapes), materials=materials,
             pair_properties=PairProperties(restitution, friction, table), bisection_iterations=iterations,
             max_impacts_per_step=max_impacts, broadphase=broadphase, rest_speed=rest_speed, method=method,
-            **method_fields)
+            rigid=self.rigid_scene(c, method, rotation), **method_fields)
 
     @staticmethod
     def _restitution(t: Table, key: str, default):

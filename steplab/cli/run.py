@@ -66,6 +66,8 @@ def command(args) -> int:
     rotation_method = rotation_named(scene, args)
     dt, t_end = time_span(scene, args)
     world = with_method(collision_world(scene, args.detector, args.backend), args)
+    if world is not None and world.rigid is not None:  # the solver turns the bodies with the run's rotation method
+        world = dataclasses.replace(world, rigid=dataclasses.replace(world.rigid, rotation=rotation_method.name))
     warning = dt_warning(scene.model, scene.y0[0], integrator, dt)  # before the run: it may be long
     if warning is not None:
         print(f"steplab run: warning: {warning}", file=sys.stderr)
@@ -78,7 +80,7 @@ def command(args) -> int:
         traj = simulate(scene.model, integrator, scene.y0, scene.t_start, dt=dt, **end, backend=args.backend,
                         dtype=np.dtype(args.precision), save_every=args.save_every,
                         max_steps=args.max_steps or MAX_STEPS, progress=not args.json and sys.stderr.isatty(),
-                        stepper=None if world is None else _keeping(world.stepper, kept))
+                        stepper=None if world is None else _keeping(world.stepper, kept, args.save_every))
     except Exception as err:
         if world is None:
             raise
@@ -90,7 +92,9 @@ def command(args) -> int:
             print(json.dumps(stopped_summary(settings, err, kept[0].log if kept else None), indent=2))
         return fail(args.command, str(err), EXIT_DIVERGED)
     rotation = None
-    if scene.rigid_bodies is not None:  # beside the translation, at its saved times; a divergence is status 1
+    if kept and hasattr(kept[0], "rotation_at"):  # the contact solver turned the bodies with their contacts
+        rotation = _solved_rotation(scene, traj, kept[0])
+    elif scene.rigid_bodies is not None:  # beside the translation, at its saved times; a divergence is status 1
         from steplab.integrators.scene_rotation import rotate_scene
 
         rotation = rotate_scene(scene, traj, rotation_method, backend=args.backend)
@@ -135,14 +139,29 @@ def integrator_named(name: str):
     return get_integrator(name)
 
 
-def _keeping(make_step, kept: list):
-    """``make_step`` (a stepper factory for ``simulate``) that also appends the step it builds to ``kept``."""
+def _keeping(make_step, kept: list, save_every: int = 1):
+    """``make_step`` (a stepper factory for ``simulate``) that also appends the step it builds to ``kept``
+    (and has a step that records the rotation keep it at the saved steps only)."""
     def stepper(model, integrator):
         step = make_step(model, integrator)
+        if hasattr(step, "record_every"):
+            step.record_every = save_every
         kept.append(step)
         return step
 
     return stepper
+
+
+def _solved_rotation(scene, traj, step):
+    """The rotating bodies at the trajectory's saved times, as the contact solver turned them."""
+    import numpy as np
+
+    from steplab.integrators.scene_rotation import RotationTrajectory
+
+    bodies = scene.rigid_bodies
+    orientations, angular_velocities = step.rotation_at(np.rint((traj.t - traj.t[0]) / traj.dt).astype(int))
+    return RotationTrajectory(traj.t, orientations[:, bodies.index], angular_velocities[:, bodies.index],
+                              step.world.rigid.rotation, bodies)
 
 
 def with_method(world, args):
