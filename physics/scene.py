@@ -372,6 +372,7 @@ class _SceneBuilder:
                 t.fail(f"the box's principal moments {inertia.tolist()} kg m^2 are not finite and positive "
                        "(the numbers overflow or underflow)", "size")
             self.rotating.append((len(self.names) - 1, "box", inertia, np.array([1.0, 0, 0, 0]), np.zeros(3)))
+            self.half[len(self.names) - 1] = 0.5 * size
 
     def bodies(self) -> SceneBodies:
         """The bodies declared so far, for the forces' tables."""

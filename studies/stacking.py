@@ -105,20 +105,37 @@ def with_solver(scene: Scene, **settings) -> Scene:
 
 def run(scene: Scene, t_end: float | None = None, dt: float | None = None, every: int = 1) -> Run:
     """Run ``scene`` (its integrator, collisions and rotating bodies) to ``t_end`` with steps of
-    ``dt`` (default the scene's), keeping every ``every``-th state."""
+    ``dt`` (default the scene's), keeping every ``every``-th state.
+
+    Under the contact solver the rotation is the solver's (the rigid step turns the bodies with
+    their contacts and records them at the saved steps); elsewhere (no collisions, or the event
+    loop, whose spheres do not spin) each body turns freely beside its translation."""
     from steplab.integrators import simulate
     from steplab.integrators.scene_rotation import rotate_scene
 
-    dt, t_end = dt or scene.dt, t_end or scene.t_end
+    dt, t_end, world, kept = dt or scene.dt, t_end or scene.t_end, scene.collisions, []
+
+    def stepper(model, integrator):
+        step = world.stepper(model, integrator)
+        if hasattr(step, "record_every"):  # the rigid solver: its rotation at the saved steps only
+            step.record_every = every
+        kept.append(step)
+        return step
+
     start = time.perf_counter()
     traj = simulate(scene.model, scene.integrator, scene.y0, scene.t_start, t_end, dt, save_every=every,
-                    collisions=scene.collisions)
-    rotation = rotate_scene(scene, traj)
+                    stepper=stepper if world is not None else None)
     seconds = (time.perf_counter() - start) / max(traj.steps, 1)
-    if rotation is None:
-        shape = (len(traj.t), 0)
-        return Run(traj.t, traj.positions, traj.velocities, np.zeros(shape + (4,)), np.zeros(shape + (3,)), seconds)
-    return Run(traj.t, traj.positions, traj.velocities, rotation.orientations, rotation.angular_velocities, seconds)
+    bodies, shape = scene.rigid_bodies, (len(traj.t), 0)
+    if bodies is None:
+        orientations, omega = np.zeros(shape + (4,)), np.zeros(shape + (3,))
+    elif kept and hasattr(kept[0], "rotation_at"):
+        orientations, omega = kept[0].rotation_at(np.rint((traj.t - traj.t[0]) / traj.dt).astype(int))
+        orientations, omega = orientations[:, bodies.index], omega[:, bodies.index]
+    else:
+        rotation = rotate_scene(scene, traj)
+        orientations, omega = rotation.orientations, rotation.angular_velocities
+    return Run(traj.t, traj.positions, traj.velocities, orientations, omega, seconds)
 
 
 def kinetic_energy(scene: Scene, r: Run) -> np.ndarray:
