@@ -324,3 +324,21 @@ def test_a_scene_file_builds_the_rigid_world():
     assert rigid.kind.tolist() == [BOX, SPHERE] and rigid.has_corners
     np.testing.assert_array_equal(rigid.half, [[0.2, 0.15, 0.1], [0.0, 0.0, 0.0]])
     assert rigid.bodies.index.tolist() == [0] and rigid.rotation == "exponential-map"
+
+
+def test_rolling_resistance_slows_a_rolling_ball_at_five_sevenths_c_g():
+    """A torque c_r r m g against the rolling of a ball that rolls (v = omega r): (m + I / r^2) dv/dt =
+    -c_r m g, so dv/dt = -5/7 c_r g; without the setting it rolls on at constant speed."""
+    radius, v0, c = 0.1, 1.0, 0.05
+
+    def rolling(c_r):
+        world = rigid_world([SPHERE], [radius], [[0.0, 0.0, 0.0]], [1.0], omega=[[0.0, v0 / radius, 0.0]],
+                            shapes=[FLOOR], friction=0.5, rolling_resistance=c_r)
+        y0 = np.array([[[0.0, 0.0, radius]], [[v0, 0.0, 0.0]]])
+        traj, _ = run(world, Model([1.0], [radius], [Gravity()]), y0, 1 / 60, 60)
+        return traj.t[10:], traj.velocities[10:, 0, 0]
+
+    t, v = rolling(c)
+    assert np.polyfit(t, v, 1)[0] == pytest.approx(-5 / 7 * c * G, rel=1e-2)
+    t, v = rolling(0.0)
+    assert np.max(np.abs(v - v[0])) < 1e-3 * v0  # the contact's deflection shortens the lever: 6e-4 measured
