@@ -96,6 +96,11 @@ class Box2DRun(PlanarRun):
         Setting("box2d-default", "Box2D default", {}, True, "implicit-euler", BOX2D_BOUNCE),
         Setting("box2d-bullet", "Box2D, bullets", {"bullet": True}, True, "implicit-euler", BOX2D_BOUNCE),
     )
+    rotation_settings = (
+        Setting("box2d-default", "Box2D default", {}, None, "exponential-map",
+                "a spin about the axis out of the plane: angle += h omega, the exact turn at constant omega (as "
+                "every method that turns by the exponential map); a 3-D tumble is out of its reach"),
+    )
     velocity_attribute = "linearVelocity"
     spin_attribute = "angularVelocity"
 

@@ -56,6 +56,12 @@ class BulletRun(EngineRun):
         Setting("bullet-ccd", "Bullet, CCD on", {"ccd": True}, True, "semi-implicit-euler", PENETRATION_RECOVERY),
     )
 
+    rotation_settings = (
+        Setting("bullet-default", "Bullet default", {}, None, "implicit-gyroscopic",
+                "BT_ENABLE_GYROSCOPIC_FORCE_IMPLICIT_BODY (btRigidBody's default; pybullet cannot change it): one "
+                "Newton step on omega in the body frame, then integrateTransform's exponential map"),
+    )
+
     def __init__(self, model, collisions=None, dt: float = 0.01, position_correction: bool = True,
                  ccd: bool = False, y0=None, bodies=None):
         pybullet = require("pybullet", ENGINE)

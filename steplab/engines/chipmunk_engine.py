@@ -40,6 +40,11 @@ class ChipmunkRun(PlanarRun):
         Setting("chipmunk", "Chipmunk", {}, False, "exponential-damping-euler",
                 "elasticity is the product of the two shapes'; with the collision slop at 5 mm the bounce is eps^2"),
     )
+    rotation_settings = (
+        Setting("chipmunk", "Chipmunk", {}, None, "exponential-map",
+                "a spin about the axis out of the plane: angle += h omega, the exact turn at constant omega (as "
+                "every method that turns by the exponential map); a 3-D tumble is out of its reach"),
+    )
 
     def __init__(self, model, collisions=None, dt: float = 0.01, collision_slop: float = COLLISION_SLOP, y0=None,
                  bodies=None):
