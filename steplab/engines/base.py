@@ -316,7 +316,9 @@ class EngineRun:
     None: it needs none), ``study_settings`` (the :class:`Setting` tuple the engines
     study measures) and ``rotation_settings`` (those the rotation study measures on a free
     rigid body: ``equals`` is the steplab *rotation* method each is expected to step, None
-    for none, and ``deviation`` says what the engine does to the rotation).
+    for none, and ``deviation`` says what the engine does to the rotation) and ``stack_settings``
+    (:mod:`.stacks`: the engine's defaults first, then its documented tuned settings, each
+    ``deviation`` saying what it changes and why).
     Instances set ``settings`` (a line saying how the run is set up) and
     implement ``set_state(y)``, ``step(dt)``, ``state() -> y`` and, where the engine reports
     contacts, ``touching() -> {(body, other): normal}`` (``other`` a body index or a shape's name).
@@ -331,12 +333,13 @@ class EngineRun:
     distribution: ClassVar[str | None] = None
     study_settings: ClassVar[tuple[Setting, ...]] = ()
     rotation_settings: ClassVar[tuple[Setting, ...]] = ()
+    stack_settings: ClassVar[tuple[Setting, ...]] = ()
     settings: str = ""
 
     def __init_subclass__(cls, **kwargs):
         super().__init_subclass__(**kwargs)
         # each setting names its adapter: one table of facts per engine, kept in its adapter
-        for kind in ("study_settings", "rotation_settings"):
+        for kind in ("study_settings", "rotation_settings", "stack_settings"):
             setattr(cls, kind, tuple(dataclasses.replace(s, engine=cls.engine, adapter=cls)
                                      for s in cls.__dict__.get(kind, ())))
 

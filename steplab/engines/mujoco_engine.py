@@ -62,6 +62,15 @@ class MujocoRun(EngineRun):
                 "sum b omega), not RK4 on the quaternion's components: 4th order, not steplab's rk4"),
     )
 
+    stack_settings = (
+        Setting("mujoco-newton", "MuJoCo Newton (default)", {"solver": "Newton"}, None, None,
+                "MuJoCo's default solver: Newton's method on the soft contacts' convex problem"),
+        Setting("mujoco-pgs", "MuJoCo PGS", {"solver": "PGS"}, None, None,
+                "projected Gauss-Seidel on the dual problem, the sequential-impulse family"),
+        Setting("mujoco-pgs-tuned", "MuJoCo PGS, 200 iterations", {"solver": "PGS", "iterations": 200}, None, None,
+                "PGS converges linearly: 200 iterations instead of 100 for the tall stacks"),
+    )
+
     @classmethod
     def integrator_stepping_as(cls, method: str) -> str | None:
         """MuJoCo's integrator that steps as steplab's ``method`` does (what its settings declare;
