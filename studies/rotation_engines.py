@@ -329,5 +329,15 @@ def engines_table(data: dict) -> str:
     return markdown_table(header, rows) + note + missing
 
 
-TABLE = Table("rotation_engines", lambda engines: {k: engines[k] for k in (
-    "identification", "drift", "drift_time", "identification_steps", "missing")}, engines_table)
+def _table_slice(engines: dict) -> dict:
+    """What :func:`engines_table` draws from, and no more: each drift run's last values."""
+    keep = ("body", "kind", "name", "diverged_at")
+    drift = [{k: r[k] for k in keep if k in r} | {k: r[k][-1:] for k in ("energy", "momentum") if k in r}
+             for r in engines["drift"]]
+    identification = [{k: r[k] for k in ("key", "label", "expected", "equals", "nearest", "difference",
+                                         "tolerance", "precision")} for r in engines["identification"]]
+    return {k: engines[k] for k in ("drift_time", "identification_steps", "missing")} | {
+        "drift": drift, "identification": identification}
+
+
+TABLE = Table("rotation_engines", _table_slice, engines_table)
