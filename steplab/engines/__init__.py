@@ -55,8 +55,11 @@ ENGINES: Registry = Registry("steplab.engines", "engine", [(cls.engine, cls) for
 class _Settings(Mapping):
     """Setting key -> :class:`Setting`, read from the registered adapters each time (in their order)."""
 
+    def __init__(self, kind: str = "study_settings"):
+        self.kind = kind
+
     def _all(self) -> dict[str, Setting]:
-        return {s.key: s for cls in ENGINES.values() for s in cls.study_settings}
+        return {s.key: s for cls in ENGINES.values() for s in getattr(cls, self.kind)}
 
     def __getitem__(self, key: str) -> Setting:
         return self._all()[key]
@@ -70,6 +73,8 @@ class _Settings(Mapping):
 
 #: the settings of the engines study, in its order: each adapter's ``study_settings``
 SETTINGS: Mapping[str, Setting] = _Settings()
+#: the settings of the rotation study's engines (a free rigid body): each adapter's ``rotation_settings``
+ROTATION_SETTINGS: Mapping[str, Setting] = _Settings("rotation_settings")
 
 
 def available(engine: str) -> bool:

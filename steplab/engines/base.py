@@ -183,6 +183,10 @@ def plane_axes(parts: SceneParts, y0, engine: str) -> tuple[int, int]:
     return axes
 
 
+#: m, the least half extent of a rotating body's engine shape (MuJoCo and Bullet need sizes > 0)
+SMALLEST_EXTENT = 1e-6
+
+
 @dataclasses.dataclass(frozen=True)
 class RigidShape:
     """One rotating body as an engine builds it: its shape, mass, principal moments and extent.
@@ -211,7 +215,8 @@ def rigid_shapes(model, bodies: RigidBodies | None) -> tuple[RigidShape, ...]:
     from m/12 (b^2 + c^2, ...): a^2 = 6 (I2 + I3 - I1) / m; a cylinder's length from
     I1 = m/12 (3 r^2 + l^2); a capsule's by bisection on its (monotone) I1(l). A body whose
     ``inertia`` overrides its shape's gets the shape of these moments (the engine still
-    gets the moments themselves).
+    gets the moments themselves). An extent the moments make zero (a thin plate's edge) is
+    :data:`SMALLEST_EXTENT`: the engines refuse a shape of size 0.
     """
     if bodies is None:
         return ()
@@ -226,7 +231,7 @@ def rigid_shapes(model, bodies: RigidBodies | None) -> tuple[RigidShape, ...]:
             half = np.array([r, r, 0.5 * _capsule_length(m, r, inertia[0])])
         else:
             half = np.full(3, r)
-        out.append(RigidShape(int(i), shape, m, inertia, half))
+        out.append(RigidShape(int(i), shape, m, inertia, np.maximum(half, SMALLEST_EXTENT)))
     return tuple(out)
 
 
@@ -308,8 +313,13 @@ class EngineRun:
     ``display_name`` (for figures), ``colour`` (its figures' colour), ``planar`` (a 2-D
     engine, bodies in a plane), ``precision`` (its float type, "float64" or "float32"),
     ``package`` and ``distribution`` (the Python package it imports and its name on PyPI;
-    None: it needs none) and ``study_settings`` (the :class:`Setting` tuple the engines
-    study measures). Instances set ``settings`` (a line saying how the run is set up) and
+    None: it needs none), ``study_settings`` (the :class:`Setting` tuple the engines
+    study measures) and ``rotation_settings`` (those the rotation study measures on a free
+    rigid body: ``equals`` is the steplab *rotation* method each is expected to step, None
+    for none, and ``deviation`` says what the engine does to the rotation) and ``stack_settings``
+    (:mod:`.stacks`: the engine's defaults first, then its documented tuned settings, each
+    ``deviation`` saying what it changes and why).
+    Instances set ``settings`` (a line saying how the run is set up) and
     implement ``set_state(y)``, ``step(dt)``, ``state() -> y`` and, where the engine reports
     contacts, ``touching() -> {(body, other): normal}`` (``other`` a body index or a shape's name).
     """
@@ -322,13 +332,16 @@ class EngineRun:
     package: ClassVar[str | None] = None
     distribution: ClassVar[str | None] = None
     study_settings: ClassVar[tuple[Setting, ...]] = ()
+    rotation_settings: ClassVar[tuple[Setting, ...]] = ()
+    stack_settings: ClassVar[tuple[Setting, ...]] = ()
     settings: str = ""
 
     def __init_subclass__(cls, **kwargs):
         super().__init_subclass__(**kwargs)
         # each setting names its adapter: one table of facts per engine, kept in its adapter
-        cls.study_settings = tuple(dataclasses.replace(s, engine=cls.engine, adapter=cls)
-                                   for s in cls.__dict__.get("study_settings", ()))
+        for kind in ("study_settings", "rotation_settings", "stack_settings"):
+            setattr(cls, kind, tuple(dataclasses.replace(s, engine=cls.engine, adapter=cls)
+                                     for s in cls.__dict__.get(kind, ())))
 
     @classmethod
     def available(cls) -> bool:

@@ -21,7 +21,9 @@
 - Settings: ``position_correction=False`` turns Bullet's penetration recovery off (the
   split impulse and the error-reduction parameters ERP, contact ERP and friction ERP);
   ``ccd=True`` turns on continuous collision detection, a swept sphere of each body's
-  radius (Bullet's motion clamping).
+  radius (Bullet's motion clamping); ``iterations`` sets the constraint solver's iterations
+  (``numSolverIterations``, pybullet's default 50) and ``substeps`` splits each step into that
+  many (``numSubSteps``).
 """
 
 from __future__ import annotations
@@ -56,8 +58,23 @@ class BulletRun(EngineRun):
         Setting("bullet-ccd", "Bullet, CCD on", {"ccd": True}, True, "semi-implicit-euler", PENETRATION_RECOVERY),
     )
 
+    rotation_settings = (
+        Setting("bullet-default", "Bullet default", {}, None, "implicit-gyroscopic",
+                "BT_ENABLE_GYROSCOPIC_FORCE_IMPLICIT_BODY (btRigidBody's default; pybullet cannot change it): one "
+                "Newton step on omega in the body frame, then integrateTransform's exponential map"),
+    )
+
+    stack_settings = (
+        Setting("bullet-default", "Bullet default", {}, None, None, "pybullet's defaults: 50 solver iterations, "
+                "split impulse"),
+        Setting("bullet-substeps", "Bullet, 4 substeps", {"substeps": 4}, None, None,
+                "each step as 4 substeps of dt/4: the stiffer problem per substep is what substepping buys a solver "
+                "of sequential impulses"),
+    )
+
     def __init__(self, model, collisions=None, dt: float = 0.01, position_correction: bool = True,
-                 ccd: bool = False, y0=None, bodies=None):
+                 ccd: bool = False, iterations: int | None = None, substeps: int | None = None, y0=None,
+                 bodies=None):
         pybullet = require("pybullet", ENGINE)
         super().__init__(scene_parts(model, collisions, ENGINE, forces=(Gravity, Springs, Dampers),
                                      shapes=(Plane, Box, OrientedBox)), model, bodies)
@@ -70,6 +87,10 @@ class BulletRun(EngineRun):
         self._dt = dt
         if not position_correction:
             pb.setPhysicsEngineParameter(erp=0.0, contactERP=0.0, frictionERP=0.0, useSplitImpulse=0, **p)
+        if iterations is not None:
+            pb.setPhysicsEngineParameter(numSolverIterations=int(iterations), **p)
+        if substeps is not None:
+            pb.setPhysicsEngineParameter(numSubSteps=int(substeps), **p)
         y0 = np.zeros((2, parts.n, 3)) if y0 is None else np.asarray(y0, float)
         self._y = y0.copy()
         self._links = [f for f in model._source_forces if isinstance(f, (Springs, Dampers))]
@@ -101,7 +122,9 @@ class BulletRun(EngineRun):
         self.moving = body_indices(parts)
         self._start = pb.saveState(**p)
         options = [name for name, on in (("position correction off", not position_correction),
-                                         ("continuous collision detection", ccd)) if on]
+                                         ("continuous collision detection", ccd),
+                                         (f"{iterations} iterations", iterations is not None),
+                                         (f"{substeps} substeps", substeps is not None)) if on]
         self.settings = f"Bullet (pybullet {version('pybullet')})" + (", " + ", ".join(options) if options else
                                                                      ", default")
 

@@ -47,6 +47,30 @@ class MujocoRun(EngineRun):
                 "a large part of the bounce"),
     )
 
+    rotation_settings = (
+        Setting("mujoco-euler", "MuJoCo Euler", {"integrator": "Euler"}, None, "exponential-map",
+                "omega from the Coriolis term at the start of the step, then q exp(h omega) with the new omega "
+                "(mj_integratePos)"),
+        Setting("mujoco-implicitfast", "MuJoCo implicitfast", {"integrator": "implicitfast"}, None,
+                "implicit-gyroscopic", "the gyroscopic term's derivative is in the step's matrix: one Newton step on "
+                "omega, then the exponential map; it damps the tumbling"),
+        Setting("mujoco-implicit", "MuJoCo implicit", {"integrator": "implicit"}, None, "implicit-gyroscopic",
+                "the full derivative of the forces, which on a free body is that of the gyroscopic term: as "
+                "implicitfast"),
+        Setting("mujoco-rk4", "MuJoCo RK4", {"integrator": "RK4"}, None, None,
+                "RK4 on omega, but each stage's orientation is q exp(c h omega_stage) and the step's q exp(h "
+                "sum b omega), not RK4 on the quaternion's components: 4th order, not steplab's rk4"),
+    )
+
+    stack_settings = (
+        Setting("mujoco-newton", "MuJoCo Newton (default)", {"solver": "Newton"}, None, None,
+                "MuJoCo's default solver: Newton's method on the soft contacts' convex problem"),
+        Setting("mujoco-pgs", "MuJoCo PGS", {"solver": "PGS"}, None, None,
+                "projected Gauss-Seidel on the dual problem, the sequential-impulse family"),
+        Setting("mujoco-pgs-tuned", "MuJoCo PGS, 200 iterations", {"solver": "PGS", "iterations": 200}, None, None,
+                "PGS converges linearly: 200 iterations instead of 100 for the tall stacks"),
+    )
+
     @classmethod
     def integrator_stepping_as(cls, method: str) -> str | None:
         """MuJoCo's integrator that steps as steplab's ``method`` does (what its settings declare;
