@@ -55,6 +55,8 @@ REST_ENERGY = 1e-3
 ENERGY_GAIN_TOLERANCE = 1e-3
 #: a body moves when faster than this, m/s (the cradle)
 MOVING = 1e-3
+#: the stacks the engines run beside steplab
+STACKS = ("box-column", "box-pyramid", "mass-ratio-stack")
 
 
 def parameters(quick: bool) -> dict:
@@ -372,23 +374,26 @@ def cradle(p: dict) -> dict:
 
 
 def engines(p: dict, progress) -> dict:
-    """The engines on the column, the pyramid and the mass-ratio stack (run_stack), where installed."""
+    """Each engine's stack settings (its defaults and its tuned one) on the column, the pyramid
+    and the mass-ratio stack (:func:`steplab.engines.stacks.run_stack`), where installed; a 2-D
+    engine runs a stack's plane."""
     if not p["engines"]:
         return {"rows": [], "skipped": ["--quick: the engines are not run"]}
-    try:
-        from steplab.engines.stacks import run_stack
-    except ImportError:
-        return {"rows": [], "skipped": ["steplab.engines.stacks is not in this build: no engines compared"]}
-    from steplab.engines import ENGINES
+    from steplab.engines import ENGINES, UnsupportedFeatureError
+    from steplab.engines.stacks import run_stack
 
     rows, skipped = [], []
-    for key in ENGINES:
-        if not ENGINES[key].available():
-            skipped.append(f"{ENGINES[key].distribution} is not installed: not compared")
+    for key, cls in ENGINES.items():
+        if not cls.available():
+            skipped.append(f"{cls.distribution} is not installed: not compared")
             continue
-        for name in ("box-column", "box-pyramid", "mass-ratio-stack"):
+        for name in STACKS:
             scene = load_scene(name)
-            rows.append({"engine": key, "scene": name, **run_stack(key, scene, scene.dt, scene.t_end)})
+            for setting in cls.stack_settings:
+                try:
+                    rows.append({"scene": name, **run_stack(key, scene, setting=setting.key)})
+                except UnsupportedFeatureError as err:
+                    skipped.append(f"{cls.display_name} on {name}: {err}")
         progress(f"engines: {key}")
     return {"rows": rows, "skipped": skipped}
 
