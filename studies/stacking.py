@@ -27,6 +27,7 @@ swept):
 from __future__ import annotations
 
 import dataclasses
+import importlib
 import math
 import time
 from typing import NamedTuple
@@ -117,7 +118,15 @@ def run(scene: Scene, t_end: float | None = None, dt: float | None = None, every
     dt, t_end, world, kept = dt or scene.dt, t_end or scene.t_end, scene.collisions, []
 
     def stepper(model, integrator):
-        step = world.stepper(model, integrator)
+        if world.rigid is not None and world.method == "solver":
+            # the narrow phase given as its module: physics.collision re-exports the function
+            # manifolds under the module's name, which the step's own import then finds (NOTES-stacking.md)
+            from steplab.physics.collision.rigid_solver_step import RigidSolverStep
+
+            step = RigidSolverStep(world, model, integrator, importlib.import_module(
+                "steplab.physics.collision.manifolds"))
+        else:
+            step = world.stepper(model, integrator)
         if hasattr(step, "record_every"):  # the rigid solver: its rotation at the saved steps only
             step.record_every = every
         kept.append(step)
@@ -422,8 +431,17 @@ def _plural(n: int, word: str) -> str:
     return f"{n} {word}{'' if n == 1 else 's'}"
 
 
-def _none_as_nan(values):
-    return [np.nan if v is None else v for v in values]
+def _nan(value):
+    """A measure for a figure: NaN (not drawn) for a run that diverged (None)."""
+    return np.nan if value is None else value
+
+
+def _integer_ticks(ax, values):
+    """Tick a log x axis at the swept integers themselves."""
+    from matplotlib.ticker import NullFormatter
+
+    ax.set_xticks(values, [str(v) for v in values])
+    ax.xaxis.set_minor_formatter(NullFormatter())
 
 
 def plot(record: dict, out) -> list[str]:
@@ -445,7 +463,8 @@ def plot(record: dict, out) -> list[str]:
     rows = roll["rows"]
     b.loglog([r["dt"] for r in rows], [max(r["speed_error"], 1e-16) for r in rows], "o-", label="solver")
     b.axhline(0.005, color="tab:red", ls=":", label="the issue's 0.5 % at 60 Hz")
-    b.set(xlabel="dt, s", ylabel="|v_end / (5/7 v0) - 1|", title="Rolling speed error against dt")
+    b.set(xlabel="dt, s", ylabel="|v_end / (5/7 v0) - 1|", title="Rolling speed error against dt",
+          ylim=(1e-5, 1e-1))
     b.legend(fontsize=8)
     dense = np.linspace(0.0, max(r["theta_deg"] for r in inc["rows"]), 300)
     for k, mu in enumerate(sorted({r["mu"] for r in inc["rows"]})):
@@ -468,23 +487,25 @@ def plot(record: dict, out) -> list[str]:
             label = f"{n} boxes, {_plural(s, 'substep')}"
             style = "o-" if n == min(r["boxes"] for r in cols) else "s--"
             its = [r["iterations"] for r in rows]
-            axes[0].plot(its, [max(r["jitter"], 1e-16) for r in rows], style, label=label)
-            axes[1].plot(its, [r["sink"] / r["predicted_sink"] for r in rows], style, label=label)
-    axes[0].set(xscale="log", yscale="log", xlabel="iterations per substep", ylabel="rms speed, last second, m/s",
-                title="Columns at rest, dt = 1/60 s: jitter")
+            axes[0].plot(its, [_nan(r["jitter"]) for r in rows], style, label=label)
+            axes[1].plot(its, [_nan(r["sink"]) / r["predicted_sink"] for r in rows], style, label=label)
+    axes[0].set(xscale="log", yscale="log", xlabel="iterations per substep", ylabel="rms speed after 1 s, m/s",
+                title="Columns at rest, 60 Hz: jitter")
     axes[1].axhline(1.0, color="k", lw=0.8, ls=":", label="static deflection on the soft contacts")
     axes[1].set(xscale="log", xlabel="iterations per substep", ylabel="top box's sink / predicted",
-                title="Columns at rest: sink against the springs' prediction")
+                title="Columns: sink over the springs' prediction")
     for ax in axes[:2]:
         ax.legend(fontsize=7)
+        _integer_ticks(ax, sorted({r["iterations"] for r in cols}))
     by_dt = [r for r in record["columns"]["rows"] if r["substeps"] == DEFAULTS.substeps
              and r["iterations"] == DEFAULTS.iterations]
     for n in sorted({r["boxes"] for r in by_dt}):
         rows = sorted((r for r in by_dt if r["boxes"] == n), key=lambda r: r["dt"])
-        axes[2].loglog([r["dt"] for r in rows], [max(r["drift"], 1e-16) for r in rows], "o-", label=f"{n}: drift")
-        axes[2].loglog([r["dt"] for r in rows], [max(r["penetration"], 1e-16) for r in rows], "s--",
+        axes[2].loglog([r["dt"] for r in rows], [_nan(r["drift"]) for r in rows], "o-", label=f"{n}: drift")
+        axes[2].loglog([r["dt"] for r in rows], [_nan(r["penetration"]) for r in rows], "s--",
                        label=f"{n}: deepest penetration")
-    axes[2].set(xlabel="dt, s", ylabel="m", title=f"Columns at rest, {DEFAULTS.describe()}, 0 drawn at 1e-16")
+    axes[2].set(xlabel="dt, s", ylabel="m", title=f"Columns against dt ({DEFAULTS.substeps} substeps x "
+                f"{DEFAULTS.iterations})")
     axes[2].legend(fontsize=7, title="boxes", title_fontsize=7)
     names += plotting.save_figure(fig, out, "stacking_columns")
 
@@ -499,11 +520,12 @@ def plot(record: dict, out) -> list[str]:
     mr = record["mass_ratio"]
     for iterations in sorted({r["iterations"] for r in mr["rows"]}):
         rows = [r for r in mr["rows"] if r["iterations"] == iterations]
-        b.plot([r["substeps"] for r in rows], [1e3 * r["sink"] for r in rows], "o-",
+        b.plot([r["substeps"] for r in rows], [1e3 * _nan(r["sink"]) for r in rows], "o-",
                label=_plural(iterations, "iteration"))
     b.axhline(1e3 * mr["predicted_sink"], color="k", ls="--", label="predicted static deflection")
-    b.set(xscale="log", yscale="log", xlabel="substeps", ylabel="heavy box's sink after the run, mm",
+    b.set(xscale="log", yscale="log", xlabel="substeps", ylabel="heavy box's sink at the end, mm",
           title="100 kg on three 1 kg boxes")
+    _integer_ticks(b, sorted({r["substeps"] for r in mr["rows"]}))
     b.legend(fontsize=8)
     tum = record["tumbling"]
     c.plot(tum["t"], tum["energy"], "-", label="total energy (potential from the floor)")
