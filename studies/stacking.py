@@ -592,10 +592,42 @@ def _table_slice(record: dict) -> dict:
     return {"columns": [{k: r[k] for k in keep} for r in columns_rows],
             "mass_ratio": [{k: r[k] for k in keep if k != "boxes"} for r in record["mass_ratio"]["rows"]
                            if r["iterations"] == DEFAULTS.iterations],
-            "pyramid": {k: record["pyramid"][k] for k in keep + ("settings",)}}
+            "pyramid": {k: record["pyramid"][k] for k in keep[3:] + ("boxes", "settings")}}
 
 
-TABLES = (Table("stacking", _table_slice, stacking_table),)
+def engines_table(rows: list) -> str:
+    def cell(x, scale=1.0, spec=".2f"):
+        return "-" if x is None else f"{scale * x:{spec}}"
+
+    return markdown_table(
+        ["stack", "engine, setting", "stands", "top moves after 1 s, mm", "sink at 1 s, mm", "jitter, m/s",
+         "ms per step"],
+        [[r["scene"], r["label"], "yes" if r["standing"] else "no", cell(r["top_drift"], 1e3),
+          cell(r["deflection"], 1e3), cell(r["jitter"], 1.0, ".1e"), cell(r["seconds_per_step"], 1e3, ".3g")]
+         for r in rows])
+
+
+def _engines_slice(record: dict) -> list:
+    """steplab's row at the solver's defaults (at 60 Hz) beside each engine setting's, stack by stack."""
+    keep = ("standing", "top_drift", "deflection", "jitter", "seconds_per_step")
+    ours = {"box-pyramid": record["pyramid"]}
+    for r in record["columns"]["rows"]:
+        if (r["boxes"], r["substeps"], r["iterations"]) == (10, DEFAULTS.substeps, DEFAULTS.iterations) and abs(
+                r["dt"] - 1 / 60) < 1e-12:
+            ours["box-column"] = r
+    ours["mass-ratio-stack"] = next(r for r in record["mass_ratio"]["rows"] if (r["substeps"], r["iterations"]) == (
+        DEFAULTS.substeps, DEFAULTS.iterations))
+    rows = []
+    for scene in ("box-column", "box-pyramid", "mass-ratio-stack"):
+        if scene in ours:
+            rows.append({"scene": scene, "label": f"steplab, {DEFAULTS.describe()}",
+                         **{k: ours[scene][k] for k in keep}})
+        rows += [{"scene": scene, "label": r["label"], **{k: r[k] for k in keep}} for r in record["engines"]["rows"]
+                 if r["scene"] == scene]
+    return rows
+
+
+TABLES = (Table("stacking", _table_slice, stacking_table), Table("stacking_engines", _engines_slice, engines_table))
 
 STUDY = Study("stacking", "Stacking: boxes that stack, slide, roll and tumble in the contact solver",
               parameters, compute, plot, summary, tables=TABLES)

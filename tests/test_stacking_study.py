@@ -71,3 +71,25 @@ def test_predicted_sink_of_the_built_in_stacks():
     omega2 = (2 * math.pi * 30.0) ** 2
     assert stacking.predicted_sink(load_scene("box-column")) == pytest.approx(100 * 9.81 / omega2, rel=1e-10)
     assert stacking.predicted_sink(load_scene("mass-ratio-stack")) == pytest.approx(610 * 9.81 / omega2, rel=1e-10)
+
+
+@pytest.mark.slow
+def test_quick_study_meets_the_laws_and_draws_from_its_record(tmp_path):
+    """``steplab study stacking --quick``: the rolling and incline laws in the solver, the column of
+    ten on its predicted sink, no energy gained by the tumbling boxes; the figures from the record.
+    (-m slow: about 40 s.)"""
+    import json
+
+    from steplab.studies import STUDIES, run_study
+
+    run_study(STUDIES["stacking"], tmp_path, quick=True)
+    record = json.loads((tmp_path / "stacking.json").read_text())
+    roll = next(r for r in record["rolling"]["rows"] if abs(r["dt"] - 1 / 60) < 1e-12)
+    assert roll["speed_error"] < 0.005  # issue 26's target at 60 Hz
+    assert record["incline"]["max_error"] < 0.01
+    column = next(r for r in record["columns"]["rows"] if (r["substeps"], r["iterations"]) == (4, 1))
+    assert column["sink"] == pytest.approx(column["predicted_sink"], rel=0.01)
+    assert not record["tumbling"]["gains_energy"]
+    assert {f for f in record["figures"] if f.endswith(".png")} == {
+        "stacking_rolling_incline.png", "stacking_columns.png", "stacking_pyramid_mass_ratio_tumbling.png",
+        "stacking_cradle.png"}
