@@ -446,6 +446,7 @@ def _integer_ticks(ax, values):
 
 def plot(record: dict, out) -> list[str]:
     import matplotlib.pyplot as plt
+    from matplotlib.ticker import NullFormatter
 
     names = []
     roll, inc = record["rolling"], record["incline"]
@@ -465,6 +466,7 @@ def plot(record: dict, out) -> list[str]:
     b.axhline(0.005, color="tab:red", ls=":", label="the issue's 0.5 % at 60 Hz")
     b.set(xlabel="dt, s", ylabel="|v_end / (5/7 v0) - 1|", title="Rolling speed error against dt",
           ylim=(1e-5, 1e-1))
+    b.xaxis.set_minor_formatter(NullFormatter())
     b.legend(fontsize=8)
     dense = np.linspace(0.0, max(r["theta_deg"] for r in inc["rows"]), 300)
     for k, mu in enumerate(sorted({r["mu"] for r in inc["rows"]})):
@@ -492,10 +494,11 @@ def plot(record: dict, out) -> list[str]:
     axes[0].set(xscale="log", yscale="log", xlabel="iterations per substep", ylabel="rms speed after 1 s, m/s",
                 title="Columns at rest, 60 Hz: jitter")
     axes[1].axhline(1.0, color="k", lw=0.8, ls=":", label="static deflection on the soft contacts")
-    axes[1].set(xscale="log", xlabel="iterations per substep", ylabel="top box's sink / predicted",
+    axes[1].set(xscale="log", yscale="log", xlabel="iterations per substep", ylabel="top box's sink / predicted",
                 title="Columns: sink over the springs' prediction")
     for ax in axes[:2]:
-        ax.legend(fontsize=7)
+        ax.legend(fontsize=6, ncol=2, loc="upper right")
+        ax.set_ylim(top=ax.get_ylim()[1] * 30)  # room for the legend above the lines
         _integer_ticks(ax, sorted({r["iterations"] for r in cols}))
     by_dt = [r for r in record["columns"]["rows"] if r["substeps"] == DEFAULTS.substeps
              and r["iterations"] == DEFAULTS.iterations]
@@ -526,6 +529,7 @@ def plot(record: dict, out) -> list[str]:
     b.set(xscale="log", yscale="log", xlabel="substeps", ylabel="heavy box's sink at the end, mm",
           title="100 kg on three 1 kg boxes")
     _integer_ticks(b, sorted({r["substeps"] for r in mr["rows"]}))
+    b.yaxis.set_minor_formatter(NullFormatter())
     b.legend(fontsize=8)
     tum = record["tumbling"]
     c.plot(tum["t"], tum["energy"], "-", label="total energy (potential from the floor)")
@@ -571,27 +575,36 @@ def summary(record: dict) -> list[tuple[str, str]]:
 
 
 def stacking_table(data: dict) -> str:
-    rows = [[f"column of {r['boxes']}, {_plural(r['substeps'], 'substep')} x {_plural(r['iterations'], 'iteration')}",
-             f"{1e3 * r['sink']:.2f}", f"{1e3 * r['predicted_sink']:.2f}", f"{1e3 * r['top_drift']:.3f}",
-             f"{r['jitter']:.1e}", f"{1e3 * r['penetration']:.2f}"] for r in data["columns"]]
-    rows += [[f"mass ratio 100:1, {_plural(r['substeps'], 'substep')} x {_plural(r['iterations'], 'iteration')}",
-              f"{1e3 * r['sink']:.2f}", f"{1e3 * r['predicted_sink']:.2f}", f"{1e3 * r['top_drift']:.3f}",
-              f"{r['jitter']:.1e}", f"{1e3 * r['penetration']:.2f}"] for r in data["mass_ratio"]]
+    def cells(r):
+        return [f"{1e3 * r['sink']:.1f}" if r["sink"] is not None else "diverged", f"{1e3 * r['predicted_sink']:.1f}",
+                "yes" if r["standing"] else "no", f"{1e3 * r['top_drift']:.1f}" if r["top_drift"] is not None else "-",
+                f"{r['jitter']:.1e}" if r["jitter"] is not None else "-"]
+
+    def setting(r):
+        return f"{_plural(r['substeps'], 'substep')} x {_plural(r['iterations'], 'iteration')}"
+
+    rows = [[f"column of {r['boxes']}, {setting(r)}", *cells(r)] for r in data["columns"]]
+    rows += [[f"mass ratio 100:1, {setting(r)}", *cells(r)] for r in data["mass_ratio"]]
     p = data["pyramid"]
-    rows.append([f"pyramid of {p['boxes']}, {p['settings']}", f"{1e3 * p['sink']:.2f}",
-                 f"{1e3 * p['predicted_sink']:.2f}", f"{1e3 * p['top_drift']:.3f}", f"{p['jitter']:.1e}",
-                 f"{1e3 * p['penetration']:.2f}"])
-    return markdown_table(["stack", "top's sink, mm", "predicted, mm", "top moves after 1 s, mm", "jitter, m/s",
-                           "deepest penetration, mm"], rows)
+    rows.append([f"pyramid of {p['boxes']}, {p['settings']}", *cells(p)])
+    return markdown_table(["stack (60 Hz)", "top's sink, mm", "predicted, mm", "stands", "top moves after 1 s, mm",
+                           "jitter, m/s"], rows)
+
+
+#: the (substeps, iterations) of the columns' and the mass-ratio stack's rows in the paper's table
+TABLE_SETTINGS = {"columns": ((1, 1), (4, 1), (4, 4), (8, 1)), "mass_ratio": ((1, 1), (4, 1), (16, 1), (4, 4), (16, 4))}
 
 
 def _table_slice(record: dict) -> dict:
-    keep = ("boxes", "substeps", "iterations", "sink", "predicted_sink", "top_drift", "jitter", "penetration")
-    columns_rows = [r for r in record["columns"]["rows"] if abs(r["dt"] - 1 / 60) < 1e-12
-                    and r["iterations"] == DEFAULTS.iterations]
-    return {"columns": [{k: r[k] for k in keep} for r in columns_rows],
-            "mass_ratio": [{k: r[k] for k in keep if k != "boxes"} for r in record["mass_ratio"]["rows"]
-                           if r["iterations"] == DEFAULTS.iterations],
+    keep = ("boxes", "substeps", "iterations", "sink", "predicted_sink", "standing", "top_drift", "jitter",
+            "penetration")
+
+    def picked(rows, part):
+        return [{k: r[k] for k in keep if k in r} for r in rows if (r["substeps"], r["iterations"])
+                in TABLE_SETTINGS[part] and abs(r.get("dt", 1 / 60) - 1 / 60) < 1e-12]
+
+    return {"columns": picked(record["columns"]["rows"], "columns"),
+            "mass_ratio": picked(record["mass_ratio"]["rows"], "mass_ratio"),
             "pyramid": {k: record["pyramid"][k] for k in keep[3:] + ("boxes", "settings")}}
 
 
