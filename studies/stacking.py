@@ -8,9 +8,10 @@ swept):
   t = 2 v0 / (7 mu g); its final speed and the time it starts rolling, against dt;
 - **incline** (``box-incline`` at several angles and frictions): a box sticks for
   tan theta <= mu, else slides at g (sin theta - mu cos theta);
-- **columns** (``box-column``, 10 and 20 boxes) at rest for 10 s: drift (the largest
-  horizontal move of a box), jitter (rms speed over the last second), penetration, and the
-  top box's sink beside the soft contacts' static deflection, against substeps, iterations and dt;
+- **columns** (``box-column``, 10 and 20 boxes) at rest for 10 s, measured as the engines'
+  stacks are (:func:`steplab.engines.stacks.stack_measures`: standing, drift, jitter after the
+  first second), with the penetration and the top box's sink beside the soft contacts' static
+  deflection, against substeps, iterations and dt;
 - **pyramid** (``box-pyramid``, 210 boxes): does it stand (the top box moves less than 1 cm
   after the first second, :data:`steplab.engines.stacks.STANDING_TOLERANCE`), its sink beside
   the prediction, and the cost per step;
