@@ -50,7 +50,7 @@ def box_box(ca, fa, ha, cb, fb, hb, margin, out):
     ``margin`` m is the speculative distance; the normal points from a to b.
     """
     t = to_local(fa, sub3(cb, ca))  # b's centre in a's frame
-    c = np.empty((3, 3))  # c[i, j] = a_i . b_j, b's axes in a's frame by columns
+    c = out.axes  # c[i, j] = a_i . b_j, b's axes in a's frame by columns
     for i in range(3):
         for j in range(3):
             c[i, j] = dot3(fa[i], fb[j])
