@@ -41,7 +41,7 @@ from numba import njit
 from .. import quaternion as quat
 from .manifold_box import box_box, box_plane
 from .manifold_capsule_box import box_capsule
-from .manifold_geometry import Scratch, make_scratch, to_local
+from .manifold_geometry import make_scratch, to_local
 from .manifold_round import (
     capsule_capsule,
     capsule_plane,
@@ -325,7 +325,3 @@ def manifolds(shapes: RigidShapes, poses: Poses, pairs, statics=(), margin=0.0) 
     rows = manifold_rows(bodies, static, pairs, static_pairs, np.ascontiguousarray(margin), out, make_scratch())
     order = np.lexsort((out.feature[:rows], out.b[:rows], out.a[:rows]))
     return ManifoldPoints(*(column[:rows][order] for column in out))
-
-
-__all__ = ["SPHERE", "BOX", "CAPSULE", "RigidShapes", "Poses", "ManifoldPoints", "Scratch", "manifolds",
-           "bounding_radius", "check_shapes"]
