@@ -24,7 +24,7 @@ import numpy as np
 from numba import njit
 
 from .manifold_geometry import add3, cross3, madd3, reduce_to_four, scale3, segment_segment, sign_of, to_local, to_world
-from .sphere_contacts import dot3, sub3
+from .sphere_contacts import dot3, sphere_plane, sub3
 
 #: m, Box2D's b2_linearSlop: the contact distance below which nothing a player can see changes
 LINEAR_SLOP = 0.005
@@ -50,7 +50,7 @@ def box_box(ca, fa, ha, cb, fb, hb, margin, out):
     ``margin`` m is the speculative distance; the normal points from a to b.
     """
     t = to_local(fa, sub3(cb, ca))  # b's centre in a's frame
-    c = np.empty((3, 3))  # c[i, j] = a_i . b_j, b's axes in a's frame by columns
+    c = out.axes  # c[i, j] = a_i . b_j, b's axes in a's frame by columns
     for i in range(3):
         for j in range(3):
             c[i, j] = dot3(fa[i], fb[j])
@@ -243,12 +243,11 @@ def box_plane(c, frame, half, plane_normal, offset, margin, out):
     for k in range(4):
         su, sv = 1.0 if k % 2 == 0 else -1.0, 1.0 if k < 2 else -1.0
         corner = madd3(madd3(madd3(c, side * half[j], frame[j]), su * half[u], frame[u]), sv * half[v], frame[v])
-        height = dot3(corner, plane_normal) - offset
+        normal, _, height = sphere_plane(corner, 0.0, plane_normal, offset)  # the corner as a sphere of radius 0
         if height >= margin:
             continue
         out.point[kept, 0], out.point[kept, 1], out.point[kept, 2] = madd3(corner, -0.5 * height, plane_normal)
-        out.normal[kept, 0], out.normal[kept, 1], out.normal[kept, 2] = (
-            0.0 - plane_normal[0], 0.0 - plane_normal[1], 0.0 - plane_normal[2])
+        out.normal[kept, 0], out.normal[kept, 1], out.normal[kept, 2] = normal
         out.separation[kept] = height
         # the corner's id: bit 4 >> k set where it lies on the + side of axis k
         out.feature[kept] = (4 >> j if side > 0 else 0) + (4 >> u if su > 0 else 0) + (4 >> v if sv > 0 else 0)

@@ -41,7 +41,7 @@ from numba import njit
 from .. import quaternion as quat
 from .manifold_box import box_box, box_plane
 from .manifold_capsule_box import box_capsule
-from .manifold_geometry import Scratch, make_scratch, to_local
+from .manifold_geometry import make_scratch, to_local
 from .manifold_round import (
     capsule_capsule,
     capsule_plane,
@@ -117,19 +117,25 @@ def check_shapes(shapes: RigidShapes) -> RigidShapes:
     n = len(kind)
     radius = np.asarray(shapes.radius, dtype=float).reshape(n)
     half = np.asarray(shapes.half, dtype=float).reshape(n, 3)
-    for k in range(n):
-        what = f"body {k}"
-        if kind[k] not in (SPHERE, BOX, CAPSULE):
-            raise ValueError(f"{what}: kind {kind[k]} is no shape; valid: 0 (sphere), 1 (box), 2 (capsule)")
-        if not (np.isfinite(radius[k]) and np.all(np.isfinite(half[k]))):
-            raise ValueError(f"{what}: radius and half edges must be finite, got {radius[k]} and {half[k].tolist()}")
-        if kind[k] == BOX and not np.all(half[k] > 0):
-            raise ValueError(f"{what}: a box needs half edges > 0 m (a degenerate box has no faces), "
-                             f"got {half[k].tolist()}")
-        if kind[k] != BOX and not radius[k] > 0:
-            raise ValueError(f"{what}: a {KIND_NAMES[kind[k]]} needs a radius > 0 m, got {radius[k]}")
-        if kind[k] == CAPSULE and not half[k, 2] >= 0:
-            raise ValueError(f"{what}: a capsule's length must be >= 0 m, got the half length {half[k, 2]}")
+    box, capsule = kind == BOX, kind == CAPSULE
+    problems = [  # (bodies, what is wrong with them), in the order they are reported
+        (~np.isin(kind, (SPHERE, BOX, CAPSULE)),
+         lambda k: f"kind {kind[k]} is no shape; valid: 0 (sphere), 1 (box), 2 (capsule)"),
+        (~(np.isfinite(radius) & np.all(np.isfinite(half), axis=1)),
+         lambda k: f"radius and half edges must be finite, got {radius[k]} and {half[k].tolist()}"),
+        (box & ~np.all(half > 0, axis=1),
+         lambda k: f"a box needs half edges > 0 m (a degenerate box has no faces), got {half[k].tolist()}"),
+        (~box & ~(radius > 0), lambda k: f"a {KIND_NAMES[kind[k]]} needs a radius > 0 m, got {radius[k]}"),
+        (capsule & ~(half[:, 2] >= 0),
+         lambda k: f"a capsule's length must be >= 0 m, got the half length {half[k, 2]}"),
+    ]
+    bad = np.zeros(n, dtype=bool)
+    for which, _ in problems:
+        bad |= which
+    if np.any(bad):
+        k = int(np.argmax(bad))
+        message = next(say for which, say in problems if which[k])
+        raise ValueError(f"body {k}: {message(k)}")
     return RigidShapes(kind.astype(np.int8), radius, half)
 
 
@@ -138,7 +144,11 @@ def bounding_radius(shapes: RigidShapes) -> np.ndarray:
 
     sphere r; box |half| (its corner); capsule r + half length.
     """
-    shapes = check_shapes(shapes)
+    return reach(check_shapes(shapes))
+
+
+def reach(shapes: RigidShapes) -> np.ndarray:
+    """:func:`bounding_radius` of checked shapes."""
     corner = np.sqrt((shapes.half * shapes.half).sum(axis=1))
     return np.where(shapes.kind == BOX, corner, shapes.radius + np.where(shapes.kind == CAPSULE, shapes.half[:, 2], 0))
 
@@ -193,7 +203,9 @@ def solid(solids, k):
                  (h[k, 0], h[k, 1], h[k, 2]), solids.radius[k], solids.offset[k])
 
 
-@njit(cache=True)
+# The table is inlined into its caller: a call passing a Solid by value costs 2 us a pair (10^4 boxes'
+# pairs: 95 ms called, 15 ms inlined)
+@njit(cache=True, inline="always")
 def collide_ordered(a, b, margin, out):
     """The kernel of a's and b's kinds, for a.kind <= b.kind: its points into ``out``, their count."""
     if a.kind == SPHERE:
@@ -215,13 +227,15 @@ def collide_ordered(a, b, margin, out):
     return capsule_plane(a.centre, a.frame, a.half, a.radius, b.frame[2], b.offset, margin, out)
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def collide(a, b, margin, out):
     """The pair table: the manifold of shapes a and b, normals from a to b, whichever order their kinds come in."""
     if a.kind <= b.kind:
         return collide_ordered(a, b, margin, out)
     count = collide_ordered(b, a, margin, out)
-    out.normal[:count] = -out.normal[:count]
+    for k in range(count):
+        for m in range(3):
+            out.normal[k, m] = -out.normal[k, m]
     return count
 
 
@@ -261,9 +275,10 @@ def manifold_rows(bodies, statics, pairs, static_pairs, margin, out, scratch):
             i, s = static_pairs[p - len(pairs), 0], static_pairs[p - len(pairs), 1]
             count = collide(solid(bodies, i), solid(statics, s), margin[i], scratch)
             b = -1 - s
-        for k in range(count):
+        for k in range(count):  # element by element: a row slice would be a view made and freed per point
             out.a[rows], out.b[rows] = i, b
-            out.normal[rows], out.point[rows] = scratch.normal[k], scratch.point[k]
+            for m in range(3):
+                out.normal[rows, m], out.point[rows, m] = scratch.normal[k, m], scratch.point[k, m]
             out.separation[rows], out.feature[rows] = scratch.separation[k], scratch.feature[k]
             rows += 1
     return rows
@@ -294,20 +309,19 @@ def manifolds(shapes: RigidShapes, poses: Poses, pairs, statics=(), margin=0.0) 
     if not np.all(np.isfinite(margin) & (margin >= 0)):
         raise ValueError(f"margin must be finite and >= 0 m for every body, got {margin.min()} .. {margin.max()}")
     pairs = np.asarray(pairs, dtype=np.int64).reshape(-1, 2)
-    bad = (pairs.min(axis=1) < 0) | (pairs.max(axis=1) >= n) | (pairs[:, 0] == pairs[:, 1])
+    lo, hi = np.minimum(pairs[:, 0], pairs[:, 1]), np.maximum(pairs[:, 0], pairs[:, 1])
+    bad = (lo < 0) | (hi >= n) | (lo == hi)
     if np.any(bad):
         raise ValueError(f"pair {int(np.argmax(bad))} must join two different bodies 0 .. {n - 1}, "
                          f"got {pairs[np.argmax(bad)].tolist()}")
-    pairs = np.unique(np.sort(pairs, axis=1), axis=0)
+    key = np.sort(lo * n + hi)  # each pair once, as (min, max), in order
+    key = key[np.diff(key, prepend=-1) != 0]
+    pairs = np.column_stack([key // n, key % n])
     bodies, static = body_solids(shapes, poses), static_solids(statics)
-    static_pairs = static_candidates(bodies, static, bounding_radius(shapes) + margin)
+    static_pairs = static_candidates(bodies, static, reach(shapes) + margin)
     capacity = MAX_POINTS * (len(pairs) + len(static_pairs))
     out = ManifoldPoints(np.empty(capacity, np.int64), np.empty(capacity, np.int64), np.empty((capacity, 3)),
                          np.empty((capacity, 3)), np.empty(capacity), np.empty(capacity, np.int64))
     rows = manifold_rows(bodies, static, pairs, static_pairs, np.ascontiguousarray(margin), out, make_scratch())
     order = np.lexsort((out.feature[:rows], out.b[:rows], out.a[:rows]))
     return ManifoldPoints(*(column[:rows][order] for column in out))
-
-
-__all__ = ["SPHERE", "BOX", "CAPSULE", "RigidShapes", "Poses", "ManifoldPoints", "Scratch", "manifolds",
-           "bounding_radius", "check_shapes"]
