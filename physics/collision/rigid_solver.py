@@ -395,7 +395,8 @@ def _solve_rolling(bodies, contacts, k):
     n = _row(contacts.normal, k)
     along = _dot(w, n)
     m = 3.0 / trace
-    p = [pr[k, x] - m * (w[x] - along * n[x]) for x in range(3)]
+    p = (pr[k, 0] - m * (w[0] - along * n[0]), pr[k, 1] - m * (w[1] - along * n[1]),
+         pr[k, 2] - m * (w[2] - along * n[2]))
     limit = contacts.rolling[k] * contacts.pn[k]
     size = np.sqrt(p[0] * p[0] + p[1] * p[1] + p[2] * p[2])
     f = limit / size if size > limit else 1.0
@@ -422,10 +423,11 @@ def warm_start(bodies, contacts):
     """Each contact's impulses of the last substep applied again: a good first guess."""
     for k in range(len(contacts.a)):
         pn, p1, p2 = contacts.pn[k], contacts.pt[k, 0], contacts.pt[k, 1]
-        p = [pn * contacts.normal[k, x] + p1 * contacts.tangent[k, 0, x] + p2 * contacts.tangent[k, 1, x]
-             for x in range(3)]
+        n, t = contacts.normal, contacts.tangent
+        p = (pn * n[k, 0] + p1 * t[k, 0, 0] + p2 * t[k, 1, 0], pn * n[k, 1] + p1 * t[k, 0, 1] + p2 * t[k, 1, 1],
+             pn * n[k, 2] + p1 * t[k, 0, 2] + p2 * t[k, 1, 2])
         _, la, lb = _geometry(bodies, contacts, k)
-        _apply(bodies, contacts, k, la, lb, (p[0], p[1], p[2]))
+        _apply(bodies, contacts, k, la, lb, p)
         _apply_angular(bodies, contacts, k, (contacts.pr[k, 0], contacts.pr[k, 1], contacts.pr[k, 2]))
 
 
