@@ -342,3 +342,15 @@ def test_rolling_resistance_slows_a_rolling_ball_at_five_sevenths_c_g():
     assert np.polyfit(t, v, 1)[0] == pytest.approx(-5 / 7 * c * G, rel=1e-2)
     t, v = rolling(0.0)
     assert np.max(np.abs(v - v[0])) < 1e-3 * v0  # the contact's deflection shortens the lever: 6e-4 measured
+
+
+def test_a_fast_ball_meets_the_other_speculatively_and_never_passes_it():
+    """60 m/s at 60 Hz is a metre per step, five times the gap: the contact is found while still
+    0.4 m apart (the bound is swept over the step), closes exactly and passes the momentum on."""
+    world = rigid_world([SPHERE, SPHERE], [0.1, 0.1], np.zeros((2, 3)), [1.0, 1.0], restitution=1.0)
+    y0 = np.array([[[0.0, 0.0, 0.0], [0.6, 0.0, 0.0]], [[60.0, 0.0, 0.0], [0.0, 0.0, 0.0]]])
+    traj, step = run(world, Model(np.ones(2), np.full(2, 0.1), []), y0, 1 / 60, 3)
+    gap = traj.positions[:, 1, 0] - traj.positions[:, 0, 0]
+    assert np.all(gap >= 0.2 - 1e-12)  # never inside each other
+    np.testing.assert_allclose(traj.velocities[-1, :, 0], [0.0, 60.0], atol=1e-9)  # eps = 1: equal masses swap
+    assert step.log.count() == 1

@@ -83,7 +83,7 @@ class RigidScene:
     @property
     def has_corners(self) -> bool:
         """Whether some body is a box or a capsule (what the event loop cannot step)."""
-        return bool(np.any(self.kind != 0))
+        return bool(np.any((self.kind == KINDS["box"]) | (self.kind == KINDS["capsule"])))
 
 
 def rotation_codes(rotation: str) -> tuple[int, int]:
