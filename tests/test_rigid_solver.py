@@ -7,8 +7,8 @@ sphere's 5/7 v0 and its time, the incline's tan(theta) <= mu, a box's rest on it
 from __future__ import annotations
 
 import dataclasses
+import importlib
 import types
-from typing import NamedTuple
 
 import numpy as np
 import pytest
@@ -22,70 +22,11 @@ from steplab.physics.collision.rigid_solver_step import ROTATION_STAGES, RigidSc
 from steplab.physics.rigid_body import RigidBodies, RotationModel, principal_inertia
 from steplab.physics.scene import parse_scene
 
+#: the rigid narrow phase's module (the package's name ``manifolds`` is its function)
+manifolds = importlib.import_module("steplab.physics.collision.manifolds")
 G = 9.81
-SPHERE, BOX = 0, 1
+SPHERE, BOX = manifolds.SPHERE, manifolds.BOX
 EULER = get_integrator("semi-implicit-euler")
-
-
-# --- a narrow phase by hand: box corners and spheres against planes, sphere pairs ------------
-
-class RigidShapes(NamedTuple):
-    kind: np.ndarray
-    radius: np.ndarray
-    half: np.ndarray
-
-
-class Poses(NamedTuple):
-    position: np.ndarray
-    orientation: np.ndarray
-
-
-class ManifoldPoints(NamedTuple):
-    a: np.ndarray
-    b: np.ndarray
-    normal: np.ndarray
-    point: np.ndarray
-    separation: np.ndarray
-    feature: np.ndarray
-
-
-CORNERS = np.array([[x, y, z] for x in (-1, 1) for y in (-1, 1) for z in (-1, 1)], dtype=float)
-
-
-def _manifolds(shapes, poses, pairs, statics, margin):
-    """Every box corner and sphere within ``margin`` of a plane; every sphere pair within the sum of margins."""
-    rows = []
-    for k, plane in enumerate(statics):
-        n = plane.normal
-        for body in range(len(shapes.kind)):
-            if shapes.kind[body] == BOX:
-                corners = poses.position[body] + quat.rotate(np, poses.orientation[body], CORNERS * shapes.half[body])
-                gaps = corners @ n - plane.offset
-            else:
-                corners = poses.position[body][None] - shapes.radius[body] * n
-                gaps = corners @ n - plane.offset
-            for f in np.flatnonzero(gaps <= margin[body]):
-                rows.append((body, -1 - k, -n, corners[f] - 0.5 * gaps[f] * n, gaps[f], f))
-    for a, b in pairs:
-        d = poses.position[b] - poses.position[a]
-        distance = np.linalg.norm(d)
-        gap = distance - shapes.radius[a] - shapes.radius[b]
-        if gap <= margin[a] + margin[b]:
-            n = d / distance
-            rows.append((a, b, n, poses.position[a] + (shapes.radius[a] + 0.5 * gap) * n, gap, 0))
-    if not rows:
-        return ManifoldPoints(np.zeros(0, int), np.zeros(0, int), np.zeros((0, 3)), np.zeros((0, 3)), np.zeros(0),
-                              np.zeros(0, int))
-    a, b, n, p, s, f = zip(*rows)
-    return ManifoldPoints(np.array(a), np.array(b), np.array(n), np.array(p), np.array(s), np.array(f))
-
-
-def _bounding_radius(shapes):
-    return np.where(shapes.kind == BOX, np.linalg.norm(shapes.half, axis=1), shapes.radius)
-
-
-BY_HAND = types.SimpleNamespace(RigidShapes=RigidShapes, Poses=Poses, manifolds=_manifolds,
-                                bounding_radius=_bounding_radius)
 
 
 def rigid_world(kind, radius, half, masses, orientations=None, omega=None, shapes=(), friction=0.0,
@@ -108,7 +49,7 @@ def rigid_world(kind, radius, half, masses, orientations=None, omega=None, shape
     return world
 
 
-def run(world, model, y0, dt, steps, narrow_phase=BY_HAND):
+def run(world, model, y0, dt, steps, narrow_phase=manifolds):
     kept = []
 
     def stepper(model, integrator):
@@ -245,19 +186,20 @@ def test_body_contacts_keep_linear_and_angular_momentum_to_round_off():
 
 
 def _shuffled(narrow_phase, rename=False):
-    """``narrow_phase`` whose manifolds come in a seeded random order (and, with ``rename``, whose box
-    corners' feature ids change from call to call: the same points under other names)."""
+    """``narrow_phase`` whose manifolds come in a seeded random order (and, with ``rename``, whose
+    feature ids change from call to call: the same points under other names)."""
     rng = np.random.default_rng(7)
     calls = []
 
-    def manifolds(*args):
+    def shuffled(*args):
         points = narrow_phase.manifolds(*args)
         order = rng.permutation(len(points.a))
-        feature = (points.feature + len(calls)) % 8 if rename else points.feature
+        feature = points.feature + len(calls) if rename else points.feature
         calls.append(1)
-        return ManifoldPoints(*(np.asarray(c)[order] for c in points._replace(feature=feature)))
+        return manifolds.ManifoldPoints(*(np.asarray(c)[order] for c in points._replace(feature=feature)))
 
-    return types.SimpleNamespace(**{**vars(narrow_phase), "manifolds": manifolds})
+    return types.SimpleNamespace(RigidShapes=narrow_phase.RigidShapes, Poses=narrow_phase.Poses,
+                                 bounding_radius=narrow_phase.bounding_radius, manifolds=shuffled)
 
 
 def test_warm_starting_by_feature_survives_a_reordering_of_the_contacts():
@@ -269,8 +211,8 @@ def test_warm_starting_by_feature_survives_a_reordering_of_the_contacts():
     model = Model([1.0], [0.1], [Gravity()])
     y0 = np.array([[[0.0, 0.0, 0.3]], [[0.5, 0.0, -1.0]]])
     ordered, a = run(world, model, y0, 1 / 60, 60)
-    shuffled, b = run(world, model, y0, 1 / 60, 60, _shuffled(BY_HAND))
-    renamed, c = run(world, model, y0, 1 / 60, 60, _shuffled(BY_HAND, rename=True))
+    shuffled, b = run(world, model, y0, 1 / 60, 60, _shuffled(manifolds))
+    renamed, c = run(world, model, y0, 1 / 60, 60, _shuffled(manifolds, rename=True))
     assert len(a._previous.pn) >= 2  # it came to lie on the floor
     assert ordered.y.tobytes() == shuffled.y.tobytes()
     assert a.orientation.tobytes() == b.orientation.tobytes()

@@ -28,6 +28,7 @@ position stages and are refused in one line.
 from __future__ import annotations
 
 import dataclasses
+import importlib
 
 import numpy as np
 
@@ -35,6 +36,7 @@ from .. import quaternion as quat
 from . import rigid_solver as rs
 from .contact_buffer import MARGIN_OF_RADIUS, Materials
 from .events import CollisionLog, ImpactBlock, cancel_triggers
+from .manifolds import BOX, CAPSULE, SPHERE
 from .pairs import SweptSpheres
 from .resting import rest_speed
 from .solver_step import INTEGRATOR
@@ -50,8 +52,8 @@ ROTATION_STAGES = {
 }
 #: the rotation method of a scene that names none (as steplab.integrators.rotation.DEFAULT_ROTATION)
 DEFAULT_ROTATION = "exponential-map"
-#: the shapes' numbers in :class:`.manifolds.RigidShapes` (as SPHERE, BOX, CAPSULE there), by scene name
-KINDS = {"sphere": 0, "box": 1, "capsule": 2}
+#: the shapes' numbers in :class:`.manifolds.RigidShapes`, by their names in a scene
+KINDS = {"sphere": SPHERE, "box": BOX, "capsule": CAPSULE}
 #: the most a rotation moves a point of a body: its diameter, 2 R (a half turn)
 MAX_ROTATION_REACH = 2.0
 
@@ -65,7 +67,7 @@ class RigidScene:
     kind : int8 ndarray, shape (N,)
         :data:`.manifolds.SPHERE`, ``BOX`` or ``CAPSULE`` for each of the N bodies.
     radius : ndarray, shape (N,)
-        The sphere's or capsule's radius, m.
+        The sphere's or capsule's radius, m (0 for a box).
     half : ndarray, shape (N, 3)
         The box's half edges; a capsule's (0, 0, half its segment), m.
     bodies : physics.rigid_body.RigidBodies
@@ -83,7 +85,7 @@ class RigidScene:
     @property
     def has_corners(self) -> bool:
         """Whether some body is a box or a capsule (what the event loop cannot step)."""
-        return bool(np.any((self.kind == KINDS["box"]) | (self.kind == KINDS["capsule"])))
+        return bool(np.any((self.kind == BOX) | (self.kind == CAPSULE)))
 
 
 def rotation_codes(rotation: str) -> tuple[int, int]:
@@ -159,10 +161,8 @@ class RigidSolverStep:
                 or any(s.trigger for s in world.shapes)):
             raise ValueError("the contact solver on rotating bodies takes no prologues, epilogues or trigger "
                              "shapes yet (the sphere solver does)")
-        if self.narrow_phase is None:
-            from . import manifolds as narrow_phase
-
-            self.narrow_phase = narrow_phase
+        if self.narrow_phase is None:  # the module (the package's name ``manifolds`` is its function)
+            self.narrow_phase = importlib.import_module(f"{__package__}.manifolds")
         self.codes = rotation_codes(rigid.rotation)
         if np.any(rigid.kind < 0):
             raise ValueError('the contact solver has no manifold for a cylinder; give the body shape = "capsule"')
@@ -175,7 +175,7 @@ class RigidSolverStep:
         self.materials = Materials.of(world, n)
         self.margin = MARGIN_OF_RADIUS * float(np.median(self.bounding)) if n else 0.0
         # spheres and capsules are rounded about their core (centre, segment) by their radius; boxes are not
-        self.rounding = np.where(np.asarray(rigid.kind) != KINDS["box"], np.asarray(rigid.radius, float), 0.0)
+        self.rounding = np.where(np.asarray(rigid.kind) != BOX, np.asarray(rigid.radius, float), 0.0)
         self.rolling = world.solver.rolling_resistance * self.rounding
         bodies = rigid.bodies
         self.orientation = np.tile(quat.IDENTITY, (n, 1)).astype(float)
