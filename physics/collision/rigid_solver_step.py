@@ -272,7 +272,8 @@ class RigidSolverStep:
         pr[found] = old.pr[rows[found]]
         contacts = rs.RigidContactColumns(
             ca, cb_body, normal, np.ascontiguousarray(ra), np.ascontiguousarray(rb), np.ascontiguousarray(basis),
-            np.asarray(points.separation, dtype=float), np.zeros(len(ca)), np.zeros((len(ca), 3)), friction,
+            np.asarray(points.separation, dtype=float), np.zeros(len(ca)), np.full(len(ca), np.inf),
+            np.zeros((len(ca), 3)), friction,
             restitution, rest_speed(self.world.rest_speed, pressing, dt), rolling, pn, pt, pr, np.zeros(len(ca)),
             np.zeros(len(ca)))
         rs.prepare(bodies, contacts)
@@ -295,7 +296,7 @@ class RigidSolverStep:
         first = new[np.unique(self._key[new, :2], axis=0, return_index=True)[1]] if len(new) else new
         self.log.add_impacts(ImpactBlock(
             np.full(len(first), float(t)), c.a[first], np.asarray(points.b, np.int64)[first], c.normal[first],
-            -c.vn0[first], c.restitution[first], c.friction[first], c.total[first], (float(t), float(t + dt)),
+            -c.hit[first], c.restitution[first], c.friction[first], c.total[first], (float(t), float(t + dt)),
             self.model.names, self.world.shapes))
         self.log.most_impacts_in_a_step = max(self.log.most_impacts_in_a_step, len(first))
         self.log.largest_residual = max(self.log.largest_residual, float(residual))
