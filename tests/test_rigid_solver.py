@@ -364,3 +364,27 @@ def test_two_spinning_cubes_keep_linear_and_angular_momentum_to_round_off():
     assert np.linalg.norm(step.omega - world.rigid.bodies.angular_velocities) > 0.1  # the hit changed the spins
     np.testing.assert_allclose(p1, p0, rtol=0, atol=1e-14 * np.abs(p0).max())
     np.testing.assert_allclose(l1, l0, rtol=0, atol=1e-14 * np.abs(l0).max())
+
+
+def test_steplab_run_steps_a_box_scene_with_the_solver_and_reports_its_rotation(tmp_path, capsys):
+    """``steplab run --json``: the crate's final orientation and spin are the solver's (it landed and
+    stopped tumbling), the ball rolls without a row of rotation; a rotation method that cannot go
+    between the solver's stages is one line, status 2."""
+    import json
+
+    from steplab.cli import main
+
+    path = tmp_path / "crate.toml"
+    path.write_text(BOX_SCENE.replace("{method}", "solver").replace("t_end = 0.5", "t_end = 2.0"))
+    assert main(["run", str(path), "--json", "--save-every", "7", "--out", str(tmp_path / "crate.npz")]) == 0
+    summary = json.loads(capsys.readouterr().out)
+    assert summary["rotation"] == "exponential-map" and summary["rotating_bodies"] == ["crate"]
+    crate = np.array(summary["final_angular_velocities"][0])
+    assert np.linalg.norm(crate) < 0.05  # at rest on the floor after 2 s (2.3 rad/s at the start)
+    assert np.isfinite(summary["collisions"]["largest_residual"]) and summary["collisions"]["impacts"] >= 2
+    saved = np.load(tmp_path / "crate.npz")
+    assert saved["orientations"].shape == (len(saved["t"]), 2, 4)
+    np.testing.assert_allclose(saved["orientations"][-1, 0], summary["final_orientations"][0], rtol=0, atol=0)
+    assert main(["run", str(path), "--rotation", "dlm"]) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and "does not compose with it" in err
