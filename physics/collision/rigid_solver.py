@@ -16,10 +16,11 @@ effective mass
 
     m_n = 1 / (1/m_a + 1/m_b + (r_a x n) . I_a^-1 (r_a x n) + (r_b x n) . I_b^-1 (r_b x n)),
 
-I^-1 = R diag(1/I1, 1/I2, 1/I3) R^T the world inverse inertia at the start of the step (kept
-through its substeps, as Box2D keeps its effective masses). Both bodies receive equal and
-opposite impulses at the same point, so linear and angular momentum are conserved to
-round-off by every body-body contact. Coulomb friction acts along two tangent directions
+I^-1 = R diag(1/I1, 1/I2, 1/I3) R^T the world inverse inertia, both computed at the start of
+the step and kept through its substeps, as Box2D keeps its effective masses. The levers the
+impulses act through are those of the point now (:func:`_geometry`): both bodies receive equal
+and opposite impulses at one point, so linear and angular momentum are conserved to round-off
+by every body-body contact. Coulomb friction acts along two tangent directions
 t1, t2 of the contact plane, each with its own effective mass; the tangential impulse, a
 vector in the plane, is kept in the disc |P_t| <= mu P. Rolling resistance (optional) is an
 angular impulse against the relative rolling velocity (its part across n), kept in the disc

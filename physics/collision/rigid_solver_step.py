@@ -139,8 +139,8 @@ class RigidSolverStep:
 
     The rotational state lives here beside the translational ``y``: ``orientation`` (N, 4) and
     ``omega`` (N, 3, world frame) of every body (identity and zero for those that do not
-    rotate); ``history`` holds them at the end of every ``record_every``-th step (and
-    :meth:`rotation_trajectory` at a run's saved times). ``narrow_phase`` is a module with
+    rotate); ``history`` holds them at the end of every ``record_every``-th step and of the
+    last (:meth:`rotation_at`). ``narrow_phase`` is a module with
     ``RigidShapes``, ``Poses``, ``manifolds`` and ``bounding_radius`` (default
     :mod:`.manifolds`).
     """
@@ -183,10 +183,9 @@ class RigidSolverStep:
         self.inverse_principal = np.zeros((n, 3))
         self.orientation[bodies.index] = bodies.orientations
         self.omega[bodies.index] = bodies.angular_velocities
-        moving = bodies.index[self.inverse_masses[bodies.index] > 0]
-        self.inverse_principal[moving] = 1.0 / np.asarray(bodies.inertia, float)[self.inverse_masses[
-            bodies.index] > 0]
-        self.omega[self.inverse_principal[:, 0] == 0] = 0.0  # a pinned body does not turn
+        turns = self.inverse_masses[bodies.index] > 0  # a pinned body neither moves nor turns
+        self.inverse_principal[bodies.index[turns]] = 1.0 / np.asarray(bodies.inertia, float)[turns]
+        self.omega[bodies.index[~turns]] = 0.0
         self.log.largest_residual = 0.0
         self._previous = _NOTHING
         self._steps = 0
@@ -230,11 +229,10 @@ class RigidSolverStep:
         swept = SweptSpheres.of(q0, np.asarray(y_forces[0]), reach, self.inverse_masses, self.log.removed,
                                 self.margin)
         pairs = swept.body_pairs(self.world.broadphase)
-        nearest = self.narrow_phase.Poses(q0, self.orientation)
-        # every body's contacts up to its margin apart: speculative ones included
+        # every point up to as far apart as the two bodies can close in the step: speculative ones included
         margin = reach - self.bounding + self.margin + np.linalg.norm(np.asarray(y_forces[0]) - q0, axis=1)
-        points = self.narrow_phase.manifolds(self.shapes, nearest, np.column_stack([pairs.i, pairs.j]),
-                                             self.world.shapes, margin)
+        points = self.narrow_phase.manifolds(self.shapes, self.narrow_phase.Poses(q0, self.orientation),
+                                             np.column_stack([pairs.i, pairs.j]), self.world.shapes, margin)
         order = np.lexsort((points.feature, points.b, points.a))
         return type(points)(*(np.asarray(column)[order] for column in points))
 
@@ -270,27 +268,26 @@ class RigidSolverStep:
         pn[found] = old.pn[rows[found]]
         pt[found] = np.einsum("cj,cdj->cd", old.pt[rows[found]], basis[found])  # kept in the new contact plane
         pr[found] = old.pr[rows[found]]
+        count = len(ca)
         contacts = rs.RigidContactColumns(
             ca, cb_body, normal, np.ascontiguousarray(ra), np.ascontiguousarray(rb), np.ascontiguousarray(basis),
-            np.asarray(points.separation, dtype=float), np.zeros(len(ca)), np.full(len(ca), np.inf),
-            np.zeros((len(ca), 3)), friction,
-            restitution, rest_speed(self.world.rest_speed, pressing, dt), rolling, pn, pt, pr, np.zeros(len(ca)),
-            np.zeros(len(ca)))
+            np.asarray(points.separation, dtype=float), np.zeros(count), np.full(count, np.inf), np.zeros((count, 3)),
+            friction, restitution, rest_speed(self.world.rest_speed, pressing, dt), rolling, pn, pt, pr,
+            np.zeros(count), np.zeros(count))
         rs.prepare(bodies, contacts)
         bias_rate, mass_scale, impulse_scale = s.softness(h)
         sub = rs.RigidSubstep(h, s.iterations, bias_rate, mass_scale, impulse_scale, s.push_speed, s.slop,
                               *self.codes)
-        self._key = key
+        self._key, self._rows = key, rows
         return bodies, contacts, sub
 
     def _conclude(self, t, dt, points, contacts, residual):
         """The log (impacts, residual) and what the next step warm-starts from."""
         c = contacts
         pt = c.pt[:, 0, None] * c.tangent[:, 0] + c.pt[:, 1, None] * c.tangent[:, 1]
-        old = self._previous
-        rows = rs.previous_rows(old.key, self._key)
+        rows = self._rows
         was_hit = np.zeros(len(rows), bool)
-        was_hit[rows >= 0] = old.total[rows[rows >= 0]] > 0
+        was_hit[rows >= 0] = self._previous.total[rows[rows >= 0]] > 0
         new = np.flatnonzero((c.total > 0) & ~was_hit)
         # one impact per pair: its first point newly hit
         first = new[np.unique(self._key[new, :2], axis=0, return_index=True)[1]] if len(new) else new
