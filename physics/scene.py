@@ -417,7 +417,8 @@ class _SceneBuilder:
         half = np.zeros((len(self.names), 3))
         for body, extent in self.half.items():
             half[body] = extent
-        return RigidScene(kind, np.array(self.radii), half, bodies, rotation or DEFAULT_ROTATION)
+        radius = np.where(kind == KINDS["box"], 0.0, np.array(self.radii))  # a box is its half edges
+        return RigidScene(kind, radius, half, bodies, rotation or DEFAULT_ROTATION)
 
     def add_collisions(self, c: Table, rotation: str | None = None):
         """The [collisions] table: detector, materials and static geometry (a CollisionWorld)."""

@@ -28,6 +28,7 @@ position stages and are refused in one line.
 from __future__ import annotations
 
 import dataclasses
+import importlib
 
 import numpy as np
 
@@ -35,6 +36,7 @@ from .. import quaternion as quat
 from . import rigid_solver as rs
 from .contact_buffer import MARGIN_OF_RADIUS, Materials
 from .events import CollisionLog, ImpactBlock, cancel_triggers
+from .manifolds import BOX, CAPSULE, SPHERE
 from .pairs import SweptSpheres
 from .resting import rest_speed
 from .solver_step import INTEGRATOR
@@ -50,8 +52,8 @@ ROTATION_STAGES = {
 }
 #: the rotation method of a scene that names none (as steplab.integrators.rotation.DEFAULT_ROTATION)
 DEFAULT_ROTATION = "exponential-map"
-#: the shapes' numbers in :class:`.manifolds.RigidShapes` (as SPHERE, BOX, CAPSULE there), by scene name
-KINDS = {"sphere": 0, "box": 1, "capsule": 2}
+#: the shapes' numbers in :class:`.manifolds.RigidShapes`, by their names in a scene
+KINDS = {"sphere": SPHERE, "box": BOX, "capsule": CAPSULE}
 #: the most a rotation moves a point of a body: its diameter, 2 R (a half turn)
 MAX_ROTATION_REACH = 2.0
 
@@ -65,7 +67,7 @@ class RigidScene:
     kind : int8 ndarray, shape (N,)
         :data:`.manifolds.SPHERE`, ``BOX`` or ``CAPSULE`` for each of the N bodies.
     radius : ndarray, shape (N,)
-        The sphere's or capsule's radius, m.
+        The sphere's or capsule's radius, m (0 for a box).
     half : ndarray, shape (N, 3)
         The box's half edges; a capsule's (0, 0, half its segment), m.
     bodies : physics.rigid_body.RigidBodies
@@ -83,7 +85,7 @@ class RigidScene:
     @property
     def has_corners(self) -> bool:
         """Whether some body is a box or a capsule (what the event loop cannot step)."""
-        return bool(np.any(self.kind != 0))
+        return bool(np.any((self.kind == BOX) | (self.kind == CAPSULE)))
 
 
 def rotation_codes(rotation: str) -> tuple[int, int]:
@@ -137,8 +139,8 @@ class RigidSolverStep:
 
     The rotational state lives here beside the translational ``y``: ``orientation`` (N, 4) and
     ``omega`` (N, 3, world frame) of every body (identity and zero for those that do not
-    rotate); ``history`` holds them at the end of every ``record_every``-th step (and
-    :meth:`rotation_trajectory` at a run's saved times). ``narrow_phase`` is a module with
+    rotate); ``history`` holds them at the end of every ``record_every``-th step and of the
+    last (:meth:`rotation_at`). ``narrow_phase`` is a module with
     ``RigidShapes``, ``Poses``, ``manifolds`` and ``bounding_radius`` (default
     :mod:`.manifolds`).
     """
@@ -159,10 +161,8 @@ class RigidSolverStep:
                 or any(s.trigger for s in world.shapes)):
             raise ValueError("the contact solver on rotating bodies takes no prologues, epilogues or trigger "
                              "shapes yet (the sphere solver does)")
-        if self.narrow_phase is None:
-            from . import manifolds as narrow_phase
-
-            self.narrow_phase = narrow_phase
+        if self.narrow_phase is None:  # the module (the package's name ``manifolds`` is its function)
+            self.narrow_phase = importlib.import_module(f"{__package__}.manifolds")
         self.codes = rotation_codes(rigid.rotation)
         if np.any(rigid.kind < 0):
             raise ValueError('the contact solver has no manifold for a cylinder; give the body shape = "capsule"')
@@ -175,7 +175,7 @@ class RigidSolverStep:
         self.materials = Materials.of(world, n)
         self.margin = MARGIN_OF_RADIUS * float(np.median(self.bounding)) if n else 0.0
         # spheres and capsules are rounded about their core (centre, segment) by their radius; boxes are not
-        self.rounding = np.where(np.asarray(rigid.kind) != KINDS["box"], np.asarray(rigid.radius, float), 0.0)
+        self.rounding = np.where(np.asarray(rigid.kind) != BOX, np.asarray(rigid.radius, float), 0.0)
         self.rolling = world.solver.rolling_resistance * self.rounding
         bodies = rigid.bodies
         self.orientation = np.tile(quat.IDENTITY, (n, 1)).astype(float)
@@ -183,10 +183,9 @@ class RigidSolverStep:
         self.inverse_principal = np.zeros((n, 3))
         self.orientation[bodies.index] = bodies.orientations
         self.omega[bodies.index] = bodies.angular_velocities
-        moving = bodies.index[self.inverse_masses[bodies.index] > 0]
-        self.inverse_principal[moving] = 1.0 / np.asarray(bodies.inertia, float)[self.inverse_masses[
-            bodies.index] > 0]
-        self.omega[self.inverse_principal[:, 0] == 0] = 0.0  # a pinned body does not turn
+        turns = self.inverse_masses[bodies.index] > 0  # a pinned body neither moves nor turns
+        self.inverse_principal[bodies.index[turns]] = 1.0 / np.asarray(bodies.inertia, float)[turns]
+        self.omega[bodies.index[~turns]] = 0.0
         self.log.largest_residual = 0.0
         self._previous = _NOTHING
         self._steps = 0
@@ -230,11 +229,10 @@ class RigidSolverStep:
         swept = SweptSpheres.of(q0, np.asarray(y_forces[0]), reach, self.inverse_masses, self.log.removed,
                                 self.margin)
         pairs = swept.body_pairs(self.world.broadphase)
-        nearest = self.narrow_phase.Poses(q0, self.orientation)
-        # every body's contacts up to its margin apart: speculative ones included
+        # every point up to as far apart as the two bodies can close in the step: speculative ones included
         margin = reach - self.bounding + self.margin + np.linalg.norm(np.asarray(y_forces[0]) - q0, axis=1)
-        points = self.narrow_phase.manifolds(self.shapes, nearest, np.column_stack([pairs.i, pairs.j]),
-                                             self.world.shapes, margin)
+        points = self.narrow_phase.manifolds(self.shapes, self.narrow_phase.Poses(q0, self.orientation),
+                                             np.column_stack([pairs.i, pairs.j]), self.world.shapes, margin)
         order = np.lexsort((points.feature, points.b, points.a))
         return type(points)(*(np.asarray(column)[order] for column in points))
 
@@ -270,32 +268,32 @@ class RigidSolverStep:
         pn[found] = old.pn[rows[found]]
         pt[found] = np.einsum("cj,cdj->cd", old.pt[rows[found]], basis[found])  # kept in the new contact plane
         pr[found] = old.pr[rows[found]]
+        count = len(ca)
         contacts = rs.RigidContactColumns(
             ca, cb_body, normal, np.ascontiguousarray(ra), np.ascontiguousarray(rb), np.ascontiguousarray(basis),
-            np.asarray(points.separation, dtype=float), np.zeros(len(ca)), np.zeros((len(ca), 3)), friction,
-            restitution, rest_speed(self.world.rest_speed, pressing, dt), rolling, pn, pt, pr, np.zeros(len(ca)),
-            np.zeros(len(ca)))
+            np.asarray(points.separation, dtype=float), np.zeros(count), np.full(count, np.inf), np.zeros((count, 3)),
+            friction, restitution, rest_speed(self.world.rest_speed, pressing, dt), rolling, pn, pt, pr,
+            np.zeros(count), np.zeros(count))
         rs.prepare(bodies, contacts)
         bias_rate, mass_scale, impulse_scale = s.softness(h)
         sub = rs.RigidSubstep(h, s.iterations, bias_rate, mass_scale, impulse_scale, s.push_speed, s.slop,
                               *self.codes)
-        self._key = key
+        self._key, self._rows = key, rows
         return bodies, contacts, sub
 
     def _conclude(self, t, dt, points, contacts, residual):
         """The log (impacts, residual) and what the next step warm-starts from."""
         c = contacts
         pt = c.pt[:, 0, None] * c.tangent[:, 0] + c.pt[:, 1, None] * c.tangent[:, 1]
-        old = self._previous
-        rows = rs.previous_rows(old.key, self._key)
+        rows = self._rows
         was_hit = np.zeros(len(rows), bool)
-        was_hit[rows >= 0] = old.total[rows[rows >= 0]] > 0
+        was_hit[rows >= 0] = self._previous.total[rows[rows >= 0]] > 0
         new = np.flatnonzero((c.total > 0) & ~was_hit)
         # one impact per pair: its first point newly hit
         first = new[np.unique(self._key[new, :2], axis=0, return_index=True)[1]] if len(new) else new
         self.log.add_impacts(ImpactBlock(
             np.full(len(first), float(t)), c.a[first], np.asarray(points.b, np.int64)[first], c.normal[first],
-            -c.vn0[first], c.restitution[first], c.friction[first], c.total[first], (float(t), float(t + dt)),
+            -c.hit[first], c.restitution[first], c.friction[first], c.total[first], (float(t), float(t + dt)),
             self.model.names, self.world.shapes))
         self.log.most_impacts_in_a_step = max(self.log.most_impacts_in_a_step, len(first))
         self.log.largest_residual = max(self.log.largest_residual, float(residual))

@@ -141,7 +141,7 @@ def integrator_named(name: str):
 
 def _keeping(make_step, kept: list, save_every: int = 1):
     """``make_step`` (a stepper factory for ``simulate``) that also appends the step it builds to ``kept``
-    (and has a step that records the rotation keep it at the saved steps only)."""
+    (a step that records the rotation, the rigid solver's, records it at the saved steps only)."""
     def stepper(model, integrator):
         step = make_step(model, integrator)
         if hasattr(step, "record_every"):
