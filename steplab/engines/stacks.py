@@ -13,8 +13,8 @@ after the first :data:`SETTLE` seconds (once the contacts have taken their stati
 - ``deflection`` (m): how far the top box has sunk at ``SETTLE`` below its start (the
   contacts' static compression plus any settling);
 - ``stands_after`` (s): the first saved time from which the top box stays within
-  ``STANDING_TOLERANCE`` to the end (a stack still bouncing at ``SETTLE`` may stand later;
-  None: it never comes to rest);
+  ``STANDING_TOLERANCE`` to the end, at least ``SETTLE`` before it (a stack still bouncing at
+  ``SETTLE`` may stand later; None: it does not come to rest);
 - ``seconds_per_step``: the median over rounds of :data:`COST_STEPS` steps, on the stack as it
   stands at the end (steplab's one timer, :func:`steplab.core.timing.median_time`).
 
@@ -125,7 +125,8 @@ def stack_measures(t, positions, velocities, up) -> dict:
     # from each saved state k, the top box's largest displacement over the states after it
     path = q[:, top]
     reach = [float(np.max(np.linalg.norm(path[k:] - path[k], axis=-1))) for k in range(len(t))]
-    rest = [k for k in range(len(t) - 1) if reach[k] < STANDING_TOLERANCE]
+    # at rest for at least SETTLE before the end: a last instant proves nothing
+    rest = [k for k in range(len(t)) if reach[k] < STANDING_TOLERANCE and t[-1] - t[k] >= SETTLE - 1e-9]
     return {"standing": bool(np.max(moved[:, top]) < STANDING_TOLERANCE), "top_drift": float(np.max(moved[:, top])),
             "drift": float(np.max(moved)), "jitter": float(np.sqrt(np.mean(np.sum(v[settled:] ** 2, axis=-1)))),
             "deflection": float((q[0, top] - q[settled, top]) @ up),
