@@ -12,9 +12,10 @@ after the first :data:`SETTLE` seconds (once the contacts have taken their stati
 - ``jitter`` (m/s): the rms speed of all boxes over the saved states after ``SETTLE``;
 - ``deflection`` (m): how far the top box has sunk at ``SETTLE`` below its start (the
   contacts' static compression plus any settling);
-- ``stands_after`` (s): the first saved time from which the top box stays within
-  ``STANDING_TOLERANCE`` to the end, at least ``SETTLE`` before it (a stack still bouncing at
-  ``SETTLE`` may stand later; None: it does not come to rest);
+- ``at_rest_after`` (s): the first saved time from which the top box stays within
+  ``STANDING_TOLERANCE`` to the end, at least ``SETTLE`` before it: a stack still bouncing at
+  ``SETTLE`` may stand later, and a fallen one lies still (read it with ``top_drift``; None: the
+  top box never comes to rest);
 - ``seconds_per_step``: the median over rounds of :data:`COST_STEPS` steps, on the stack as it
   stands at the end (steplab's one timer, :func:`steplab.core.timing.median_time`).
 
@@ -84,7 +85,7 @@ def run_stack(engine: str, scene, dt: float | None = None, t_end: float | None =
     dict
         ``engine``, ``setting``, ``label``, ``options``, ``settings`` (the adapter's line), ``boxes``,
         ``dt``, ``t_end``, ``steps``, ``standing``, ``top_drift``, ``drift``, ``jitter``,
-        ``deflection``, ``stands_after``, ``top`` (the top box's index), ``seconds_per_step``,
+        ``deflection``, ``at_rest_after``, ``top`` (the top box's index), ``seconds_per_step``,
         ``diverged_at`` (s, or None; the measures are then None and ``standing`` False).
 
     Raises
@@ -107,7 +108,7 @@ def run_stack(engine: str, scene, dt: float | None = None, t_end: float | None =
     except DivergenceError as err:
         run.close()
         return out | {"standing": False, "top_drift": None, "drift": None, "jitter": None, "deflection": None,
-                      "stands_after": None, "top": None, "seconds_per_step": None, "diverged_at": err.t}
+                      "at_rest_after": None, "top": None, "seconds_per_step": None, "diverged_at": err.t}
     measures = stack_measures(trajectory.t - scene.t_start, trajectory.positions, trajectory.velocities, _up(scene))
     cost = _cost(run, dt)
     run.close()
@@ -115,7 +116,7 @@ def run_stack(engine: str, scene, dt: float | None = None, t_end: float | None =
 
 
 def stack_measures(t, positions, velocities, up) -> dict:
-    """standing, top_drift, drift, jitter, deflection and stands_after of the saved states
+    """standing, top_drift, drift, jitter, deflection and at_rest_after of the saved states
     ``positions``, ``velocities`` (K, N, 3) at times ``t`` (from the start), ``up`` the unit
     vector against gravity; ``top`` is the box highest at the start."""
     t, q, v = np.asarray(t), np.asarray(positions), np.asarray(velocities)
@@ -130,7 +131,7 @@ def stack_measures(t, positions, velocities, up) -> dict:
     return {"standing": bool(np.max(moved[:, top]) < STANDING_TOLERANCE), "top_drift": float(np.max(moved[:, top])),
             "drift": float(np.max(moved)), "jitter": float(np.sqrt(np.mean(np.sum(v[settled:] ** 2, axis=-1)))),
             "deflection": float((q[0, top] - q[settled, top]) @ up),
-            "stands_after": float(t[rest[0]]) if rest else None, "top": top}
+            "at_rest_after": float(t[rest[0]]) if rest else None, "top": top}
 
 
 def _up(scene) -> np.ndarray:
