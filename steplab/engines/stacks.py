@@ -26,12 +26,14 @@ plane (the scene's boxes must lie in one, as a pyramid of rows does).
 
 from __future__ import annotations
 
+import dataclasses
+
 import numpy as np
 
 from steplab.integrators.simulate import DivergenceError, step_count
 
 from . import ENGINES, build_scene
-from .base import Setting
+from .base import Setting, scene_parts
 
 #: s: the stack settles into its contacts' static deflection first; standing is judged after
 SETTLE = 1.0
@@ -97,6 +99,7 @@ def run_stack(engine: str, scene, dt: float | None = None, t_end: float | None =
     t_end = float(scene.t_end if t_end is None else t_end)
     if not t_end > SETTLE:
         raise ValueError(f"t_end must exceed the settling time {SETTLE:g} s, got {t_end:g} s")
+    up = _up(scene)
     run, chosen = build_stack(engine, scene, dt, setting)
     every = max(1, int(round(SAMPLE_INTERVAL / dt)))
     n = step_count(scene.t_start, scene.t_start + t_end, dt)
@@ -109,7 +112,7 @@ def run_stack(engine: str, scene, dt: float | None = None, t_end: float | None =
         run.close()
         return out | {"standing": False, "top_drift": None, "drift": None, "jitter": None, "deflection": None,
                       "at_rest_after": None, "top": None, "seconds_per_step": None, "diverged_at": err.t}
-    measures = stack_measures(trajectory.t - scene.t_start, trajectory.positions, trajectory.velocities, _up(scene))
+    measures = stack_measures(trajectory.t - scene.t_start, trajectory.positions, trajectory.velocities, up)
     cost = _cost(run, dt)
     run.close()
     return out | measures | {"seconds_per_step": cost, "diverged_at": None}
@@ -135,8 +138,6 @@ def stack_measures(t, positions, velocities, up) -> dict:
 
 
 def _up(scene) -> np.ndarray:
-    from .base import scene_parts
-
     g = scene_parts(scene.model, None, "the stack").gravity
     if not np.any(g):
         raise ValueError("a stack needs gravity ([forces.gravity]): it sets which way is up")
@@ -144,8 +145,6 @@ def _up(scene) -> np.ndarray:
 
 
 def _at_dt(scene, dt):
-    import dataclasses
-
     return scene if dt is None or dt == scene.dt else dataclasses.replace(scene, dt=float(dt))
 
 
