@@ -69,10 +69,10 @@ def test_the_measures_of_a_made_up_drift():
     assert found["top_drift"] == pytest.approx(speed * 9.0, rel=1e-12) == found["drift"]
     assert found["jitter"] == pytest.approx(speed / np.sqrt(2), rel=1e-12)
     assert found["deflection"] == pytest.approx(0.05, rel=1e-12)
-    assert found["stands_after"] == pytest.approx(SETTLE)
+    assert found["at_rest_after"] == pytest.approx(SETTLE)
     q[-1, 1, 0] += STANDING_TOLERANCE  # a last jump of 1 cm: fallen, and it comes to rest only then
     found = stack_measures(t, q, v, np.array([0.0, 0.0, 1.0]))
-    assert not found["standing"] and found["stands_after"] is None
+    assert not found["standing"] and found["at_rest_after"] is None
 
 
 @pytest.mark.parametrize("engine", list(ENGINES))

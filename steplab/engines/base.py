@@ -207,28 +207,35 @@ class RigidShape:
         return float(self.half_extents[0])
 
 
-def rigid_shapes(model, bodies: RigidBodies | None) -> tuple[RigidShape, ...]:
+def rigid_shapes(model, bodies: RigidBodies | None, collisions=None) -> tuple[RigidShape, ...]:
     """The rotating bodies of a scene with their extents, for the engines' collision shapes.
 
-    :class:`~steplab.physics.rigid_body.RigidBodies` keeps the principal moments, not the
-    edges, so a box's edges are those of the uniform box with these moments, inverted
-    from m/12 (b^2 + c^2, ...): a^2 = 6 (I2 + I3 - I1) / m; a cylinder's length from
-    I1 = m/12 (3 r^2 + l^2); a capsule's by bisection on its (monotone) I1(l). A body whose
-    ``inertia`` overrides its shape's gets the shape of these moments (the engine still
-    gets the moments themselves). An extent the moments make zero (a thin plate's edge) is
+    A scene with collisions keeps each box's half edges and each capsule's half length
+    (``collisions.rigid``, the contact solver's :class:`RigidScene`); otherwise they follow from
+    the principal moments: a box's edges are those of the uniform box with these moments,
+    inverted from m/12 (b^2 + c^2, ...), a^2 = 6 (I2 + I3 - I1) / m; a cylinder's length from
+    I1 = m/12 (3 r^2 + l^2); a capsule's by bisection on its (monotone) I1(l). (The engine gets
+    the moments themselves either way.) An extent that comes out zero (a thin plate's edge) is
     :data:`SMALLEST_EXTENT`: the engines refuse a shape of size 0.
     """
     if bodies is None:
         return ()
+    given = getattr(collisions, "rigid", None)
     out = []
     for k, (i, shape) in enumerate(zip(bodies.index, bodies.shapes or ("sphere",) * bodies.n)):
         m, r, inertia = float(model.masses[i]), float(model.radii[i]), np.asarray(bodies.inertia[k], float)
+        known = None if given is None else np.asarray(given.half[i], float)
         if shape == "box":
-            half = 0.5 * np.sqrt(np.maximum(6.0 * (inertia.sum() - 2 * inertia) / m, 0.0))
-        elif shape == "cylinder":
-            half = np.array([r, r, 0.5 * math.sqrt(max(12.0 * inertia[0] / m - 3 * r * r, 0.0))])
-        elif shape == "capsule":
-            half = np.array([r, r, 0.5 * _capsule_length(m, r, inertia[0])])
+            half = known if known is not None and np.all(known > 0) else \
+                0.5 * np.sqrt(np.maximum(6.0 * (inertia.sum() - 2 * inertia) / m, 0.0))
+        elif shape in ("cylinder", "capsule"):
+            if known is not None and known[2] > 0:
+                length = 2 * known[2]
+            elif shape == "cylinder":
+                length = math.sqrt(max(12.0 * inertia[0] / m - 3 * r * r, 0.0))
+            else:
+                length = _capsule_length(m, r, inertia[0])
+            half = np.array([r, r, 0.5 * length])
         else:
             half = np.full(3, r)
         out.append(RigidShape(int(i), shape, m, inertia, np.maximum(half, SMALLEST_EXTENT)))
@@ -352,7 +359,7 @@ class EngineRun:
         self.parts = parts
         self._pinned_y = None
         self.rigid_bodies = bodies
-        self.rigid = rigid_shapes(model, bodies)
+        self.rigid = rigid_shapes(model, bodies, parts.collisions)
 
     @property
     def name(self) -> str:

@@ -108,7 +108,7 @@ def mjcf(model, y0, dt: float, collisions=None, integrator: str = "Euler", solve
         attrs += f' friction="{float(mu)!r} 0.005 0.0001"' if mu > 0 else ' condim="1"'
         return attrs + (' solmix="0"' if body is None else "")
 
-    rigid = {shape.body: shape for shape in rigid_shapes(model, bodies)}
+    rigid = {shape.body: shape for shape in rigid_shapes(model, bodies, parts.collisions)}
     turn = np.broadcast_to(quat.IDENTITY, (parts.n, 4)).copy()
     spin = np.zeros((parts.n, 3))  # body frame, as MuJoCo's free joint keeps it
     if rigid:

@@ -12,9 +12,10 @@ after the first :data:`SETTLE` seconds (once the contacts have taken their stati
 - ``jitter`` (m/s): the rms speed of all boxes over the saved states after ``SETTLE``;
 - ``deflection`` (m): how far the top box has sunk at ``SETTLE`` below its start (the
   contacts' static compression plus any settling);
-- ``stands_after`` (s): the first saved time from which the top box stays within
-  ``STANDING_TOLERANCE`` to the end (a stack still bouncing at ``SETTLE`` may stand later;
-  None: it never comes to rest);
+- ``at_rest_after`` (s): the first saved time from which the top box stays within
+  ``STANDING_TOLERANCE`` to the end, at least ``SETTLE`` before it: a stack still bouncing at
+  ``SETTLE`` may stand later, and a fallen one lies still (read it with ``top_drift``; None: the
+  top box never comes to rest);
 - ``seconds_per_step``: the median over rounds of :data:`COST_STEPS` steps, on the stack as it
   stands at the end (steplab's one timer, :func:`steplab.core.timing.median_time`).
 
@@ -25,12 +26,14 @@ plane (the scene's boxes must lie in one, as a pyramid of rows does).
 
 from __future__ import annotations
 
+import dataclasses
+
 import numpy as np
 
 from steplab.integrators.simulate import DivergenceError, step_count
 
 from . import ENGINES, build_scene
-from .base import Setting
+from .base import Setting, scene_parts
 
 #: s: the stack settles into its contacts' static deflection first; standing is judged after
 SETTLE = 1.0
@@ -84,7 +87,7 @@ def run_stack(engine: str, scene, dt: float | None = None, t_end: float | None =
     dict
         ``engine``, ``setting``, ``label``, ``options``, ``settings`` (the adapter's line), ``boxes``,
         ``dt``, ``t_end``, ``steps``, ``standing``, ``top_drift``, ``drift``, ``jitter``,
-        ``deflection``, ``stands_after``, ``top`` (the top box's index), ``seconds_per_step``,
+        ``deflection``, ``at_rest_after``, ``top`` (the top box's index), ``seconds_per_step``,
         ``diverged_at`` (s, or None; the measures are then None and ``standing`` False).
 
     Raises
@@ -96,6 +99,7 @@ def run_stack(engine: str, scene, dt: float | None = None, t_end: float | None =
     t_end = float(scene.t_end if t_end is None else t_end)
     if not t_end > SETTLE:
         raise ValueError(f"t_end must exceed the settling time {SETTLE:g} s, got {t_end:g} s")
+    up = _up(scene)
     run, chosen = build_stack(engine, scene, dt, setting)
     every = max(1, int(round(SAMPLE_INTERVAL / dt)))
     n = step_count(scene.t_start, scene.t_start + t_end, dt)
@@ -107,15 +111,15 @@ def run_stack(engine: str, scene, dt: float | None = None, t_end: float | None =
     except DivergenceError as err:
         run.close()
         return out | {"standing": False, "top_drift": None, "drift": None, "jitter": None, "deflection": None,
-                      "stands_after": None, "top": None, "seconds_per_step": None, "diverged_at": err.t}
-    measures = stack_measures(trajectory.t - scene.t_start, trajectory.positions, trajectory.velocities, _up(scene))
+                      "at_rest_after": None, "top": None, "seconds_per_step": None, "diverged_at": err.t}
+    measures = stack_measures(trajectory.t - scene.t_start, trajectory.positions, trajectory.velocities, up)
     cost = _cost(run, dt)
     run.close()
     return out | measures | {"seconds_per_step": cost, "diverged_at": None}
 
 
 def stack_measures(t, positions, velocities, up) -> dict:
-    """standing, top_drift, drift, jitter, deflection and stands_after of the saved states
+    """standing, top_drift, drift, jitter, deflection and at_rest_after of the saved states
     ``positions``, ``velocities`` (K, N, 3) at times ``t`` (from the start), ``up`` the unit
     vector against gravity; ``top`` is the box highest at the start."""
     t, q, v = np.asarray(t), np.asarray(positions), np.asarray(velocities)
@@ -125,16 +129,15 @@ def stack_measures(t, positions, velocities, up) -> dict:
     # from each saved state k, the top box's largest displacement over the states after it
     path = q[:, top]
     reach = [float(np.max(np.linalg.norm(path[k:] - path[k], axis=-1))) for k in range(len(t))]
-    rest = [k for k in range(len(t) - 1) if reach[k] < STANDING_TOLERANCE]
+    # at rest for at least SETTLE before the end: a last instant proves nothing
+    rest = [k for k in range(len(t)) if reach[k] < STANDING_TOLERANCE and t[-1] - t[k] >= SETTLE - 1e-9]
     return {"standing": bool(np.max(moved[:, top]) < STANDING_TOLERANCE), "top_drift": float(np.max(moved[:, top])),
             "drift": float(np.max(moved)), "jitter": float(np.sqrt(np.mean(np.sum(v[settled:] ** 2, axis=-1)))),
             "deflection": float((q[0, top] - q[settled, top]) @ up),
-            "stands_after": float(t[rest[0]]) if rest else None, "top": top}
+            "at_rest_after": float(t[rest[0]]) if rest else None, "top": top}
 
 
 def _up(scene) -> np.ndarray:
-    from .base import scene_parts
-
     g = scene_parts(scene.model, None, "the stack").gravity
     if not np.any(g):
         raise ValueError("a stack needs gravity ([forces.gravity]): it sets which way is up")
@@ -142,8 +145,6 @@ def _up(scene) -> np.ndarray:
 
 
 def _at_dt(scene, dt):
-    import dataclasses
-
     return scene if dt is None or dt == scene.dt else dataclasses.replace(scene, dt=float(dt))
 
 
