@@ -28,7 +28,6 @@ swept):
 from __future__ import annotations
 
 import dataclasses
-import importlib
 import math
 import time
 from typing import NamedTuple
@@ -119,15 +118,7 @@ def run(scene: Scene, t_end: float | None = None, dt: float | None = None, every
     dt, t_end, world, kept = dt or scene.dt, t_end or scene.t_end, scene.collisions, []
 
     def stepper(model, integrator):
-        if world.rigid is not None and world.method == "solver":
-            # the narrow phase given as its module: physics.collision re-exports the function
-            # manifolds under the module's name, which the step's own import then finds (NOTES-stacking.md)
-            from steplab.physics.collision.rigid_solver_step import RigidSolverStep
-
-            step = RigidSolverStep(world, model, integrator, importlib.import_module(
-                "steplab.physics.collision.manifolds"))
-        else:
-            step = world.stepper(model, integrator)
+        step = world.stepper(model, integrator)
         if hasattr(step, "record_every"):  # the rigid solver: its rotation at the saved steps only
             step.record_every = every
         kept.append(step)
@@ -239,7 +230,7 @@ def incline(p: dict) -> dict:
 def at_rest(scene: Scene, t_end: float, dt: float | None = None, series: bool = False) -> dict:
     """A stack run from rest to ``t_end``, saved every step, measured as the engines' stacks are
     (:func:`steplab.engines.stacks.stack_measures`: standing, top_drift, drift, jitter, deflection
-    at its SETTLE, stands_after), and besides: penetration, the deepest overlap of a box with the
+    at its SETTLE, at_rest_after), and besides: penetration, the deepest overlap of a box with the
     floor or a box it stood on at the start (from the corners, exact for upright boxes); sink,
     the top box's drop at the end; the wall time per step; with ``series``, the top box's height
     change at 10 Hz (``t``, ``top_height``). A run that diverges gives its time (``diverged_at``)
@@ -252,7 +243,7 @@ def at_rest(scene: Scene, t_end: float, dt: float | None = None, series: bool = 
         r = run(scene, t_end, dt)
     except DivergenceError as err:
         return {"diverged_at": err.t, "standing": False, "top_drift": None, "drift": None, "jitter": None,
-                "deflection": None, "stands_after": None, "penetration": None, "sink": None,
+                "deflection": None, "at_rest_after": None, "penetration": None, "sink": None,
                 "seconds_per_step": None}
     measures = stack_measures(r.t - r.t[0], r.q, r.v, np.array([0.0, 0.0, 1.0]))
     low, high = corner_heights(r.q[-1], r.orientations[-1], box_sizes(scene))
