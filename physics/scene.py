@@ -20,7 +20,7 @@ import numpy as np
 
 from steplab.core.registry import BUILTIN
 
-from . import rigid_body, soft_body
+from . import rigid_body, soft_body, stacks
 from .forces import FORCES
 from .model import Model
 from .scene_library import SCENES
@@ -173,10 +173,11 @@ class _SceneBuilder:
         self.forces: list = []
         self.materials: list[str] = []
         self.rotating: list[tuple] = []  # (body index, shape, inertia, orientation, angular velocity)
+        self.half: dict[int, np.ndarray] = {}  # body index -> a box's half edges, a capsule's (0, 0, l / 2)
 
     def build(self, data, name: str, collisions: bool = True) -> Scene:
         root = Table(data, "", self.label)
-        root.allow("name", "description", "simulation", "bodies", "soft_bodies", "particles", "forces",
+        root.allow("name", "description", "simulation", "bodies", "soft_bodies", "particles", "stacks", "forces",
                    "collisions")
         sim = root.table("simulation")
         if sim is None:
@@ -190,8 +191,11 @@ class _SceneBuilder:
         for group in root.tables("particles"):
             self.add_particles(group)
             self._material(group)
+        for stack in root.tables("stacks"):
+            self.add_stack(stack)
+            self._material(stack)
         if not self.names:
-            root.fail("declares no bodies: add [[bodies]], [[soft_bodies]] or [[particles]]")
+            root.fail("declares no bodies: add [[bodies]], [[soft_bodies]], [[particles]] or [[stacks]]")
         forces = root.table("forces")
         if forces is not None:
             self.add_forces(forces)
@@ -211,7 +215,7 @@ class _SceneBuilder:
                       pinned=np.array(self.pinned), names=self.names)
         y0 = np.stack([np.array(self.positions), np.array(self.velocities)])
         table = root.table("collisions") if collisions else None
-        collisions = self.add_collisions(table) if table is not None else None
+        collisions = self.add_collisions(table, rotation) if table is not None else None
         return Scene(root.string("name", name), model, y0, integrator, dt, t_start, t_end,
                      root.string("description", ""), collisions, self.rigid_bodies(), rotation,
                      {} if settings is None else dict(settings.data))
@@ -253,6 +257,10 @@ class _SceneBuilder:
         rotation = rigid_body.from_scene_body(t, mass, radius)
         if rotation is not None:
             self.rotating.append((len(self.names) - 1, *rotation))
+            if rotation[0] == "box":
+                self.half[len(self.names) - 1] = 0.5 * t.vector("size", REQUIRED)
+            elif rotation[0] in ("capsule", "cylinder"):
+                self.half[len(self.names) - 1] = np.array([0.0, 0.0, 0.5 * t.number("length", REQUIRED)])
 
     def add_soft_body(self, t: Table):
         t.allow("name", "shape", "size", "center", "rows", "cols", "spacing", "origin", "shear",
@@ -341,6 +349,40 @@ class _SceneBuilder:
         for k in range(count):
             self._append(t, f"{name}[{k}]", mass, radius, positions[k], velocities[k])
 
+    def add_stack(self, t: Table):
+        """A column or pyramid of boxes "name[0]", "name[1]", ... bottom row first (:mod:`.stacks`):
+        each a rotating box of ``size``, at rest, its radius the half diagonal (the sphere
+        that bounds it), its mass ``mass`` or, row by row from the bottom, ``masses``."""
+        t.allow("name", "kind", "rows", "size", "mass", "masses", "gap", "base", "material")
+        name, kind = t.string("name", REQUIRED), t.string("kind", REQUIRED, choices=stacks.KINDS)
+        rows = t.integer("rows", REQUIRED, 1, 1000)
+        size = t.vector("size", REQUIRED, positive=True)
+        if ("mass" in t.data) == ("masses" in t.data):
+            t.fail("needs either mass (every box) or masses (one per row, bottom up), not both" if "mass" in t.data
+                   else "missing required key mass (every box) or masses (one per row, bottom up)")
+        if "mass" in t.data:
+            row_masses = [t.number("mass", REQUIRED, positive=True)] * rows
+        else:
+            value = t.raw("masses")
+            if not isinstance(value, list) or len(value) != rows:
+                t.fail(f"must be a list of {rows} masses, one per row bottom up, got {short(value)}", "masses")
+            row_masses = [Table({f"[{k}]": m}, f"{t.where}.masses", self.label).number(f"[{k}]", positive=True)
+                          for k, m in enumerate(value)]
+        gap, base = t.number("gap", 0.0, nonnegative=True), t.vector("base", [0, 0, 0])
+        centres, row = stacks.stack_layout(kind, rows, size, gap, base)
+        radius = 0.5 * float(np.hypot(np.hypot(size[0], size[1]), size[2]))  # hypot: no overflow on the way
+        if not np.isfinite(radius):
+            t.fail(f"a box of edges {size.tolist()} m has no finite half diagonal (the numbers overflow)", "size")
+        for k, (centre, r) in enumerate(zip(centres, row)):
+            mass = row_masses[r]
+            self._append(t, f"{name}[{k}]", mass, radius, centre, np.zeros(3))
+            inertia = rigid_body.principal_inertia("box", mass, radius, size)
+            if not np.all(np.isfinite(inertia) & (inertia > 0)):
+                t.fail(f"the box's principal moments {inertia.tolist()} kg m^2 are not finite and positive "
+                       "(the numbers overflow or underflow)", "size")
+            self.rotating.append((len(self.names) - 1, "box", inertia, np.array([1.0, 0, 0, 0]), np.zeros(3)))
+            self.half[len(self.names) - 1] = 0.5 * size
+
     def bodies(self) -> SceneBodies:
         """The bodies declared so far, for the forces' tables."""
         n = len(self.names)
@@ -376,7 +418,24 @@ class _SceneBuilder:
         material = t.string("material", DEFAULT_MATERIAL)
         self.materials += [material] * (len(self.names) - len(self.materials))
 
-    def add_collisions(self, c: Table):
+    def rigid_scene(self, c: Table, method: str, rotation: str | None):
+        """The rotating bodies' shapes and state for the contact solver (None: all point masses)."""
+        bodies = self.rigid_bodies()
+        if bodies is None:
+            return None
+        from .collision.rigid_solver_step import DEFAULT_ROTATION, KINDS, RigidScene
+
+        if method == "solver" and "cylinder" in bodies.shapes:
+            c.fail('the contact solver has no manifold for a cylinder; give the body shape = "capsule"', "method")
+        kind = np.zeros(len(self.names), np.int8)
+        kind[bodies.index] = [KINDS.get(shape, -1) for shape in bodies.shapes]
+        half = np.zeros((len(self.names), 3))
+        for body, extent in self.half.items():
+            half[body] = extent
+        radius = np.where(kind == KINDS["box"], 0.0, np.array(self.radii))  # a box is its half edges
+        return RigidScene(kind, radius, half, bodies, rotation or DEFAULT_ROTATION)
+
+    def add_collisions(self, c: Table, rotation: str | None = None):
         """The [collisions] table: detector, materials and static geometry (a CollisionWorld)."""
         from .broadphase import METHODS
         from .collision import world as collision_world
@@ -448,7 +507,7 @@ class _SceneBuilder:
             detector=detector, shapes=tuple(shape for _, shape in shapes), materials=materials,
             pair_properties=PairProperties(restitution, friction, table), bisection_iterations=iterations,
             max_impacts_per_step=max_impacts, broadphase=broadphase, rest_speed=rest_speed, method=method,
-            **method_fields)
+            rigid=self.rigid_scene(c, method, rotation), **method_fields)
 
     @staticmethod
     def _restitution(t: Table, key: str, default):

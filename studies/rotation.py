@@ -12,7 +12,9 @@ Every number is checked against the exact solution or a stated invariant:
 - a spin about the stable major axis and how long each method takes to make it a tumbler
   (the nutation angle between the body's axis 3 and L passing :data:`TUMBLER_ANGLE`);
 - Bullet's gyroscopic demo body (a disc with a cross bar, omega = (0, 0.1, 10) rad/s);
-- a heavy top's precession rate against the slow root of I1 Omega^2 cos(theta) - I3 s Omega + M g d = 0.
+- a heavy top's precession rate against the slow root of I1 Omega^2 cos(theta) - I3 s Omega + M g d = 0;
+- the engines (:mod:`.rotation_engines`, where installed): each setting named as one of these
+  methods, and its energy and |L| drift beside theirs on the flip box and the demo body.
 
 All bodies of one experiment run together as one batch (one body per omega dt: scaling omega
 scales time, so one dt covers every omega dt); the long drift runs use the compiled loop.
@@ -29,7 +31,7 @@ from steplab.integrators.torque_free import TorqueFreeMotion
 from steplab.physics import quaternion as quat
 from steplab.physics.rigid_body import ForceAtPoint, RotationModel, principal_inertia, rotational_energy
 
-from . import plotting
+from . import plotting, rotation_engines
 from .runner import Study
 from .tables import Table, format_value, markdown_table
 
@@ -50,7 +52,8 @@ TOP = {"mass": 1.0, "d": 0.1, "i1": 0.02, "i3": 0.01, "spin": 50.0, "theta": np.
 
 
 def parameters(quick: bool) -> dict:
-    common = {"methods": list(ROTATIONS), "dt": DT, "inertia": list(INERTIA), "flip_omega": list(FLIP_OMEGA)}
+    common = {"methods": list(ROTATIONS), "dt": DT, "inertia": list(INERTIA), "flip_omega": list(FLIP_OMEGA),
+              "engines": rotation_engines.parameters(quick)}
     if quick:
         return common | {"flip_omega_dt": [0.4, 0.2, 0.1, 0.05, 0.025, 0.0125], "period_omega_dt_min": 0.05,
                          "flip_periods": 2, "drift_omega_dt": 0.4,
@@ -254,6 +257,9 @@ def compute(p: dict, progress=None) -> dict:
     record["bullet_inertia"] = bullet_body().tolist()
     record |= {"inertia": p["inertia"], "drift_omega_dt": p["drift_omega_dt"],
                "stability_grid_min": min(p["stability_omega_dt"]), "stability_grid_max": max(p["stability_omega_dt"])}
+    with np.errstate(over="ignore", invalid="ignore"):
+        record["engines"] = rotation_engines.measure(p["engines"], (bullet_body().tolist(), list(BULLET_OMEGA)),
+                                                     p["drift_backend"])
     return record
 
 
@@ -349,6 +355,8 @@ def plot(record: dict, out) -> list[str]:
     right.legend(fontsize=7)
     fig.tight_layout()
     figures += plotting.save_figure(fig, out, "rotation_stability_top")
+    if "engines" in record:
+        figures += rotation_engines.plot(record["engines"], out, _style)
     return figures
 
 
@@ -356,6 +364,11 @@ def summary(record: dict) -> list[tuple[str, str]]:
     rows = [("Dzhanibekov period, closed form", f"{record['period_closed_form']:.6g} s")]
     rows.append(("fitted orientation orders", ", ".join(f"{m} {format_value(s, '.2f')}"
                                                           for m, s in record["orders"].items())))
+    engines = record.get("engines")
+    if engines is not None:
+        named = [f"{r['label']} = {', '.join(r['equals']) or 'none'}" for r in engines["identification"]]
+        rows.append(("engines' rotation", "; ".join(named) + (f" ({engines['missing']})" if engines["missing"]
+                                                             else "") if named else engines["missing"] or "none"))
     return rows
 
 
@@ -389,8 +402,17 @@ def _or(value, spec: str, missing: str) -> str:
     return missing if value is None else format(value, spec)
 
 
-TABLES = (Table("rotation", lambda r: {k: r[k] for k in ("methods", "declared_orders", "orders", "flip", "drift",
-                                                         "stability", "heavy_top", "bullet")}, rotation_table),)
+def _table_slice(record: dict) -> dict:
+    """What :func:`rotation_table` draws from, and no more: each drift run's last values (the paper's
+    numbers file stays small)."""
+    drift = [{"method": d["method"], "energy": d["energy"][-1:], "momentum": d["momentum"][-1:],
+              "tumbler_after_s": d["tumbler_after_s"]} for d in record["drift"]]
+    return {k: record[k] for k in ("methods", "declared_orders", "orders", "flip", "stability", "heavy_top",
+                                   "bullet")} | {"drift": drift}
+
+
+TABLES = (Table("rotation", _table_slice, rotation_table),
+          rotation_engines.TABLE.within("engines"))
 
 STUDY = Study("rotation", "Rotation: the engines' rotation methods against the exact tumbling of a rigid body",
               parameters, compute, plot, summary, tables=TABLES)

@@ -34,6 +34,7 @@ def test_the_slow_root_solves_the_precession_equation():
 def record():
     p = study.parameters(True) | {"methods": ["explicit", "implicit-gyroscopic", "implicit-midpoint", "rk4"],
                                   "drift_periods": 10, "stability_steps": 100}
+    p["engines"] = p["engines"] | {"settings": []}  # the engines' part: tests/test_engines_rotation.py
     return json.loads(json.dumps(study.compute(p)))  # what the runner writes
 
 

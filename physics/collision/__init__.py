@@ -10,6 +10,8 @@ One module per concept (the lecture's collision chapters):
 
 - :mod:`.shapes` — spheres (the bodies), planes, axis-aligned and oriented boxes;
 - :mod:`.narrow_phase` — one pair test per pair of kinds, in a table (:data:`PAIR_TESTS`);
+- :mod:`.manifolds` — the rigid narrow phase: contact manifolds of spheres, boxes and capsules
+  (the module keeps its name here: call ``manifolds.manifolds``);
 - :mod:`.bounding_volumes` — sphere, AABB, OBB and a two-level hierarchy;
 - :mod:`.time_of_impact` — swept tests: sphere-sphere (the lecture's quadratic), sphere-plane,
   sphere-box through the Minkowski sum;
@@ -38,6 +40,10 @@ from .events import CollisionLog as CollisionLog
 from .events import cancel_triggers as cancel_triggers
 from .events import remove_on_impact as remove_on_impact
 from .impact_cap import ImpactCapError as ImpactCapError
+from .manifolds import ManifoldPoints as ManifoldPoints
+from .manifolds import Poses as Poses
+from .manifolds import RigidShapes as RigidShapes
+from .manifolds import bounding_radius as bounding_radius
 from .narrow_phase import PAIR_TESTS as PAIR_TESTS
 from .narrow_phase import collide as collide
 from .response import PairProperties as PairProperties

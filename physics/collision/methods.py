@@ -51,6 +51,9 @@ class EventLoop(CollisionMethod):
 
     @classmethod
     def step(cls, world, model, integrator):
+        if world.rigid is not None and world.rigid.has_corners:
+            raise ValueError('the event loop steps spheres only: boxes and capsules need [collisions] method = '
+                             '"solver" (the event loop has no time of impact under rotation)')
         from .step import CollisionStep
 
         return CollisionStep(world, model, integrator)
@@ -80,10 +83,17 @@ class ContactSolverMethod(CollisionMethod):
             contact_hertz=table.number("contact_hertz", d.contact_hertz, positive=True),
             damping_ratio=table.number("damping_ratio", d.damping_ratio, nonnegative=True),
             baumgarte=baumgarte, slop=table.number("slop", d.slop, nonnegative=True),
-            push_speed=table.number("push_speed", d.push_speed, positive=True))}
+            push_speed=table.number("push_speed", d.push_speed, positive=True),
+            rolling_resistance=table.number("rolling_resistance", d.rolling_resistance, nonnegative=True))}
 
     @classmethod
     def step(cls, world, model, integrator):
+        """The sphere solver (:mod:`.solver_step`), or the rigid one (:mod:`.rigid_solver_step`) when
+        some body rotates."""
+        if world.rigid is not None:
+            from .rigid_solver_step import RigidSolverStep
+
+            return RigidSolverStep(world, model, integrator)
         from .solver_step import SolverStep
 
         return SolverStep(world, model, integrator)

@@ -62,6 +62,9 @@ class ContactSolver:
         Penetration left alone, m (>= 0): bodies sunk less than this are not pushed.
     push_speed : float
         The fastest a correction pushes bodies apart, m/s (> 0; Box2D's 3).
+    rolling_resistance : float
+        Rigid bodies (:mod:`.rigid_solver`): torques up to c_r r P oppose the rolling of a
+        sphere or capsule of radius r pressed with the impulse P (>= 0; 0, the default: none).
 
     Notes
     -----
@@ -78,6 +81,7 @@ class ContactSolver:
     baumgarte: float = 0.2
     slop: float = 0.0
     push_speed: float = 3.0
+    rolling_resistance: float = 0.0
 
     def __post_init__(self):
         for name in ("iterations", "substeps"):
@@ -90,7 +94,8 @@ class ContactSolver:
                   ("damping_ratio", self.damping_ratio >= 0, ">= 0"),
                   ("baumgarte", 0 < self.baumgarte <= 1, "in (0, 1]"),
                   ("slop", self.slop >= 0, ">= 0"),
-                  ("push_speed", self.push_speed > 0, "> 0"))
+                  ("push_speed", self.push_speed > 0, "> 0"),
+                  ("rolling_resistance", self.rolling_resistance >= 0, ">= 0"))
         for name, ok, allowed in checks:
             value = getattr(self, name)
             if not (math.isfinite(value) and ok):

@@ -71,6 +71,10 @@ class CollisionWorld:
         it only heeds "none".
     solver : ContactSolver
         The contact solver's settings (iterations, substeps, position correction).
+    rigid : physics.collision.rigid_solver_step.RigidScene or None
+        The bodies' shapes and rotational state when some of them rotate (boxes, capsules,
+        spinning spheres): the contact solver then steps them as rigid bodies
+        (:mod:`.rigid_solver_step`); None, the default, for point masses.
     """
 
     detector: str = "swept"
@@ -87,6 +91,7 @@ class CollisionWorld:
     compiled_loop: bool = True
     method: str = "event"
     solver: ContactSolver = dataclasses.field(default_factory=ContactSolver)
+    rigid: object = None
 
     def __post_init__(self):
         DETECTORS.lookup(self.detector)

@@ -7,7 +7,9 @@
 7. collisions: ball pits of 10^3 to 10^5 spheres against MuJoCo and pybullet (:mod:`.collisions`);
 8. implicit Euler's step on the cloth against semi-implicit Euler's (:mod:`.implicit`, issue 16);
 9. start-up: the light commands in fresh processes beside ``import numpy`` (:mod:`.startup`, issue 29);
-10. rotation: 10^5 free tumbling bodies, one exponential-map step against the memory bound (:mod:`.rotation`).
+10. rotation: 10^5 free tumbling bodies, one exponential-map step against the memory bound (:mod:`.rotation`);
+11. stacking: the 20-row pyramid and 10^3 and 10^4 boxes falling into a box, beside MuJoCo and pybullet
+    (:mod:`.stacking`).
 
 Each section takes the :class:`.Config`, the :class:`.Record` and a progress callback.
 """
@@ -28,6 +30,7 @@ from .implicit import implicit_euler_cloth
 from .profile import compiled_text, loop_kernels
 from .record import Record, final_difference, size_label
 from .rotation import tumbling_bodies
+from .stacking import stacking
 from .startup import startup
 from .systems import cloth_model, particles_model, step_bytes
 from .timing import marginal_times, settled_samples, settled_times
@@ -390,4 +393,4 @@ def batching(config: Config, record: Record, progress) -> None:
 
 
 SECTIONS = (small_system, large_systems, accuracy_matched, broadphase, compile_times, batching, ball_pits,
-            implicit_euler_cloth, startup, tumbling_bodies)
+            implicit_euler_cloth, startup, tumbling_bodies, stacking)

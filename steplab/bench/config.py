@@ -95,13 +95,21 @@ class Config:
     implicit_search: bool = False
     implicit_steps: int = 28
     semi_implicit_steps: int = 80
+    #: the stacking section (:mod:`.stacking`, issue 26): the pyramid's rows (the issue's 20) and its
+    #: steps per timed call, the box pits (boxes, steps of dt = 1/60 s), and the largest pit the
+    #: engines are set up for
+    stack_pyramid_rows: int = 20
+    stack_steps: int = 10
+    box_pit_runs: tuple[tuple[int, int], ...] = ((1_000, 30), (10_000, 10))
+    box_pit_peer_max: int = 1_000
 
 
 FULL = Config(small_steps=100_000, particles=1_000_000, cloth_side=160, broadphase_n=100_000, periods=100,
               max_log2_steps=22, batch=256, batch_steps=2_500, repeats=9, python_repeats=3, python_steps=100_000,
               collision_runs=((1_000, 60), (2_000, 60), (10_000, 60), (100_000, 6)), collision_repeats=3,
               crowded_pit=(2_000, 6.0, 60),
-              implicit_search=True, max_rounds=60, round_budget_seconds=30.0)
+              implicit_search=True, max_rounds=60, round_budget_seconds=30.0, stack_steps=30,
+              box_pit_runs=((1_000, 60), (10_000, 30)))
 #: the systems the targets are stated for, with fewer rounds, smaller batches, 20 oscillator
 #: periods for the accuracy match and 10^4 steps for the Python loop: under a minute; the
 #: ball pits of 10^3 and 10^4 balls for their first 0.2 and 0.1 s (a per-step cost), the

@@ -27,7 +27,8 @@ def command(args) -> int:
     # MuJoCo's integrator that steps as the scene's integrator does (the engines study's identification)
     equivalent = MujocoRun.integrator_stepping_as(scene.integrator)
     integrator = args.integrator or equivalent or "Euler"
-    text = mjcf(scene.model, scene.y0, scene.dt, scene.collisions, integrator, name=scene.name)
+    text = mjcf(scene.model, scene.y0, scene.dt, scene.collisions, integrator, name=scene.name,
+                bodies=scene.rigid_bodies)
     if args.integrator is None and equivalent is None:
         print(f"steplab export: note: MuJoCo has no integrator that steps as {scene.integrator!r} does; "
               "writing Euler (semi-implicit Euler; choose with --integrator)", file=sys.stderr)

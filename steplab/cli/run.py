@@ -68,6 +68,8 @@ def command(args) -> int:
     dt, t_end = time_span(scene, args)
     world = collision_world(scene, args.detector, args.backend)
     integrator, world = with_sweeps(integrator, world, args)
+    if world is not None and world.rigid is not None:  # the solver turns the bodies with the run's rotation method
+        world = dataclasses.replace(world, rigid=dataclasses.replace(world.rigid, rotation=rotation_method.name))
     warning = dt_warning(scene.model, scene.y0[0], integrator, dt)  # before the run: it may be long
     if warning is not None:
         print(f"steplab run: warning: {warning}", file=sys.stderr)
@@ -76,7 +78,7 @@ def command(args) -> int:
     kept = []  # the run's collision step, whose log tells what happened before a stop (or its attached step)
     energy_start = float(scene.model.energy(scene.y0, scene.rigid_bodies))  # with the spin's 1/2 omega . I omega
     settings = RunSettings(scene, integrator, dt, world, args.precision, energy_start, run_warnings)
-    stepper = None if world is None else _keeping(world.stepper, kept)
+    stepper = None if world is None else _keeping(world.stepper, kept, args.save_every)
     attached = _attached(scene, world, args.backend)
     if attached:  # forces at body-frame points: the rotation steps with the translation
         from steplab.integrators.attached import attached_stepper
@@ -101,6 +103,8 @@ def command(args) -> int:
     if attached:  # the energy at the end with the lever arms at the final orientations
         rotation = kept[0].rotation_trajectory(traj)
         settings = dataclasses.replace(settings, scene=dataclasses.replace(scene, model=kept[0].final_model()))
+    elif kept and hasattr(kept[0], "rotation_at"):  # the contact solver turned the bodies with their contacts
+        rotation = _solved_rotation(scene, traj, kept[0])
     elif scene.rigid_bodies is not None:  # beside the translation, at its saved times; a divergence is status 1
         from steplab.integrators.scene_rotation import rotate_scene
 
@@ -161,14 +165,29 @@ def _attached(scene, world, backend: str) -> bool:
     return True
 
 
-def _keeping(make_step, kept: list):
-    """``make_step`` (a stepper factory for ``simulate``) that also appends the step it builds to ``kept``."""
+def _keeping(make_step, kept: list, save_every: int = 1):
+    """``make_step`` (a stepper factory for ``simulate``) that also appends the step it builds to ``kept``
+    (a step that records the rotation, the rigid solver's, records it at the saved steps only)."""
     def stepper(model, integrator):
         step = make_step(model, integrator)
+        if hasattr(step, "record_every"):
+            step.record_every = save_every
         kept.append(step)
         return step
 
     return stepper
+
+
+def _solved_rotation(scene, traj, step):
+    """The rotating bodies at the trajectory's saved times, as the contact solver turned them."""
+    import numpy as np
+
+    from steplab.integrators.scene_rotation import RotationTrajectory
+
+    bodies = scene.rigid_bodies
+    orientations, angular_velocities = step.rotation_at(np.rint((traj.t - traj.t[0]) / traj.dt).astype(int))
+    return RotationTrajectory(traj.t, orientations[:, bodies.index], angular_velocities[:, bodies.index],
+                              step.world.rigid.rotation, bodies)
 
 
 def with_sweeps(integrator, world, args):

@@ -55,8 +55,11 @@ ENGINES: Registry = Registry("steplab.engines", "engine", [(cls.engine, cls) for
 class _Settings(Mapping):
     """Setting key -> :class:`Setting`, read from the registered adapters each time (in their order)."""
 
+    def __init__(self, kind: str = "study_settings"):
+        self.kind = kind
+
     def _all(self) -> dict[str, Setting]:
-        return {s.key: s for cls in ENGINES.values() for s in cls.study_settings}
+        return {s.key: s for cls in ENGINES.values() for s in getattr(cls, self.kind)}
 
     def __getitem__(self, key: str) -> Setting:
         return self._all()[key]
@@ -70,6 +73,8 @@ class _Settings(Mapping):
 
 #: the settings of the engines study, in its order: each adapter's ``study_settings``
 SETTINGS: Mapping[str, Setting] = _Settings()
+#: the settings of the rotation study's engines (a free rigid body): each adapter's ``rotation_settings``
+ROTATION_SETTINGS: Mapping[str, Setting] = _Settings("rotation_settings")
 
 
 def available(engine: str) -> bool:
@@ -82,8 +87,9 @@ def missing() -> list[str]:
     return [cls.distribution for cls in ENGINES.values() if not cls.available()]
 
 
-def build(engine: str, model, collisions=None, dt: float = 0.01, y0=None, **options) -> EngineRun:
-    """The adapter of ``engine`` (a key of :data:`ENGINES`) built on a model and its collisions.
+def build(engine: str, model, collisions=None, dt: float = 0.01, y0=None, bodies=None, **options) -> EngineRun:
+    """The adapter of ``engine`` (a key of :data:`ENGINES`) built on a model, its collisions and
+    its rotating ``bodies`` (a :class:`steplab.physics.rigid_body.RigidBodies`, or None).
 
     Raises
     ------
@@ -94,12 +100,13 @@ def build(engine: str, model, collisions=None, dt: float = 0.01, y0=None, **opti
     ValueError
         An unknown engine (:class:`steplab.core.registry.UnknownNameError`) or option.
     """
-    return build_adapter(ENGINES.lookup(engine), model, collisions, dt, y0, **options)
+    return build_adapter(ENGINES.lookup(engine), model, collisions, dt, y0, bodies, **options)
 
 
 def build_scene(engine: str, scene, **options) -> EngineRun:
-    """The adapter of ``engine`` on a loaded :class:`steplab.physics.scene.Scene` (its dt and start)."""
-    return build(engine, scene.model, scene.collisions, scene.dt, scene.y0, **options)
+    """The adapter of ``engine`` on a loaded :class:`steplab.physics.scene.Scene` (its dt, start and
+    rotating bodies)."""
+    return build(engine, scene.model, scene.collisions, scene.dt, scene.y0, scene.rigid_bodies, **options)
 
 
 def run_scene(engine: str, scene, n_steps: int | None = None, save_every: int = 1, **options):

@@ -18,14 +18,18 @@ import dataclasses
 import importlib
 import importlib.metadata
 import importlib.util
+import inspect
+import math
 import time
 from typing import ClassVar
 
 import numpy as np
 
+from steplab.integrators.scene_rotation import RotationTrajectory
 from steplab.integrators.simulate import DivergenceError, Trajectory, divergence_limit, saved_steps
 from steplab.physics import Dampers, Gravity, Springs
 from steplab.physics.collision import Box, Collision, CollisionLog, OrientedBox, Plane
+from steplab.physics.rigid_body import RigidBodies, principal_inertia
 
 #: approach speed recorded for a contact that began in a step, when the engine does not say
 UNKNOWN = float("nan")
@@ -179,6 +183,107 @@ def plane_axes(parts: SceneParts, y0, engine: str) -> tuple[int, int]:
     return axes
 
 
+#: m, the least half extent of a rotating body's engine shape (MuJoCo and Bullet need sizes > 0)
+SMALLEST_EXTENT = 1e-6
+
+
+@dataclasses.dataclass(frozen=True)
+class RigidShape:
+    """One rotating body as an engine builds it: its shape, mass, principal moments and extent.
+
+    ``half_extents`` are the box's half edges; for a capsule or cylinder (r, r, half its
+    length along the body z axis: the capsule's cylindrical part, as MuJoCo and Bullet
+    define it); for a sphere (r, r, r). ``body`` is its index among the scene's bodies.
+    """
+
+    body: int
+    shape: str
+    mass: float
+    inertia: np.ndarray
+    half_extents: np.ndarray
+
+    @property
+    def radius(self) -> float:
+        return float(self.half_extents[0])
+
+
+def rigid_shapes(model, bodies: RigidBodies | None, collisions=None) -> tuple[RigidShape, ...]:
+    """The rotating bodies of a scene with their extents, for the engines' collision shapes.
+
+    A scene with collisions keeps each box's half edges and each capsule's half length
+    (``collisions.rigid``, the contact solver's :class:`RigidScene`); otherwise they follow from
+    the principal moments: a box's edges are those of the uniform box with these moments,
+    inverted from m/12 (b^2 + c^2, ...), a^2 = 6 (I2 + I3 - I1) / m; a cylinder's length from
+    I1 = m/12 (3 r^2 + l^2); a capsule's by bisection on its (monotone) I1(l). (The engine gets
+    the moments themselves either way.) An extent that comes out zero (a thin plate's edge) is
+    :data:`SMALLEST_EXTENT`: the engines refuse a shape of size 0.
+    """
+    if bodies is None:
+        return ()
+    given = getattr(collisions, "rigid", None)
+    out = []
+    for k, (i, shape) in enumerate(zip(bodies.index, bodies.shapes or ("sphere",) * bodies.n)):
+        m, r, inertia = float(model.masses[i]), float(model.radii[i]), np.asarray(bodies.inertia[k], float)
+        known = None if given is None else np.asarray(given.half[i], float)
+        if shape == "box":
+            half = known if known is not None and np.all(known > 0) else \
+                0.5 * np.sqrt(np.maximum(6.0 * (inertia.sum() - 2 * inertia) / m, 0.0))
+        elif shape in ("cylinder", "capsule"):
+            if known is not None and known[2] > 0:
+                length = 2 * known[2]
+            elif shape == "cylinder":
+                length = math.sqrt(max(12.0 * inertia[0] / m - 3 * r * r, 0.0))
+            else:
+                length = _capsule_length(m, r, inertia[0])
+            half = np.array([r, r, 0.5 * length])
+        else:
+            half = np.full(3, r)
+        out.append(RigidShape(int(i), shape, m, inertia, np.maximum(half, SMALLEST_EXTENT)))
+    return tuple(out)
+
+
+def _capsule_length(mass: float, radius: float, across: float) -> float:
+    """The cylindrical length l of a capsule of ``mass`` and ``radius`` whose I1 is ``across``."""
+    from scipy.optimize import brentq
+
+    def excess(length):
+        return principal_inertia("capsule", mass, radius, length=length)[0] - across
+
+    if excess(0.0) >= 0:
+        return 0.0
+    hi = 1.0 + radius
+    while excess(hi) < 0:
+        hi *= 2
+    return float(brentq(excess, 0.0, hi, xtol=1e-15 * hi, rtol=4 * np.finfo(float).eps))
+
+
+def planar_rotation(axes: tuple[int, int], shape: RigidShape, q, omega, engine: str) -> tuple[float, float, float]:
+    """(angle, spin, moment) of a body of a 2-D engine: a turn and a spin about the dropped axis.
+
+    The engine's counter-clockwise angle turns its x (steplab's ``axes[0]``) towards its y
+    (``axes[1]``): about +e_d when (axes[0], axes[1], d) is right-handed (d = 2 or 0),
+    about -e_d otherwise (d = 1). UnsupportedFeatureError for an orientation or an angular
+    velocity off that axis (a 3-D tumble).
+    """
+    drop = 3 - sum(axes)
+    sign = -1.0 if drop == 1 else 1.0
+    q, omega = np.asarray(q, float), np.asarray(omega, float)
+    if np.any(q[[1 + k for k in axes]] != 0) or np.any(omega[list(axes)] != 0):
+        raise UnsupportedFeatureError(f"body {shape.body}: a 3-D orientation or spin; {engine} turns bodies "
+                                      f"only about the axis out of its plane ({'xyz'[drop]})")
+    return sign * 2.0 * math.atan2(q[1 + drop], q[0]), sign * float(omega[drop]), float(shape.inertia[drop])
+
+
+def planar_orientation(axes: tuple[int, int], angle: float, spin: float) -> tuple[np.ndarray, np.ndarray]:
+    """The quaternion [w, x, y, z] and world angular velocity of a 2-D engine's (angle, spin)."""
+    drop = 3 - sum(axes)
+    sign = -1.0 if drop == 1 else 1.0
+    q, omega = np.zeros(4), np.zeros(3)
+    q[0], q[1 + drop] = math.cos(0.5 * angle), sign * math.sin(0.5 * angle)
+    omega[drop] = sign * spin
+    return q, omega
+
+
 @dataclasses.dataclass(frozen=True)
 class Setting:
     """One engine in one configuration, as the engines study measures it.
@@ -200,8 +305,8 @@ class Setting:
     engine: str = ""
     adapter: type | None = None
 
-    def build(self, model, collisions=None, dt: float = 0.01, y0=None) -> EngineRun:
-        return build_adapter(self.adapter, model, collisions, dt, y0, **self.options)
+    def build(self, model, collisions=None, dt: float = 0.01, y0=None, bodies=None) -> EngineRun:
+        return build_adapter(self.adapter, model, collisions, dt, y0, bodies=bodies, **self.options)
 
     @property
     def available(self) -> bool:
@@ -215,8 +320,13 @@ class EngineRun:
     ``display_name`` (for figures), ``colour`` (its figures' colour), ``planar`` (a 2-D
     engine, bodies in a plane), ``precision`` (its float type, "float64" or "float32"),
     ``package`` and ``distribution`` (the Python package it imports and its name on PyPI;
-    None: it needs none) and ``study_settings`` (the :class:`Setting` tuple the engines
-    study measures). Instances set ``settings`` (a line saying how the run is set up) and
+    None: it needs none), ``study_settings`` (the :class:`Setting` tuple the engines
+    study measures) and ``rotation_settings`` (those the rotation study measures on a free
+    rigid body: ``equals`` is the steplab *rotation* method each is expected to step, None
+    for none, and ``deviation`` says what the engine does to the rotation) and ``stack_settings``
+    (:mod:`.stacks`: the engine's defaults first, then its documented tuned settings, each
+    ``deviation`` saying what it changes and why).
+    Instances set ``settings`` (a line saying how the run is set up) and
     implement ``set_state(y)``, ``step(dt)``, ``state() -> y`` and, where the engine reports
     contacts, ``touching() -> {(body, other): normal}`` (``other`` a body index or a shape's name).
     """
@@ -229,22 +339,27 @@ class EngineRun:
     package: ClassVar[str | None] = None
     distribution: ClassVar[str | None] = None
     study_settings: ClassVar[tuple[Setting, ...]] = ()
+    rotation_settings: ClassVar[tuple[Setting, ...]] = ()
+    stack_settings: ClassVar[tuple[Setting, ...]] = ()
     settings: str = ""
 
     def __init_subclass__(cls, **kwargs):
         super().__init_subclass__(**kwargs)
         # each setting names its adapter: one table of facts per engine, kept in its adapter
-        cls.study_settings = tuple(dataclasses.replace(s, engine=cls.engine, adapter=cls)
-                                   for s in cls.__dict__.get("study_settings", ()))
+        for kind in ("study_settings", "rotation_settings", "stack_settings"):
+            setattr(cls, kind, tuple(dataclasses.replace(s, engine=cls.engine, adapter=cls)
+                                     for s in cls.__dict__.get(kind, ())))
 
     @classmethod
     def available(cls) -> bool:
         """Whether the engine's Python package is installed (without importing it)."""
         return cls.package is None or importlib.util.find_spec(cls.package) is not None
 
-    def __init__(self, parts: SceneParts):
+    def __init__(self, parts: SceneParts, model=None, bodies: RigidBodies | None = None):
         self.parts = parts
         self._pinned_y = None
+        self.rigid_bodies = bodies
+        self.rigid = rigid_shapes(model, bodies, parts.collisions)
 
     @property
     def name(self) -> str:
@@ -261,6 +376,12 @@ class EngineRun:
 
     def touching(self) -> dict:
         return {}
+
+    def set_rotation(self, orientations, angular_velocities) -> None:
+        raise NotImplementedError
+
+    def rotation(self) -> tuple[np.ndarray, np.ndarray]:
+        raise NotImplementedError
 
     def close(self) -> None:
         """Release what the engine holds outside Python (a pybullet connection)."""
@@ -280,7 +401,16 @@ class EngineRun:
         holds one ``"contact"`` event per pair that began to touch in a step, at the step's
         end (``log_contacts``: default, when the scene has collisions). DivergenceError when
         the state becomes non-finite or absurdly large, as for steplab's own integrators.
+        The rotating bodies start from their ``bodies`` state (:meth:`advance_rotating`
+        returns their trajectory too).
         """
+        return self.advance_rotating(y0, dt, n_steps, t_start, save_every, log_contacts)[0]
+
+    def advance_rotating(self, y0, dt: float, n_steps: int, t_start: float = 0.0, save_every: int = 1,
+                         log_contacts: bool | None = None) -> tuple[Trajectory, RotationTrajectory | None]:
+        """:meth:`advance`, and the rotating bodies at the same saved times (None: the adapter was
+        built without ``bodies``): orientations and world-frame angular velocities as the engine
+        reports them. DivergenceError also when an angular velocity becomes non-finite or absurd."""
         y0 = np.asarray(y0, dtype=float)
         if n_steps < 1:
             raise ValueError(f"n_steps must be >= 1, got {n_steps}")
@@ -292,6 +422,13 @@ class EngineRun:
         log = CollisionLog() if log_contacts else None
         touching: dict = {}
         self.set_state(y0)
+        bodies = self.rigid_bodies if self.rigid else None
+        if bodies is not None:
+            self.set_rotation(bodies.orientations, bodies.angular_velocities)
+            turns = np.empty((len(saves), bodies.n, 4))
+            spins = np.empty((len(saves), bodies.n, 3))
+            turns[0], spins[0] = bodies.orientations, bodies.angular_velocities
+            spin_limit = divergence_limit(bodies.angular_velocities, np.float64)
         start = time.perf_counter()
         y = y0
         for k in range(n_steps):
@@ -300,14 +437,19 @@ class EngineRun:
                 touching = self._log_contacts(log, touching, y, t_start + (k + 1) * dt, dt)
             if saved < len(saves) and saves[saved] == k + 1 or log is not None or k + 1 == n_steps:
                 y = self.state()
-                if not np.abs(y).max() <= limit:
+                rotation = self.rotation() if bodies is not None else None
+                if not np.abs(y).max() <= limit or rotation is not None and not np.abs(rotation[1]).max() <= spin_limit:
                     self._rebuild()  # a non-finite state can stay in the engine's caches
                     raise DivergenceError(self.name, dt, k + 1, t_start + (k + 1) * dt)
                 if saved < len(saves) and saves[saved] == k + 1:
                     out[saved] = y
+                    if rotation is not None:
+                        turns[saved], spins[saved] = rotation
                     saved += 1
         wall = time.perf_counter() - start
-        return Trajectory(t_start + saves * dt, out, self.name, dt, n_steps, self.engine, wall, collisions=log)
+        t = t_start + saves * dt
+        trajectory = Trajectory(t, out, self.name, dt, n_steps, self.engine, wall, collisions=log)
+        return trajectory, (RotationTrajectory(t, turns, spins, self.name, bodies) if bodies is not None else None)
 
     def _log_contacts(self, log, before: dict, y_before, t: float, dt: float) -> dict:
         """Record the pairs that began touching in the step that ended at ``t``."""
@@ -338,14 +480,50 @@ class PlanarRun(EngineRun):
     velocity_attribute = "velocity"
     spin_attribute = "angular_velocity"
 
-    def __init__(self, model, collisions, engine: str, y0=None):
+    def __init__(self, model, collisions, engine: str, y0=None, bodies: RigidBodies | None = None):
         """The scene's parts an engine in a plane takes (gravity, springs, dampers; planes and
-        boxes), the plane's two axes from the state ``y0`` (default: all at the origin, at rest)."""
+        boxes), the plane's two axes from the state ``y0`` (default: all at the origin, at rest);
+        each rotating body's (angle, spin, moment) about the axis out of the plane
+        (``self.turns``; UnsupportedFeatureError for a 3-D tumble)."""
         super().__init__(scene_parts(model, collisions, engine, forces=(Gravity, Springs, Dampers),
-                                     shapes=(Plane, Box, OrientedBox)))
+                                     shapes=(Plane, Box, OrientedBox)), model, bodies)
         y0 = np.zeros((2, self.parts.n, 3)) if y0 is None else np.asarray(y0, float)
         self.axes = plane_axes(self.parts, y0, engine)
         self._y = y0.copy()
+        self.turns = {shape.body: planar_rotation(self.axes, shape, bodies.orientations[k],
+                                                  bodies.angular_velocities[k], engine)
+                      for k, shape in enumerate(self.rigid)}
+
+    def outline(self, shape: RigidShape) -> tuple:
+        """A rotating body's section by the plane, in the engine's body frame (its x, y along
+        steplab's ``axes``): ``("circle", r)``, ``("box", (hx, hy))`` or ``("segment", hl, r)``,
+        a capsule from (0, -hl) to (0, hl) of radius r. A capsule or cylinder (axis: body z)
+        whose axis is out of the plane is its circle."""
+        a, b = self.axes
+        if shape.shape == "box":
+            return ("box", (float(shape.half_extents[a]), float(shape.half_extents[b])))
+        if shape.shape == "sphere" or b != 2:  # body z out of the plane: a circle
+            return ("circle", shape.radius)
+        half = float(shape.half_extents[2])  # body z is the engine's y
+        return ("box", (shape.radius, half)) if shape.shape == "cylinder" else ("segment", half, shape.radius)
+
+    def moment(self, i: int, default: float) -> float:
+        """Body ``i``'s moment of inertia about the axis out of the plane (``default``: a point mass's disc)."""
+        return self.turns[i][2] if i in self.turns else default
+
+    def set_rotation(self, orientations, angular_velocities) -> None:
+        for k, shape in enumerate(self.rigid):
+            if self.parts.pinned[shape.body]:
+                continue
+            body = self.bodies[shape.body]
+            body.angle, spin, _ = planar_rotation(self.axes, shape, orientations[k], angular_velocities[k],
+                                                  self.engine)
+            setattr(body, self.spin_attribute, spin)
+
+    def rotation(self) -> tuple[np.ndarray, np.ndarray]:
+        turns = [planar_orientation(self.axes, self.bodies[s.body].angle,
+                                    getattr(self.bodies[s.body], self.spin_attribute)) for s in self.rigid]
+        return np.array([q for q, _ in turns]), np.array([w for _, w in turns])
 
     def set_state(self, y) -> None:
         a, b = self.axes
@@ -386,8 +564,15 @@ def body_indices(parts: SceneParts) -> np.ndarray:
     return np.flatnonzero(~parts.pinned)
 
 
-def build_adapter(cls: type[EngineRun], model, collisions=None, dt: float = 0.01, y0=None, **options) -> EngineRun:
-    """The adapter ``cls`` built on a model and its collisions (see :func:`steplab.engines.build`)."""
+def build_adapter(cls: type[EngineRun], model, collisions=None, dt: float = 0.01, y0=None, bodies=None,
+                  **options) -> EngineRun:
+    """The adapter ``cls`` built on a model, its collisions and its rotating ``bodies`` (see
+    :func:`steplab.engines.build`). UnsupportedFeatureError for rotating bodies in an adapter
+    that does not take them."""
+    if bodies is not None:
+        if "bodies" not in inspect.signature(cls).parameters:
+            raise UnsupportedFeatureError(f"rotating bodies: the {cls.engine} adapter builds point masses only")
+        options["bodies"] = bodies
     try:
         run = cls(model, collisions, dt, y0=y0, **options)
     except TypeError as err:

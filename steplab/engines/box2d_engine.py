@@ -14,9 +14,16 @@
 - Restitution and friction: Box2D takes the larger restitution of the two fixtures and
   the geometric mean of the frictions, so static shapes get restitution 0 (each body's
   against them wins) and friction 1, and each body mu^2 (the mean is then mu).
+- Rotating bodies (the scene's ``rigid_bodies``) spin about the axis out of the plane: their
+  section by the plane is the fixture (a box, a circle; a capsule in the plane is a box and
+  two circles) and their mass and moment about that axis are set as the body's mass data. A
+  moving box's polygon is its box less the skin (``b2_polygonRadius``), so that the skin's outer
+  surface is the box and a stack does not grow by two skins per contact.
+  Box2D turns a body by angle += dt omega (omega constant without torque).
 - Settings: ``continuous=False`` turns off Box2D's continuous physics (time of impact
   against static bodies); ``bullet=True`` makes every body a "bullet" (time of impact
-  against moving bodies too).
+  against moving bodies too); ``velocity_iterations`` and ``position_iterations`` set the
+  solver's iterations (default Box2D's recommended 8 and 3).
 """
 
 from __future__ import annotations
@@ -92,13 +99,27 @@ class Box2DRun(PlanarRun):
         Setting("box2d-default", "Box2D default", {}, True, "implicit-euler", BOX2D_BOUNCE),
         Setting("box2d-bullet", "Box2D, bullets", {"bullet": True}, True, "implicit-euler", BOX2D_BOUNCE),
     )
+    rotation_settings = (
+        Setting("box2d-default", "Box2D default", {}, None, "exponential-map",
+                "a spin about the axis out of the plane: angle += h omega, the exact turn at constant omega (as "
+                "every method that turns by the exponential map); a 3-D tumble is out of its reach"),
+    )
+    stack_settings = (
+        Setting("box2d-default", "Box2D default", {}, None, None, "8 velocity and 3 position iterations "
+                "(Box2D's recommendation)"),
+        Setting("box2d-iterations", "Box2D, 30 + 10 iterations", {"velocity_iterations": 30,
+                                                                   "position_iterations": 10}, None, None,
+                "30 velocity and 10 position iterations: each contact of a tall stack is solved more often per step"),
+    )
     velocity_attribute = "linearVelocity"
     spin_attribute = "angularVelocity"
 
     def __init__(self, model, collisions=None, dt: float = 0.01, continuous: bool = True, bullet: bool = False,
-                 y0=None):
+                 velocity_iterations: int = VELOCITY_ITERATIONS, position_iterations: int = POSITION_ITERATIONS,
+                 y0=None, bodies=None):
         b2 = require("Box2D", ENGINE)
-        super().__init__(model, collisions, ENGINE, y0)
+        super().__init__(model, collisions, ENGINE, y0, bodies)
+        self._skin = float(b2.b2_polygonRadius)
         parts, axes, y0 = self.parts, self.axes, self._y.copy()
         self.world = world = b2.b2World(gravity=tuple(parts.gravity[list(axes)]), doSleep=False)
         world.continuousPhysics = continuous
@@ -107,18 +128,27 @@ class Box2DRun(PlanarRun):
             ground = world.CreateStaticBody(userData=shape.name)
             ground.CreatePolygonFixture(vertices=corners, restitution=0.0, friction=1.0)
         self.bodies = []
+        rigid = {shape.body: shape for shape in self.rigid}
         for i in range(parts.n):
             position = tuple(y0[0, i, list(axes)])
             if parts.pinned[i]:
                 body = world.CreateStaticBody(position=position, userData=i)
             else:
-                body = world.CreateDynamicBody(position=position, bullet=bullet, userData=i)
+                # allowSleep per body: pybox2d 2.3.10 puts bodies to sleep whatever the world's doSleep says
+                body = world.CreateDynamicBody(position=position, bullet=bullet, allowSleep=False, userData=i)
             e, mu = parts.against_shapes(i)
             r = float(parts.radii[i])
-            fixture = body.CreateCircleFixture(radius=r, density=float(parts.masses[i]) / (math.pi * r * r),
-                                               restitution=e, friction=mu * mu)
+            if i in rigid:
+                fixtures = self._fixtures(body, rigid[i], restitution=e, friction=mu * mu)
+            else:
+                fixtures = [body.CreateCircleFixture(radius=r, density=float(parts.masses[i]) / (math.pi * r * r),
+                                                     restitution=e, friction=mu * mu)]
             if not contacts:
-                fixture.filterData = b2.b2Filter(categoryBits=1, maskBits=0)
+                for fixture in fixtures:
+                    fixture.filterData = b2.b2Filter(categoryBits=1, maskBits=0)
+            if i in rigid and not parts.pinned[i]:
+                # the body's own mass and moment, not those of its fixtures' areas
+                body.massData = b2.b2MassData(mass=float(parts.masses[i]), center=(0.0, 0.0), I=self.moment(i, 0.0))
             self.bodies.append(body)
         for i, j, k, rest, c in parts.links:
             if rest is None or k == 0:
@@ -132,15 +162,30 @@ class Box2DRun(PlanarRun):
                                       anchorA=self.bodies[i].position, anchorB=self.bodies[j].position,
                                       frequencyHz=hz, dampingRatio=ratio, collideConnected=True, length=rest)
         self.moving = body_indices(parts)
+        self.iterations = (int(velocity_iterations), int(position_iterations))
         mode = "bullets" if bullet else "continuous physics" if continuous else "continuous physics off"
-        self.settings = f"Box2D {version('Box2D')}, {mode}"
+        tuned = "" if self.iterations == (VELOCITY_ITERATIONS, POSITION_ITERATIONS) else \
+            f", {velocity_iterations} velocity and {position_iterations} position iterations"
+        self.settings = f"Box2D {version('Box2D')}, {mode}{tuned}"
+
+    def _fixtures(self, body, shape, **material) -> list:
+        """The fixtures of a rotating body's section by the plane (:meth:`.base.PlanarRun.outline`)."""
+        outline = self.outline(shape)
+        if outline[0] == "circle":
+            return [body.CreateCircleFixture(radius=outline[1], density=1.0, **material)]
+        if outline[0] == "box":  # the polygon inside its skin, so that the skin's outside is the box
+            half = tuple(max(h - self._skin, h / 2) for h in outline[1])
+            return [body.CreatePolygonFixture(box=half, density=1.0, **material)]
+        half, r = outline[1], outline[2]
+        return [body.CreatePolygonFixture(box=(max(r - self._skin, r / 2), half), density=1.0, **material),
+                *(body.CreateCircleFixture(radius=r, pos=(0.0, end), density=1.0, **material) for end in (-half, half))]
 
     def step(self, dt: float) -> None:
-        self.world.Step(dt, VELOCITY_ITERATIONS, POSITION_ITERATIONS)
+        self.world.Step(dt, *self.iterations)
 
     def run(self, steps: int, dt: float) -> None:
         for _ in range(steps):
-            self.world.Step(dt, VELOCITY_ITERATIONS, POSITION_ITERATIONS)
+            self.world.Step(dt, *self.iterations)
 
     def touching(self) -> dict:
         out = {}

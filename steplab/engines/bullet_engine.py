@@ -10,10 +10,20 @@
 - Restitution and friction: Bullet multiplies the two bodies' coefficients, so the static
   shapes get 1 and each body its coefficient against them; two bodies then bounce with
   eps_a eps_b, not the scene's eps (the ball pit's 0.8 becomes 0.64 between balls).
+- Rotating bodies (the scene's ``rigid_bodies``) get the collision shape of their shape (box,
+  capsule, cylinder, sphere; along the body z axis) and their principal moments
+  (``localInertiaDiagonal``, the inertial frame at the body's origin); pybullet's orientation
+  is (x, y, z, w) and its angular velocity world-frame, both converted. Bullet's
+  btRigidBody applies the gyroscopic term by one implicit Newton step in the body frame
+  (``BT_ENABLE_GYROSCOPIC_FORCE_IMPLICIT_BODY``, its default flag); pybullet has no switch for
+  the flag (neither ``changeDynamics`` nor ``setPhysicsEngineParameter`` takes one), so only
+  the default is measured.
 - Settings: ``position_correction=False`` turns Bullet's penetration recovery off (the
   split impulse and the error-reduction parameters ERP, contact ERP and friction ERP);
   ``ccd=True`` turns on continuous collision detection, a swept sphere of each body's
-  radius (Bullet's motion clamping).
+  radius (Bullet's motion clamping); ``iterations`` sets the constraint solver's iterations
+  (``numSolverIterations``, pybullet's default 50) and ``substeps`` splits each step into that
+  many (``numSubSteps``).
 """
 
 from __future__ import annotations
@@ -24,6 +34,9 @@ from steplab.physics import Dampers, Gravity, Springs
 from steplab.physics.collision import Box, OrientedBox, Plane
 
 from .base import EngineRun, Setting, body_indices, require, scene_parts, version
+
+#: the body's orientation [w, x, y, z] as pybullet's (x, y, z, w) and back
+TO_PYBULLET, FROM_PYBULLET = [1, 2, 3, 0], [3, 0, 1, 2]
 
 ENGINE = "Bullet"
 #: why Bullet's bounce is above eps^2 (the drop test's explanation, from Bullet's documented rules)
@@ -45,11 +58,26 @@ class BulletRun(EngineRun):
         Setting("bullet-ccd", "Bullet, CCD on", {"ccd": True}, True, "semi-implicit-euler", PENETRATION_RECOVERY),
     )
 
+    rotation_settings = (
+        Setting("bullet-default", "Bullet default", {}, None, "implicit-gyroscopic",
+                "BT_ENABLE_GYROSCOPIC_FORCE_IMPLICIT_BODY (btRigidBody's default; pybullet cannot change it): one "
+                "Newton step on omega in the body frame, then integrateTransform's exponential map"),
+    )
+
+    stack_settings = (
+        Setting("bullet-default", "Bullet default", {}, None, None, "pybullet's defaults: 50 solver iterations, "
+                "split impulse"),
+        Setting("bullet-substeps", "Bullet, 4 substeps", {"substeps": 4}, None, None,
+                "each step as 4 substeps of dt/4: the stiffer problem per substep is what substepping buys a solver "
+                "of sequential impulses"),
+    )
+
     def __init__(self, model, collisions=None, dt: float = 0.01, position_correction: bool = True,
-                 ccd: bool = False, y0=None):
+                 ccd: bool = False, iterations: int | None = None, substeps: int | None = None, y0=None,
+                 bodies=None):
         pybullet = require("pybullet", ENGINE)
         super().__init__(scene_parts(model, collisions, ENGINE, forces=(Gravity, Springs, Dampers),
-                                     shapes=(Plane, Box, OrientedBox)))
+                                     shapes=(Plane, Box, OrientedBox)), model, bodies)
         parts = self.parts
         self._pb = pb = pybullet
         self._client = pb.connect(pb.DIRECT)
@@ -59,6 +87,10 @@ class BulletRun(EngineRun):
         self._dt = dt
         if not position_correction:
             pb.setPhysicsEngineParameter(erp=0.0, contactERP=0.0, frictionERP=0.0, useSplitImpulse=0, **p)
+        if iterations is not None:
+            pb.setPhysicsEngineParameter(numSolverIterations=int(iterations), **p)
+        if substeps is not None:
+            pb.setPhysicsEngineParameter(numSubSteps=int(substeps), **p)
         y0 = np.zeros((2, parts.n, 3)) if y0 is None else np.asarray(y0, float)
         self._y = y0.copy()
         self._links = [f for f in model._source_forces if isinstance(f, (Springs, Dampers))]
@@ -68,13 +100,21 @@ class BulletRun(EngineRun):
         for shape in parts.shapes:
             self._ids[self._static(shape)] = shape.name
         self.bodies = []
+        rigid = {shape.body: shape for shape in self.rigid}
         for i in range(parts.n):
-            sphere = pb.createCollisionShape(pb.GEOM_SPHERE, radius=float(parts.radii[i]), **p) if contacts else -1
+            if i in rigid:
+                geom = self._shape(rigid[i]) if contacts else -1
+            else:
+                geom = pb.createCollisionShape(pb.GEOM_SPHERE, radius=float(parts.radii[i]), **p) if contacts else -1
             mass = 0.0 if parts.pinned[i] else float(parts.masses[i])
-            body = pb.createMultiBody(mass, sphere, basePosition=y0[0, i].tolist(), useMaximalCoordinates=True, **p)
+            body = pb.createMultiBody(mass, geom, basePosition=y0[0, i].tolist(), useMaximalCoordinates=True, **p)
             e, mu = parts.against_shapes(i)
             pb.changeDynamics(body, -1, linearDamping=0.0, angularDamping=0.0, restitution=e, lateralFriction=mu,
                               activationState=pb.ACTIVATION_STATE_DISABLE_SLEEPING, **p)
+            if i in rigid and not parts.pinned[i]:
+                # the mass again: pybullet 3.2 sets a maximal-coordinates body's mass to 0 (static)
+                # when localInertiaDiagonal comes alone, and resets the inertia when the mass does
+                pb.changeDynamics(body, -1, mass=mass, localInertiaDiagonal=rigid[i].inertia.tolist(), **p)
             if ccd:
                 pb.changeDynamics(body, -1, ccdSweptSphereRadius=float(parts.radii[i]), **p)
             self._ids[body] = i
@@ -82,9 +122,21 @@ class BulletRun(EngineRun):
         self.moving = body_indices(parts)
         self._start = pb.saveState(**p)
         options = [name for name, on in (("position correction off", not position_correction),
-                                         ("continuous collision detection", ccd)) if on]
+                                         ("continuous collision detection", ccd),
+                                         (f"{iterations} iterations", iterations is not None),
+                                         (f"{substeps} substeps", substeps is not None)) if on]
         self.settings = f"Bullet (pybullet {version('pybullet')})" + (", " + ", ".join(options) if options else
                                                                      ", default")
+
+    def _shape(self, shape) -> int:
+        """pybullet's collision shape of a rotating body (:class:`.base.RigidShape`)."""
+        pb, p = self._pb, self._p
+        if shape.shape == "box":
+            return pb.createCollisionShape(pb.GEOM_BOX, halfExtents=shape.half_extents.tolist(), **p)
+        if shape.shape in ("capsule", "cylinder"):
+            kind = pb.GEOM_CAPSULE if shape.shape == "capsule" else pb.GEOM_CYLINDER
+            return pb.createCollisionShape(kind, radius=shape.radius, height=2 * float(shape.half_extents[2]), **p)
+        return pb.createCollisionShape(pb.GEOM_SPHERE, radius=shape.radius, **p)
 
     def _static(self, shape) -> int:
         pb, p = self._pb, self._p
@@ -111,6 +163,25 @@ class BulletRun(EngineRun):
             pb.resetBasePositionAndOrientation(self.bodies[i], self._y[0, i].tolist(), [0.0, 0.0, 0.0, 1.0], **p)
             pb.resetBaseVelocity(self.bodies[i], self._y[1, i].tolist(), [0.0, 0.0, 0.0], **p)
         self._fresh = True
+
+    def set_rotation(self, orientations, angular_velocities) -> None:
+        pb, p = self._pb, self._p
+        self._fixed = (np.array(orientations, float), np.array(angular_velocities, float))
+        for j, shape in enumerate(self.rigid):
+            i = shape.body
+            if not self.parts.pinned[i]:
+                pb.resetBasePositionAndOrientation(self.bodies[i], self._y[0, i].tolist(),
+                                                   self._fixed[0][j][TO_PYBULLET].tolist(), **p)
+                pb.resetBaseVelocity(self.bodies[i], self._y[1, i].tolist(), self._fixed[1][j].tolist(), **p)
+
+    def rotation(self) -> tuple[np.ndarray, np.ndarray]:
+        pb, p = self._pb, self._p
+        q, omega = (a.copy() for a in self._fixed)
+        for j, shape in enumerate(self.rigid):
+            if not self.parts.pinned[shape.body]:
+                q[j] = np.array(pb.getBasePositionAndOrientation(self.bodies[shape.body], **p)[1])[FROM_PYBULLET]
+                omega[j] = pb.getBaseVelocity(self.bodies[shape.body], **p)[1]
+        return q, omega
 
     def step(self, dt: float) -> None:
         pb, p = self._pb, self._p

@@ -5,6 +5,11 @@ Written from the scene alone (MuJoCo need not be installed):
 - a moving body is a ``<body>`` with a free joint and a sphere geom of its mass and radius
   (its initial position and velocity are the keyframe ``initial``); a pinned body is a site
   (and, with collisions, a sphere geom) of the world body;
+- a rotating body (the scene's ``rigid_bodies``) gets the geom of its shape (box, capsule,
+  cylinder or sphere, :func:`.base.rigid_shapes`) and an ``<inertial>`` with its mass and
+  principal moments (``diaginertia``, the body frame being the principal frame); its
+  orientation is the body's ``quat`` and the keyframe's, its angular velocity the free joint's
+  angular ``qvel``, which MuJoCo keeps in the *body* frame (R^T omega_world);
 - gravity is ``<option gravity>``; a spring and/or damper between two bodies is a spatial
   tendon between their sites with ``stiffness``, ``springlength`` and ``damping``: its force
   acts along the line between the centres, k (l - l_rest) + c dl/dt, exactly steplab's
@@ -26,9 +31,10 @@ from xml.sax.saxutils import quoteattr
 import numpy as np
 
 from steplab.physics import Dampers, Gravity, Springs
+from steplab.physics import quaternion as quat
 from steplab.physics.collision import Box, OrientedBox, Plane
 
-from .base import scene_parts
+from .base import rigid_shapes, scene_parts
 
 ENGINE = "MuJoCo"
 #: MuJoCo's integrators by the name of its ``integrator`` option
@@ -61,9 +67,19 @@ def _vec(values) -> str:
     return " ".join(repr(float(x)) for x in values)
 
 
+def _geom(shape) -> str:
+    """MuJoCo's geom type and size of a rotating body (:class:`.base.RigidShape`)."""
+    if shape.shape == "box":
+        return f'type="box" size="{_vec(shape.half_extents)}"'
+    if shape.shape in ("capsule", "cylinder"):
+        return f'type="{shape.shape}" size="{_vec(shape.half_extents[[0, 2]])}"'
+    return f'type="sphere" size="{float(shape.radius)!r}"'
+
+
 def mjcf(model, y0, dt: float, collisions=None, integrator: str = "Euler", solver: str | None = None,
-         iterations: int | None = None, jacobian: str | None = None, name: str = "steplab") -> str:
-    """The MJCF text of a scene: ``model`` and ``y0`` (2, N, 3), the step ``dt``, ``collisions``.
+         iterations: int | None = None, jacobian: str | None = None, name: str = "steplab", bodies=None) -> str:
+    """The MJCF text of a scene: ``model`` and ``y0`` (2, N, 3), the step ``dt``, ``collisions``,
+    the rotating ``bodies`` (a :class:`steplab.physics.rigid_body.RigidBodies`, or None).
 
     ``integrator`` is one of :data:`INTEGRATORS`; ``solver``, ``iterations`` and
     ``jacobian`` set MuJoCo's constraint solver (default: MuJoCo's). UnsupportedFeatureError
@@ -92,18 +108,33 @@ def mjcf(model, y0, dt: float, collisions=None, integrator: str = "Euler", solve
         attrs += f' friction="{float(mu)!r} 0.005 0.0001"' if mu > 0 else ' condim="1"'
         return attrs + (' solmix="0"' if body is None else "")
 
-    world, bodies = [], []
+    rigid = {shape.body: shape for shape in rigid_shapes(model, bodies, parts.collisions)}
+    turn = np.broadcast_to(quat.IDENTITY, (parts.n, 4)).copy()
+    spin = np.zeros((parts.n, 3))  # body frame, as MuJoCo's free joint keeps it
+    if rigid:
+        turn[bodies.index] = bodies.orientations
+        spin[bodies.index] = bodies.body_angular_velocities()
+    world, moving_bodies = [], []
     for i in range(parts.n):
         e, mu = parts.against_shapes(i)
         collide = contact(i, e, mu) if contacts else ' contype="0" conaffinity="0"'
-        geom = (f'<geom name={quoteattr(f"body{i}")} type="sphere" size="{float(parts.radii[i])!r}" '
-                f'mass="{float(parts.masses[i])!r}"{collide}/>')
+        if i in rigid:
+            shape = rigid[i]
+            geom = f'<geom name={quoteattr(f"body{i}")} {_geom(shape)}{collide}/>'
+            inertial = (f'<inertial pos="0 0 0" mass="{float(shape.mass)!r}" '
+                        f'diaginertia="{_vec(shape.inertia)}"/>')
+            orientation = f' quat="{_vec(turn[i])}"'
+        else:
+            geom = (f'<geom name={quoteattr(f"body{i}")} type="sphere" size="{float(parts.radii[i])!r}" '
+                    f'mass="{float(parts.masses[i])!r}"{collide}/>')
+            inertial = orientation = ""
         site = f'<site name="s{i}"/>'
         if parts.pinned[i]:
             world.append(f'<site name="s{i}" pos="{_vec(q[i])}"/>'
-                         + (geom.replace("<geom ", f'<geom pos="{_vec(q[i])}" ') if contacts else ""))
+                         + (geom.replace("<geom ", f'<geom pos="{_vec(q[i])}"{orientation} ') if contacts else ""))
         else:
-            bodies.append(f'<body name={quoteattr(parts.names[i])} pos="{_vec(q[i])}"><freejoint/>{geom}{site}</body>')
+            moving_bodies.append(f'<body name={quoteattr(parts.names[i])} pos="{_vec(q[i])}"{orientation}>'
+                                 f'<freejoint/>{inertial}{geom}{site}</body>')
     for shape in parts.shapes:
         e, mu = parts.collisions.properties(0, shape) if parts.n else (1.0, 0.0)
         where = contact(None, e, mu)
@@ -125,9 +156,9 @@ def mjcf(model, y0, dt: float, collisions=None, integrator: str = "Euler", solve
         spring = f' stiffness="{float(k)!r}" springlength="{float(rest)!r}"' if rest is not None else ""
         tendons.append(f'<spatial{spring} damping="{float(c)!r}"><site site="s{i}"/><site site="s{j}"/></spatial>')
     moving = ~parts.pinned
-    qpos = np.concatenate([np.concatenate([q[i], [1.0, 0.0, 0.0, 0.0]]) for i in np.flatnonzero(moving)]) \
+    qpos = np.concatenate([np.concatenate([q[i], turn[i]]) for i in np.flatnonzero(moving)]) \
         if moving.any() else np.zeros(0)
-    qvel = np.concatenate([np.concatenate([v[i], np.zeros(3)]) for i in np.flatnonzero(moving)]) \
+    qvel = np.concatenate([np.concatenate([v[i], spin[i]]) for i in np.flatnonzero(moving)]) \
         if moving.any() else np.zeros(0)
     n = int(moving.sum())
     # MuJoCo's arena is allocated once: its broadphase takes 2 bytes per pair of bodies, and
@@ -136,10 +167,11 @@ def mjcf(model, y0, dt: float, collisions=None, integrator: str = "Euler", solve
     key = f'<keyframe><key name="initial" qpos="{_vec(qpos)}" qvel="{_vec(qvel)}"/></keyframe>' if n else ""
     return "\n".join([
         f"<mujoco model={quoteattr(name)}>",
-        "  <!-- written by steplab export: bodies are spheres, springs and dampers are tendons -->",
+        "  <!-- written by steplab export: bodies are spheres, springs and dampers are tendons -->" if not rigid else
+        "  <!-- written by steplab export: bodies are spheres or their shapes, springs and dampers are tendons -->",
         f"  {size}" if size else "",
         f"  <option {option}>{flags}</option>",
-        "  <worldbody>", *(f"    {line}" for line in world + bodies), "  </worldbody>",
+        "  <worldbody>", *(f"    {line}" for line in world + moving_bodies), "  </worldbody>",
         *(["  <tendon>", *(f"    {line}" for line in tendons), "  </tendon>"] if tendons else []),
         f"  {key}" if key else "",
         "</mujoco>", ""]).replace("\n\n", "\n")

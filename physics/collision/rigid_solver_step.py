@@ -1,0 +1,309 @@
+"""One physics step of the contact solver on rigid bodies that rotate, read as its stages.
+
+    forces -> bounds (speed and rotation) -> broadphase -> manifolds -> warm start by feature
+           -> substeps (velocities and the gyroscopic term, solve, positions and orientations,
+              relax) -> restitution -> impacts
+
+``[collisions] method = "solver"`` on a scene with boxes, capsules or spinning spheres runs this
+step (:class:`RigidSolverStep`); a scene of spheres that do not rotate keeps the sphere solver
+(:mod:`.solver_step`) bit for bit. The kernels are :mod:`.rigid_solver`; the contact points come
+from the narrow phase of :mod:`.manifolds` (up to 4 per pair, each with a feature id), once per
+step at its start, with their normals kept through the substeps as Box2D and Box3D keep them.
+
+Speculative contacts: a pair becomes a contact while its bodies' bounds can meet during the step.
+Each body's bound is its bounding sphere swept from where it is to where its forces alone take
+it, q + dt (v + dt a), widened by what its rotation can move a point of it, |omega| dt R (R its
+bounding radius; at most 2 R, the diameter), as Box3D bounds it, and by a margin
+(:data:`.contact_buffer.MARGIN_OF_RADIUS` of the median bounding radius) for what a contact can add
+to its speed within the step. Points found up to that margin apart are speculative: the solver
+lets them close the gap, not pass it.
+
+The rotation: each substep's velocity stage adds the gyroscopic term and its position stage
+turns each orientation by h omega, both as the scene's rotation method does them when it is one
+that composes with semi-implicit Euler (:data:`ROTATION_STAGES`); the others (explicit Euler, the
+splittings and implicit rules of order 2 and more) have no place between the solver's velocity and
+position stages and are refused in one line.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import importlib
+
+import numpy as np
+
+from .. import quaternion as quat
+from . import rigid_solver as rs
+from .contact_buffer import MARGIN_OF_RADIUS, Materials
+from .events import CollisionLog, ImpactBlock, cancel_triggers
+from .manifolds import BOX, CAPSULE, SPHERE
+from .pairs import SweptSpheres
+from .resting import rest_speed
+from .solver_step import INTEGRATOR
+from .step import ConstantField
+
+#: the rotation method's stages in the solver's substep, by its name: (gyroscopic term, orientation
+#: update), each as that method writes it (:mod:`steplab.integrators.rotation`)
+ROTATION_STAGES = {
+    "exponential-map": ("explicit", "exponential"),
+    "first-order-quaternion": ("explicit", "first-order"),
+    "implicit-gyroscopic": ("implicit", "exponential"),
+    "momentum-rescaled": ("rescaled", "exponential"),
+}
+#: the rotation method of a scene that names none (as steplab.integrators.rotation.DEFAULT_ROTATION)
+DEFAULT_ROTATION = "exponential-map"
+#: the shapes' numbers in :class:`.manifolds.RigidShapes`, by their names in a scene
+KINDS = {"sphere": SPHERE, "box": BOX, "capsule": CAPSULE}
+#: the most a rotation moves a point of a body: its diameter, 2 R (a half turn)
+MAX_ROTATION_REACH = 2.0
+
+
+@dataclasses.dataclass(frozen=True)
+class RigidScene:
+    """What the solver needs of a scene's rigid bodies besides the translational state.
+
+    Attributes
+    ----------
+    kind : int8 ndarray, shape (N,)
+        :data:`.manifolds.SPHERE`, ``BOX`` or ``CAPSULE`` for each of the N bodies.
+    radius : ndarray, shape (N,)
+        The sphere's or capsule's radius, m (0 for a box).
+    half : ndarray, shape (N, 3)
+        The box's half edges; a capsule's (0, 0, half its segment), m.
+    bodies : physics.rigid_body.RigidBodies
+        The rotating bodies and their state at the start of the run.
+    rotation : str
+        The rotation method (one of :data:`ROTATION_STAGES`).
+    """
+
+    kind: np.ndarray
+    radius: np.ndarray
+    half: np.ndarray
+    bodies: object
+    rotation: str = DEFAULT_ROTATION
+
+    @property
+    def has_corners(self) -> bool:
+        """Whether some body is a box or a capsule (what the event loop cannot step)."""
+        return bool(np.any((self.kind == BOX) | (self.kind == CAPSULE)))
+
+
+def rotation_codes(rotation: str) -> tuple[int, int]:
+    """The kernels' (gyroscopic, update) codes of a rotation method, or one line naming those that fit."""
+    if rotation not in ROTATION_STAGES:
+        raise ValueError(f"the contact solver's substeps are semi-implicit Euler; rotation method {rotation!r} "
+                         f"does not compose with it; use one of {', '.join(ROTATION_STAGES)}")
+    gyroscopic, update = ROTATION_STAGES[rotation]
+    return rs.GYROSCOPIC[gyroscopic], rs.UPDATES[update]
+
+
+def tangents(normal: np.ndarray) -> np.ndarray:
+    """Two unit tangents t1, t2 with (n, t1, t2) right-handed and orthonormal, (C, 2, 3).
+
+    The branch-free basis of Duff et al., "Building an Orthonormal Basis, Revisited" (JCGT 2017):
+    continuous except where n_z changes sign."""
+    x, y, z = normal[:, 0], normal[:, 1], normal[:, 2]
+    sign = np.where(z >= 0, 1.0, -1.0)
+    a = -1.0 / (sign + z)
+    b = x * y * a
+    t1 = np.stack([1.0 + sign * x * x * a, sign * b, -sign * x], axis=1)
+    t2 = np.stack([b, sign + y * y * a, -y], axis=1)
+    return np.stack([t1, t2], axis=1)
+
+
+def world_inverse_inertia(orientation, inverse_principal) -> np.ndarray:
+    """R diag(1/I1, 1/I2, 1/I3) R^T for each body, (N, 3, 3); zeros for a body that does not rotate."""
+    r = quat.to_matrix(np, orientation)
+    return np.einsum("nij,nj,nkj->nik", r, inverse_principal, r)
+
+
+@dataclasses.dataclass
+class Solved:
+    """A step's contact points and their impulses, for the next step's warm start and the log."""
+
+    key: np.ndarray  # (C, 3) int64 (a, b, feature), sorted
+    normal: np.ndarray
+    pn: np.ndarray
+    pt: np.ndarray  # (C, 3) the tangential impulse as a world vector
+    pr: np.ndarray
+    total: np.ndarray
+
+
+_NOTHING = Solved(np.zeros((0, 3), np.int64), np.zeros((0, 3)), np.zeros(0), np.zeros((0, 3)), np.zeros((0, 3)),
+                  np.zeros(0))
+
+
+@dataclasses.dataclass
+class RigidSolverStep:
+    """The contact solver's physics step on rigid bodies: ``step(t, y, dt, carry) -> (y, carry)``.
+
+    The rotational state lives here beside the translational ``y``: ``orientation`` (N, 4) and
+    ``omega`` (N, 3, world frame) of every body (identity and zero for those that do not
+    rotate); ``history`` holds them at the end of every ``record_every``-th step and of the
+    last (:meth:`rotation_at`). ``narrow_phase`` is a module with
+    ``RigidShapes``, ``Poses``, ``manifolds`` and ``bounding_radius`` (default
+    :mod:`.manifolds`).
+    """
+
+    world: object
+    model: object
+    integrator: object
+    narrow_phase: object = None
+    log: CollisionLog = dataclasses.field(default_factory=CollisionLog)
+    record_every: int = 1
+
+    def __post_init__(self):
+        if getattr(self.integrator, "name", None) != INTEGRATOR:
+            raise ValueError(f"the contact solver integrates with {INTEGRATOR} (velocities, contacts, then "
+                             f"positions, per substep), not '{self.integrator.name}'; use integrator '{INTEGRATOR}'")
+        world, rigid = self.world, self.world.rigid
+        if (any(p is not cancel_triggers for p in world.prologues) or world.epilogues
+                or any(s.trigger for s in world.shapes)):
+            raise ValueError("the contact solver on rotating bodies takes no prologues, epilogues or trigger "
+                             "shapes yet (the sphere solver does)")
+        if self.narrow_phase is None:  # the module (the package's name ``manifolds`` is its function)
+            self.narrow_phase = importlib.import_module(f"{__package__}.manifolds")
+        self.codes = rotation_codes(rigid.rotation)
+        if np.any(rigid.kind < 0):
+            raise ValueError('the contact solver has no manifold for a cylinder; give the body shape = "capsule"')
+        n = len(rigid.kind)
+        self.shapes = self.narrow_phase.RigidShapes(rigid.kind, rigid.radius, rigid.half)
+        self.bounding = np.asarray(self.narrow_phase.bounding_radius(self.shapes), dtype=float)
+        self.inverse_masses = np.ascontiguousarray(self.model.inverse_masses, dtype=float)
+        field = self.model.constant_acceleration
+        self.field = None if field is None else np.ascontiguousarray(field, dtype=float)
+        self.materials = Materials.of(world, n)
+        self.margin = MARGIN_OF_RADIUS * float(np.median(self.bounding)) if n else 0.0
+        # spheres and capsules are rounded about their core (centre, segment) by their radius; boxes are not
+        self.rounding = np.where(np.asarray(rigid.kind) != BOX, np.asarray(rigid.radius, float), 0.0)
+        self.rolling = world.solver.rolling_resistance * self.rounding
+        bodies = rigid.bodies
+        self.orientation = np.tile(quat.IDENTITY, (n, 1)).astype(float)
+        self.omega = np.zeros((n, 3))
+        self.inverse_principal = np.zeros((n, 3))
+        self.orientation[bodies.index] = bodies.orientations
+        self.omega[bodies.index] = bodies.angular_velocities
+        turns = self.inverse_masses[bodies.index] > 0  # a pinned body neither moves nor turns
+        self.inverse_principal[bodies.index[turns]] = 1.0 / np.asarray(bodies.inertia, float)[turns]
+        self.omega[bodies.index[~turns]] = 0.0
+        self.log.largest_residual = 0.0
+        self._previous = _NOTHING
+        self._steps = 0
+        self.history = {0: (self.orientation.copy(), self.omega.copy())}
+
+    def __call__(self, t, y, dt, carry):
+        """Advance ``y`` (2, N, 3) and the rotation from ``t`` by ``dt``; returns ``(y, carry)``."""
+        q0, v0 = np.array(y[0], dtype=float), np.array(y[1], dtype=float)
+        a = self.field if self.field is not None else np.asarray(self.model.acceleration(t, q0, v0), dtype=float)
+        points = self.contact_points(t, y, dt, a)
+        bodies, contacts, sub = self.columns(q0, v0, a, points, dt)
+        s = self.world.solver
+        if self.field is not None:  # constant forces: the whole step in one compiled call
+            residual = rs.step(bodies, contacts, sub, s.substeps)
+        else:
+            for k in range(s.substeps):
+                if k:
+                    bodies = bodies._replace(accel=np.ascontiguousarray(
+                        self.model.acceleration(t + k * sub.h, bodies.q, bodies.v), dtype=float))
+                rs.substep(bodies, contacts, sub)
+            residual = rs.finish(bodies, contacts, sub)
+        self._conclude(t, dt, points, contacts, residual)
+        if not (np.all(np.isfinite(bodies.q)) and np.all(np.isfinite(bodies.v))
+                and np.all(np.isfinite(bodies.omega))):
+            raise FloatingPointError(f"the contact solver's state became non-finite in the step from t = {t:g} s "
+                                     f"(largest residual {self.log.largest_residual:.3g} m/s)")
+        self._steps += 1
+        if (self._steps - 1) % self.record_every:  # the last step's record was kept only while it was the last
+            self.history.pop(self._steps - 1)
+        self.history[self._steps] = (self.orientation.copy(), self.omega.copy())  # the last step always
+        return np.stack([bodies.q, bodies.v]), carry
+
+    # --- stages --------------------------------------------------------------------------
+
+    def contact_points(self, t, y, dt, a):
+        """Broadphase over the swept bounds, then the narrow phase's manifolds, sorted by (a, b, feature)."""
+        q0 = np.asarray(y[0], dtype=float)
+        y_forces, _ = self.integrator.step(ConstantField(a), t, np.asarray(y, dtype=float), dt, None)
+        speed = np.linalg.norm(self.omega, axis=1)
+        reach = self.bounding * (1.0 + np.minimum(speed * dt, MAX_ROTATION_REACH))
+        swept = SweptSpheres.of(q0, np.asarray(y_forces[0]), reach, self.inverse_masses, self.log.removed,
+                                self.margin)
+        pairs = swept.body_pairs(self.world.broadphase)
+        # every point up to as far apart as the two bodies can close in the step: speculative ones included
+        margin = reach - self.bounding + self.margin + np.linalg.norm(np.asarray(y_forces[0]) - q0, axis=1)
+        points = self.narrow_phase.manifolds(self.shapes, self.narrow_phase.Poses(q0, self.orientation),
+                                             np.column_stack([pairs.i, pairs.j]), self.world.shapes, margin)
+        order = np.lexsort((points.feature, points.b, points.a))
+        return type(points)(*(np.asarray(column)[order] for column in points))
+
+    def columns(self, q0, v0, a, points, dt):
+        """The kernels' bodies, contacts (warm-started, effective masses) and step context."""
+        s = self.world.solver
+        h = dt / s.substeps
+        n = len(q0)
+        bodies = rs.RigidBodyColumns(q0, v0, self.omega, self.orientation, np.zeros((n, 3)),
+                                     np.tile(quat.IDENTITY, (n, 1)).astype(float), self.inverse_masses,
+                                     world_inverse_inertia(self.orientation, self.inverse_principal),
+                                     self.inverse_principal, np.ascontiguousarray(a), self.rounding)
+        ca, cb = np.asarray(points.a, np.int64), np.asarray(points.b, np.int64)
+        static = cb < 0
+        cb_body = np.where(static, -1, cb)
+        normal = np.ascontiguousarray(points.normal, dtype=float).reshape(-1, 3)
+        point = np.asarray(points.point, dtype=float).reshape(-1, 3)
+        ra = point - q0[ca]
+        rb = np.where(static[:, None], 0.0, point - q0[np.where(static, 0, cb)])
+        m = self.materials
+        other = np.where(static, m.shape[np.where(static, -1 - cb, 0)] if len(m.shape) else 0,
+                         m.body[np.where(static, 0, cb)])
+        friction = m.friction[m.body[ca], other]
+        restitution = m.restitution[m.body[ca], other]
+        pressing = np.sum((a[ca] - np.where(static[:, None], 0.0, a[np.where(static, 0, cb)])) * normal, axis=1)
+        rolling = np.maximum(self.rolling[ca], np.where(static, 0.0, self.rolling[np.where(static, 0, cb)]))
+        basis = tangents(normal)
+        key = np.column_stack([ca, cb, np.asarray(points.feature, np.int64)]).astype(np.int64)
+        old = self._previous
+        rows = rs.previous_rows(old.key, key)
+        found = rows >= 0
+        pn, pt, pr = np.zeros(len(ca)), np.zeros((len(ca), 2)), np.zeros((len(ca), 3))
+        pn[found] = old.pn[rows[found]]
+        pt[found] = np.einsum("cj,cdj->cd", old.pt[rows[found]], basis[found])  # kept in the new contact plane
+        pr[found] = old.pr[rows[found]]
+        count = len(ca)
+        contacts = rs.RigidContactColumns(
+            ca, cb_body, normal, np.ascontiguousarray(ra), np.ascontiguousarray(rb), np.ascontiguousarray(basis),
+            np.asarray(points.separation, dtype=float), np.zeros(count), np.full(count, np.inf), np.zeros((count, 3)),
+            friction, restitution, rest_speed(self.world.rest_speed, pressing, dt), rolling, pn, pt, pr,
+            np.zeros(count), np.zeros(count))
+        rs.prepare(bodies, contacts)
+        bias_rate, mass_scale, impulse_scale = s.softness(h)
+        sub = rs.RigidSubstep(h, s.iterations, bias_rate, mass_scale, impulse_scale, s.push_speed, s.slop,
+                              *self.codes)
+        self._key, self._rows = key, rows
+        return bodies, contacts, sub
+
+    def _conclude(self, t, dt, points, contacts, residual):
+        """The log (impacts, residual) and what the next step warm-starts from."""
+        c = contacts
+        pt = c.pt[:, 0, None] * c.tangent[:, 0] + c.pt[:, 1, None] * c.tangent[:, 1]
+        rows = self._rows
+        was_hit = np.zeros(len(rows), bool)
+        was_hit[rows >= 0] = self._previous.total[rows[rows >= 0]] > 0
+        new = np.flatnonzero((c.total > 0) & ~was_hit)
+        # one impact per pair: its first point newly hit
+        first = new[np.unique(self._key[new, :2], axis=0, return_index=True)[1]] if len(new) else new
+        self.log.add_impacts(ImpactBlock(
+            np.full(len(first), float(t)), c.a[first], np.asarray(points.b, np.int64)[first], c.normal[first],
+            -c.hit[first], c.restitution[first], c.friction[first], c.total[first], (float(t), float(t + dt)),
+            self.model.names, self.world.shapes))
+        self.log.most_impacts_in_a_step = max(self.log.most_impacts_in_a_step, len(first))
+        self.log.largest_residual = max(self.log.largest_residual, float(residual))
+        self._previous = Solved(self._key, c.normal, c.pn.copy(), pt, c.pr.copy(), c.total.copy())
+
+    def rotation_at(self, steps: np.ndarray):
+        """(orientations (K, N, 4), angular velocities (K, N, 3)) after each of ``steps`` steps (recorded ones)."""
+        recorded = self.history
+        missing = [int(k) for k in steps if int(k) not in recorded]
+        if missing:
+            raise ValueError(f"the solver recorded its rotation every {self.record_every} steps, not after step "
+                             f"{missing[0]}")
+        return (np.array([recorded[int(k)][0] for k in steps]), np.array([recorded[int(k)][1] for k in steps]))

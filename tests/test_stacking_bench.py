@@ -1,0 +1,55 @@
+"""The stacking section of steplab bench: its box pits, and a tiny run of the section."""
+
+import dataclasses
+import itertools
+
+import numpy as np
+import pytest
+from steplab.physics.collision.shapes import Plane
+
+from steplab import bench
+from steplab.bench import stacking
+
+
+@pytest.mark.parametrize("n", [1, 50, 1_000])
+def test_box_pit_starts_apart_inside_its_walls(n):
+    scene = stacking.box_pit(n)
+    assert scene.model.n_bodies == scene.rigid_bodies.n == n and set(scene.rigid_bodies.shapes) == {"box"}
+    q, r = scene.y0[0], scene.model.radii
+    planes = [s for s in scene.collisions.shapes if isinstance(s, Plane)]
+    assert len(planes) == 5 and scene.collisions.method == "solver"
+    for plane in planes:  # every bounding sphere inside the floor and the four walls
+        assert np.all(q @ plane.normal - plane.offset > r)
+    # no two bounding spheres touch (brute force over the pairs)
+    for i, j in itertools.combinations(range(min(n, 300)), 2):
+        assert np.linalg.norm(q[i] - q[j]) > r[i] + r[j]
+    np.testing.assert_allclose(np.linalg.norm(scene.rigid_bodies.orientations, axis=1), 1.0, rtol=1e-12)
+    assert stacking.box_pit_toml(n) == stacking.box_pit_toml(n)  # seeded: the same bytes
+    assert stacking.box_pit_toml(n, seed=1) != stacking.box_pit_toml(n)
+
+
+def test_box_pit_needs_a_box():
+    with pytest.raises(ValueError, match="at least one box, got n = 0"):
+        stacking.box_pit_toml(0)
+
+
+def test_tiny_stacking_section_records_the_pyramid_and_the_pit(monkeypatch):
+    """The section on a tiny configuration with pybullet as the one peer (MuJoCo as not installed)."""
+    from steplab.engines import ENGINES
+
+    monkeypatch.setattr(ENGINES["mujoco"], "available", classmethod(lambda cls: False))
+    config = dataclasses.replace(bench.QUICK, stack_pyramid_rows=3, stack_steps=1, box_pit_runs=((20, 2),),
+                                 repeats=1, max_rounds=2, round_budget_seconds=0.5, collision_repeats=1)
+    record = bench.Record(config, quick=True)
+    stacking.stacking(config, record, lambda message: None)
+    pyramid = record.data["stacking"]["pyramid_3"]
+    assert set(pyramid["not_compared"]) == {"mujoco_pgs", "mujoco_newton"}
+    assert "not installed" in pyramid["not_compared"]["mujoco_pgs"]
+    assert pyramid["top_start"] == 2.5 and pyramid["seconds_per_step"]["steplab"] > 0
+    pit = record.data["stacking"]["box_pit_20"]
+    assert pit["boxes"] == 20 and pit["real_time_factor"]["steplab"] > 0
+    if ENGINES["bullet"].available():
+        for name in ("vs_pybullet_pyramid_3", "vs_pybullet_box_pit_20"):
+            s = record.data["seconds"][name]
+            assert s["group"] == "stacking" and 0 < s["steplab_spread"]["min"] <= s["steplab_spread"]["max"]
+    assert "vs_mujoco_pgs_pyramid_3" not in record.data["targets"]
