@@ -215,10 +215,11 @@ class EngineRun:
     ``display_name`` (for figures), ``colour`` (its figures' colour), ``planar`` (a 2-D
     engine, bodies in a plane), ``precision`` (its float type, "float64" or "float32"),
     ``package`` and ``distribution`` (the Python package it imports and its name on PyPI;
-    None: it needs none) and ``study_settings`` (the :class:`Setting` tuple the engines
-    study measures). Instances set ``settings`` (a line saying how the run is set up) and
-    implement ``set_state(y)``, ``step(dt)``, ``state() -> y`` and, where the engine reports
-    contacts, ``touching() -> {(body, other): normal}`` (``other`` a body index or a shape's name).
+    None: it needs none), ``contacts`` (whether it expresses collisions) and ``study_settings``
+    (the :class:`Setting` tuple the engines study measures). Instances set ``settings`` (a line
+    saying how the run is set up) and implement ``set_state(y)``, ``step(dt)``, ``state() -> y``
+    and, where the engine reports contacts, ``touching() -> {(body, other): normal}`` (``other``
+    a body index or a shape's name).
     """
 
     engine: ClassVar[str] = "engine"
@@ -229,6 +230,9 @@ class EngineRun:
     package: ClassVar[str | None] = None
     distribution: ClassVar[str | None] = None
     study_settings: ClassVar[tuple[Setting, ...]] = ()
+    #: whether the adapter expresses a scene's collisions; the engines study, whose measurements
+    #: are contacts (drops, tunnelling, ball pits), measures only those that do
+    contacts: ClassVar[bool] = True
     settings: str = ""
 
     def __init_subclass__(cls, **kwargs):
