@@ -28,11 +28,9 @@ def needs_newton():
 
 @pytest.fixture(scope="module")
 def cloth():
-    """The cloth scene (12 x 12 particles, springs and dampers, two pinned corners), swinging."""
-    scene = load_scene("cloth")
-    y0 = scene.y0.copy()
-    y0[1, ~scene.model.pinned] = np.random.default_rng(20240611).normal(0.0, 0.1, (scene.model.n_bodies - 2, 3))
-    return scene.model, y0, scene.dt
+    from steplab.bench.cloth import swinging_cloth
+
+    return swinging_cloth()
 
 
 def relative(a, b) -> float:
