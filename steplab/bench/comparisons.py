@@ -7,7 +7,8 @@
 7. collisions: ball pits of 10^3 to 10^5 spheres against MuJoCo and pybullet (:mod:`.collisions`);
 8. implicit Euler's step on the cloth against semi-implicit Euler's (:mod:`.implicit`, issue 16);
 9. start-up: the light commands in fresh processes beside ``import numpy`` (:mod:`.startup`, issue 29);
-10. rotation: 10^5 free tumbling bodies, one exponential-map step against the memory bound (:mod:`.rotation`).
+10. rotation: 10^5 free tumbling bodies, one exponential-map step against the memory bound (:mod:`.rotation`);
+11. the cloth under XPBD: its step against the memory bound, a Numba loop and NVIDIA Newton (:mod:`.cloth`, issue 28).
 
 Each section takes the :class:`.Config`, the :class:`.Record` and a progress callback.
 """
@@ -22,6 +23,7 @@ from steplab.core.timing import Times, interleaved_times, ready
 from steplab.integrators.references import solve_adaptive
 from steplab.integrators.simulate import final_state_function
 
+from .cloth import xpbd_cloth
 from .collisions import ball_pits
 from .config import COMPILE_TARGET_SECONDS, SEED, Config
 from .implicit import implicit_euler_cloth
@@ -390,4 +392,4 @@ def batching(config: Config, record: Record, progress) -> None:
 
 
 SECTIONS = (small_system, large_systems, accuracy_matched, broadphase, compile_times, batching, ball_pits,
-            implicit_euler_cloth, startup, tumbling_bodies)
+            implicit_euler_cloth, startup, tumbling_bodies, xpbd_cloth)
