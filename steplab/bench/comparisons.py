@@ -8,7 +8,8 @@
 8. implicit Euler's step on the cloth against semi-implicit Euler's (:mod:`.implicit`, issue 16);
 9. start-up: the light commands in fresh processes beside ``import numpy`` (:mod:`.startup`, issue 29);
 10. rotation: 10^5 free tumbling bodies, one exponential-map step against the memory bound (:mod:`.rotation`);
-11. the cloth under XPBD: its step against the memory bound, a Numba loop and NVIDIA Newton (:mod:`.cloth`, issue 28).
+11. the cloth under XPBD: its step against the memory bound, a Numba loop and NVIDIA Newton (:mod:`.cloth`, issue 28);
+12. Newton's rigid-body solvers on the rotation study's tumbling box (:mod:`.newton_rotation`, issue 28).
 
 Each section takes the :class:`.Config`, the :class:`.Record` and a progress callback.
 """
@@ -27,6 +28,7 @@ from .cloth import xpbd_cloth
 from .collisions import ball_pits
 from .config import COMPILE_TARGET_SECONDS, SEED, Config
 from .implicit import implicit_euler_cloth
+from .newton_rotation import newton_tumbling
 from .profile import compiled_text, loop_kernels
 from .record import Record, final_difference, size_label
 from .rotation import tumbling_bodies
@@ -392,4 +394,4 @@ def batching(config: Config, record: Record, progress) -> None:
 
 
 SECTIONS = (small_system, large_systems, accuracy_matched, broadphase, compile_times, batching, ball_pits,
-            implicit_euler_cloth, startup, tumbling_bodies, xpbd_cloth)
+            implicit_euler_cloth, startup, tumbling_bodies, xpbd_cloth, newton_tumbling)

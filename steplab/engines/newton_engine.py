@@ -145,3 +145,47 @@ class NewtonRun(EngineRun):
     def state(self) -> np.ndarray:
         state = self._states[0]
         return np.stack([state.particle_q.numpy(), state.particle_qd.numpy()]).astype(float)
+
+
+#: Newton's rigid-body solvers a free body runs under (SolverMuJoCo needs mujoco_warp, which the
+#: extra leaves out); each with its angular damping off
+RIGID_SOLVERS = ("SolverSemiImplicit", "SolverXPBD", "SolverFeatherstone")
+
+
+def free_body_rotation(inertia, omega0, dt: float, n_steps: int, solver: str = "SolverXPBD"):
+    """A free rigid body of principal moments ``inertia`` (3,), kg m^2, spun at ``omega0`` (3,)
+    rad/s from the identity orientation, no gravity, ``n_steps`` steps of ``dt`` in Newton's ``solver``.
+
+    The body is Newton's ``add_body`` (a free joint); SolverFeatherstone steps the joint's
+    coordinates, the others the body's, and both are read back through the body. Returns
+    (q (n_steps + 1, 4), unit quaternions (w, x, y, z); omega (n_steps + 1, 3), body frame), as
+    :func:`steplab.integrators.rotation.simulate_rotation` for one body.
+    """
+    if solver not in RIGID_SOLVERS:
+        raise ValueError(f"newton: unknown rigid-body solver {solver!r}; valid: {', '.join(RIGID_SOLVERS)}")
+    from steplab.physics import quaternion as quat
+
+    wp, newton = _load()
+    builder = newton.ModelBuilder(gravity=(0.0, 0.0, 0.0))
+    builder.add_body(mass=1.0, inertia=wp.mat33(*np.diag(np.asarray(inertia, float)).ravel()))
+    model = builder.finalize(device="cpu")
+    states = [model.state(), model.state()]
+    twist = np.zeros(6, np.float32)
+    twist[3:] = omega0  # the free joint's (v, omega), world frame: the body frame at the identity
+    for state in states:
+        state.joint_qd.assign(twist)
+        newton.eval_fk(model, state.joint_q, state.joint_qd, state)
+    step = getattr(newton.solvers, solver)(model, angular_damping=0.0)
+    control = model.control()
+    q, omega = np.empty((n_steps + 1, 4)), np.empty((n_steps + 1, 3))
+    for k in range(n_steps + 1):
+        if k:
+            states[0].clear_forces()
+            step.step(states[0], states[1], control, None, dt)
+            states.reverse()
+            if solver == "SolverFeatherstone":
+                newton.eval_fk(model, states[0].joint_q, states[0].joint_qd, states[0])
+        x, y, z, w = states[0].body_q.numpy()[0, 3:7]  # Warp's quaternions are (x, y, z, w)
+        q[k] = w, x, y, z
+        omega[k] = quat.rotate_inverse(np, q[k], states[0].body_qd.numpy()[0, 3:].astype(float))
+    return q, omega
