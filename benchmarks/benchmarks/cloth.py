@@ -33,7 +33,8 @@ class XPBDClothStep:
         elif contender == "numba":
             constraints, external, inverse_mass = carry
             y, external = np.array(y0), np.ascontiguousarray(external)
-            self.call = lambda: numba_xpbd_loop(y[0], y[1], inverse_mass, external, constraints, dt, 1)
+            loop = numba_xpbd_loop()
+            self.call = lambda: loop(y[0], y[1], inverse_mass, external, constraints, dt, 1)
         else:
             newton = newton_run(model, dt, y0, solver="xpbd", iterations=1)
             if newton is None:

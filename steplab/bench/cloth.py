@@ -26,8 +26,9 @@ identified on the small cloth scene (:func:`identify_on_cloth`).
 
 from __future__ import annotations
 
+import functools
+
 import numpy as np
-from numba import njit
 
 from steplab.core.timing import Times, ready
 
@@ -50,8 +51,15 @@ IDENTIFICATION_STEPS = 40
 ROUND_OFF_FACTOR = 4.0
 
 
-@njit(cache=True)
-def numba_xpbd_loop(q, v, inverse_mass, external, constraints, dt, n):
+@functools.cache
+def numba_xpbd_loop():
+    """:func:`_xpbd_loop` compiled (on first use, cached on disk: importing the bench never needs Numba)."""
+    import numba
+
+    return numba.njit(cache=True)(_xpbd_loop)
+
+
+def _xpbd_loop(q, v, inverse_mass, external, constraints, dt, n):
     """``n`` steps of XPBD with one substep and one iteration, in place on q, v (N, 3).
 
     Per step: dx = dt (v + dt a_ext); one Gauss-Seidel sweep over the constraints moving dx
@@ -125,7 +133,8 @@ def xpbd_cloth(config: Config, record: Record, progress) -> None:
         return y
 
     buffer = np.array(y0)  # Numba steps this buffer in place, as a game engine would
-    numba = lambda steps: numba_xpbd_loop(buffer[0], buffer[1], inverse_mass, external, constraints, dt, steps)
+    loop = numba_xpbd_loop()
+    numba = lambda steps: loop(buffer[0], buffer[1], inverse_mass, external, constraints, dt, steps)
     read_write, read_only = xpbd_bytes(y0, carry)
     calls = {("steplab", 1): lambda: steplab(k), ("steplab", 2): lambda: steplab(2 * k),
              ("numba", 1): lambda: numba(k), ("numba", 2): lambda: numba(2 * k),
@@ -157,8 +166,10 @@ def xpbd_cloth(config: Config, record: Record, progress) -> None:
         record.compare("vs_newton_xpbd_cloth", "cloth (XPBD)", what, newton.settings, per_step["steplab"],
                        per_step["newton"], None, dt=dt, final_state_apart=final_difference(ours, newton.state()))
         _semi_implicit_beside_newton(model, y0, config, record)
-        record.data["details"]["newton_identification"] = {
-            s.key: identify_on_cloth(s) for s in _newton_settings()}
+        settings = _newton_settings()
+        references = cloth_references(settings)
+        record.data["details"]["newton_identification"] = {s.key: identify_on_cloth(s, references)
+                                                           for s in settings}
     progress("xpbd cloth: done")
 
 
@@ -204,40 +215,55 @@ def swinging_cloth():
     return scene.model, y0, scene.dt
 
 
-def identify_on_cloth(setting) -> dict:
+def cloth_references(settings) -> dict:
+    """Every steplab method's trajectory on :func:`swinging_cloth` over IDENTIFICATION_STEPS steps:
+    the fixed-step methods (implicit Euler by conjugate gradients, the same converged step) and
+    ``xpbd`` with each setting's iterations, by label; and, under "float32", semi-implicit
+    Euler in float32 (the problem's round-off). A method that diverges on the cloth is left out."""
+    from steplab.integrators import DivergenceError, ImplicitEuler, simulate
+    from steplab.integrators.position_based import XPBD
+    from steplab.studies.engines import parameters as engines_parameters
+
+    model, y0, dt = swinging_cloth()
+    methods = {m: m for m in engines_parameters(quick=True)["integrators"]}
+    methods["implicit-euler"] = ImplicitEuler(linear_solver="cg")  # dense: 0.2 s a step here
+    for iterations in sorted({s.options.get("iterations", 1) for s in settings}):
+        methods[f"xpbd, {iterations} iteration(s)"] = XPBD(iterations=iterations)
+    references = {}
+    for label, method in methods.items():
+        try:
+            references[label] = simulate(model, method, y0, 0.0, dt=dt, n_steps=IDENTIFICATION_STEPS).y
+        except DivergenceError:
+            continue
+    references["float32"] = simulate(model, "semi-implicit-euler", y0, 0.0, dt=dt, n_steps=IDENTIFICATION_STEPS,
+                                     dtype=np.float32).y
+    return references
+
+
+def identify_on_cloth(setting, references: dict) -> dict:
     """Which steplab method a Newton setting steps, on the small cloth scene (12 x 12, swinging).
 
-    The setting and each steplab fixed-step method, and ``xpbd`` with the setting's
-    iterations, take IDENTIFICATION_STEPS steps of the scene's dt from the same state; the
-    difference is :func:`steplab.studies.engines.identify`'s (max |y - y_method| / max
-    |y_method|). The nearest method is *equal* when the difference is within ROUND_OFF_FACTOR
-    times this problem's float32 round-off (steplab's semi-implicit Euler in float32 against
-    float64, 2.7e-5 here: the springs' stretch is a small difference of float32 positions).
+    The setting takes IDENTIFICATION_STEPS steps of the scene's dt from the start of
+    :func:`cloth_references`, against each of those methods' (the fixed-step methods and
+    ``xpbd`` with the setting's iterations); the difference is
+    :func:`steplab.studies.engines.identify`'s (max |y - y_method| / max |y_method|). The
+    nearest method is *equal* when the difference is within ROUND_OFF_FACTOR times this
+    problem's float32 round-off (steplab's semi-implicit Euler in float32 against float64,
+    2.7e-5 here: the springs' stretch is a small difference of float32 positions).
     """
-    from steplab.integrators import DivergenceError, simulate
-    from steplab.integrators.position_based import XPBD
     from steplab.studies.engines import identify
-    from steplab.studies.engines import parameters as engines_parameters
     from steplab.studies.problems import Problem
     from steplab.studies.system import engine_system
 
     model, y0, dt = swinging_cloth()
     n = IDENTIFICATION_STEPS
-    methods = {m: m for m in engines_parameters(quick=True)["integrators"]}
-    iterations = setting.options.get("iterations", 1)
-    methods[f"xpbd, {iterations} iteration(s)"] = XPBD(iterations=iterations)
-    references = {}
-    for label, method in methods.items():
-        try:
-            references[label] = simulate(model, method, y0, 0.0, dt=dt, n_steps=n).y
-        except (DivergenceError, ValueError):  # diverges on the cloth, or cannot step it: not the one
-            continue
+    xpbd = f"xpbd, {setting.options.get('iterations', 1)} iteration(s)"
+    methods = {m: y for m, y in references.items() if m != "float32" and (not m.startswith("xpbd") or m == xpbd)}
     problem = Problem("cloth", "the cloth scene, swinging", model, y0, 0.0, n * dt)
-    found = identify(engine_system(setting), {"identification_steps": n, "integrators": list(references)},
-                     {"cloth": (problem, dt, references)})
+    found = identify(engine_system(setting), {"identification_steps": n, "integrators": list(methods)},
+                     {"cloth": (problem, dt, methods)})
     ours = references["semi-implicit-euler"]
-    single = simulate(model, "semi-implicit-euler", y0, 0.0, dt=dt, n_steps=n, dtype=np.float32).y
-    round_off = float(np.max(np.abs(single - ours)) / np.max(np.abs(ours)))
+    round_off = float(np.max(np.abs(references["float32"] - ours)) / np.max(np.abs(ours)))
     equal = found["difference"] <= ROUND_OFF_FACTOR * round_off
     return {"nearest": found["nearest"], "difference": found["difference"], "float32_round_off": round_off,
             "equals": found["nearest"] if equal else "none", "declared": setting.equals,
