@@ -59,3 +59,4 @@ from .simulate import Trajectory as Trajectory
 from .simulate import simulate as simulate
 from .verlet import PositionVerlet as PositionVerlet
 from .verlet import VelocityVerlet as VelocityVerlet
+from .vertex_block_descent import VBD as VBD

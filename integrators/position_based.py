@@ -19,7 +19,7 @@ with substeps and one iteration it is Macklin et al.'s "Small steps in physics s
 from __future__ import annotations
 
 import dataclasses
-from typing import ClassVar
+from typing import ClassVar, NamedTuple
 
 import numpy as np
 
@@ -29,6 +29,17 @@ from .base import Integrator
 #: displacement and velocity of the linear map's basis states, m, m/s: along the spring's axis
 #: C = x - l_rest is exactly linear, so any size that keeps x > 0 gives the map to round-off
 LINEAR_AMPLITUDE = 0.25
+
+
+class SweepCarry(NamedTuple):
+    """What a pbd or xpbd run keeps between steps: the constraints in ``sweep`` order
+    (:func:`.constraint_projection.ordered`), ``external`` (N, 3), m/s^2, ``inverse_mass`` (N,),
+    1/kg, and ``work`` (:class:`.constraint_projection.Workspace`), the step's scratch."""
+
+    sweep: tuple
+    external: np.ndarray
+    inverse_mass: np.ndarray
+    work: tuple
 
 
 @dataclasses.dataclass(frozen=True)
@@ -71,7 +82,9 @@ class PositionBased(Integrator):
             if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < 1:
                 raise ValueError(f"{self.name}: {key} must be a whole number >= 1, got {value!r}")
 
-    def init(self, model, t, y):
+    def constraints(self, model):
+        """The model's springs as constraints, its external accelerations (N, 3) and inverse masses (N,),
+        refusing (one line) what the method cannot step: the JAX backend, other forces, negative compliance."""
         if model.xp is not np:
             raise ValueError(f"{self.name} runs on the NumPy backend only (its constraint sweep is a sequential "
                              "Numba loop); use --backend numpy")
@@ -84,21 +97,26 @@ class PositionBased(Integrator):
                              "(a stiffness k > 0, alpha = 1 / k)")
         field = model.constant_field
         external = np.zeros((model.n_bodies, 3)) if field is None else np.broadcast_to(field, (model.n_bodies, 3))
-        return c, np.asarray(external, float), np.asarray(model.inverse_masses, float)
+        return c, np.ascontiguousarray(external, float), np.asarray(model.inverse_masses, float)
+
+    def init(self, model, t, y) -> SweepCarry:
+        """What :meth:`step` keeps for a run: the constraints in the sweep's colour order
+        (:func:`.constraint_projection.ordered`), the external accelerations, the inverse masses
+        and the scratch the step writes."""
+        from .constraint_projection import ordered, workspace
+
+        c, external, inverse_mass = self.constraints(model)
+        return SweepCarry(ordered(c, model.n_bodies), external, inverse_mass, workspace(model.n_bodies, len(c.i)))
 
     def step(self, model, t, y, dt, carry):
-        from .constraint_projection import project  # Numba: only when a position-based run steps
+        from .constraint_projection import advance  # Numba: only when a position-based run steps
 
         if carry is None:  # a caller that did not call init
             carry = self.init(model, t, y)
-        c, external, inverse_mass = carry
-        q, v = np.array(y[0], float), np.array(y[1], float)
-        h = dt / self.substeps
-        for _ in range(self.substeps):
-            dx = h * (v + h * external)  # predict: x* = q + h v*, v* = v + h a_ext
-            project(dx, q, inverse_mass, c, h, self.iterations, self.accumulate)
-            q, v = q + dx, dx / h
-        return np.stack([q, v]).astype(y.dtype, copy=False), carry
+        y1 = np.array(y, float)
+        advance(y1[0], y1[1], carry.external, carry.inverse_mass, carry.sweep, dt / self.substeps, self.substeps,
+                self.iterations, self.accumulate, carry.work)
+        return y1.astype(y.dtype, copy=False), carry
 
     def linear_map(self, omega_dt: float, zeta: float = 0.0) -> np.ndarray:
         """One-step matrix on u'' = -u - 2 zeta u', from :meth:`step` on a spring of k = 1 to a
@@ -175,3 +193,40 @@ class XPBD(PositionBased):
     name = "xpbd"
     accumulate = True
     style = ("#5254a3", "d")  # periwinkle: no other method has it
+
+
+class InPlaceStep(NamedTuple):
+    """A position-based method stepping one state buffer in place, as a game engine does (the bench's
+    step): ``advance(n)`` takes n steps of ``dt`` on ``y`` (2, N, 3) and allocates nothing; the bytes
+    one step must move at the least are ``bytes_read_and_written`` (the state q, v) and
+    ``bytes_read`` (the constraints, inverse masses and external accelerations), for the
+    memory-traffic bound (``steplab.peers.memory_stream``)."""
+
+    y: np.ndarray
+    advance: object
+    bytes_read_and_written: int
+    bytes_read: int
+
+
+def cloth_benchmark_step(model, y0, dt: float, method: PositionBased | None = None) -> InPlaceStep:
+    """``method`` (default ``XPBD(substeps=1, iterations=1)``) on ``model`` from ``y0``, stepping in place.
+
+    For the issue's benchmark, the cloth of ``steplab.bench.systems.cloth_model(160)``: 25,600
+    particles, 101,442 springs with dampers. Each step is :func:`.constraint_projection.advance`,
+    the kernel every pbd and xpbd step runs, on the carry :meth:`PositionBased.init` builds (so
+    its result is :meth:`PositionBased.step`'s to the byte).
+    """
+    from .constraint_projection import advance
+
+    method = XPBD(substeps=1, iterations=1) if method is None else method
+    carry = method.init(model, 0.0, y0)
+    y = np.array(y0, float)
+    h, substeps, iterations = dt / method.substeps, method.substeps, method.iterations
+
+    def steps(n: int = 1) -> None:
+        for _ in range(n):
+            advance(y[0], y[1], carry.external, carry.inverse_mass, carry.sweep, h, substeps, iterations,
+                    method.accumulate, carry.work)
+
+    data = sum(a.nbytes for a in carry.sweep) + carry.inverse_mass.nbytes + carry.external.nbytes
+    return InPlaceStep(y, steps, y.nbytes, data)

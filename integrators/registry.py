@@ -21,6 +21,7 @@ from .references import DiffraxDopri8, DiffraxKvaerno5, DiffraxTsit5, ScipyDOP85
 from .runge_kutta import RK4, Heun, Midpoint
 from .semi_implicit_euler import SemiImplicitEuler
 from .verlet import PositionVerlet, VelocityVerlet
+from .vertex_block_descent import VBD
 
 #: the reference a study gets when it asks for "the reference"
 DEFAULT_REFERENCE = "diffrax-dopri8"
@@ -56,7 +57,7 @@ INTEGRATORS: Registry = Registry("steplab.integrators", "integrator", [(method.n
     Exact(), DiffraxDopri8(), DiffraxTsit5(),
     DiffraxKvaerno5(), ScipyDOP853(), ScipyRadau(),
     # position-based: the springs as constraints (steplab.physics.constraints)
-    PBD(), XPBD(),
+    PBD(), XPBD(), VBD(),
 )], _as_integrator)
 
 

@@ -19,7 +19,7 @@ from steplab.core.lazy_exports import lazy_exports  # noqa: E402
 
 #: the study modules, in the order ``steplab reproduce`` runs them; each defines ``STUDY``
 BUILTIN_MODULES = ("truncation", "stability", "work_precision", "frame_rate", "scene_tour", "restitution",
-                   "tunnelling", "broadphase", "contacts", "engines", "rotation")
+                   "tunnelling", "broadphase", "contacts", "engines", "rotation", "soft_bodies")
 
 # ``Study``, ``run_study`` and the submodules are imported on first use (steplab/core/lazy_exports.py),
 # and so is ``STUDIES``, below: importing one module of this package (records, timing) does

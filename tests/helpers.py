@@ -228,3 +228,18 @@ def browser_missing():
     if os.environ.get("CI", "").lower() == "true":
         pytest.fail("CI=true requires the browser tests, and no Chromium was found (.ci/run installs it)")
     pytest.skip(BROWSER_SKIP)
+
+
+def spring_net(seed, n=8, p=16):
+    """A seeded random spring net for the position-based methods' tests: n bodies in the unit cube,
+    p springs of 10-1000 N/m, pre-stretched +-20 %, random velocities."""
+    rng = np.random.default_rng(seed)
+    q = rng.uniform(0.0, 1.0, (n, 3))
+    pairs = set()
+    while len(pairs) < p:
+        a, b = sorted(rng.choice(n, 2, replace=False).tolist())
+        pairs.add((a, b))
+    i, j = np.array(sorted(pairs)).T
+    rest = np.linalg.norm(q[j] - q[i], axis=1) * rng.uniform(0.8, 1.2, p)
+    model = Model(rng.uniform(0.5, 2.0, n), np.full(n, 0.01), [Springs(i, j, rng.uniform(10.0, 1000.0, p), rest)])
+    return model, np.stack([q, rng.normal(0.0, 1.0, (n, 3))])

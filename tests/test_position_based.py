@@ -8,7 +8,7 @@ import sys
 
 import numpy as np
 import pytest
-from helpers import oscillator
+from helpers import oscillator, spring_net
 from steplab.integrators import PBD, XPBD, get_integrator, simulate
 from steplab.integrators.settings import scene_integrator
 from steplab.physics import Drag, Gravity, Model, Springs
@@ -59,20 +59,6 @@ def test_xpbd_substep_is_implicit_euler_with_its_damper(omega_dt, zeta):
         np.testing.assert_allclose(XPBD(substeps, iterations).linear_map(omega_dt, zeta), expected,
                                    rtol=0, atol=1e-12)
     assert XPBD().stability_limit() is None
-
-
-def spring_net(seed, n=8, p=16):
-    """A seeded random net: n bodies in the unit cube, p springs of 10-1000 N/m, pre-stretched +-20 %."""
-    rng = np.random.default_rng(seed)
-    q = rng.uniform(0.0, 1.0, (n, 3))
-    pairs = set()
-    while len(pairs) < p:
-        a, b = sorted(rng.choice(n, 2, replace=False).tolist())
-        pairs.add((a, b))
-    i, j = np.array(sorted(pairs)).T
-    rest = np.linalg.norm(q[j] - q[i], axis=1) * rng.uniform(0.8, 1.2, p)
-    model = Model(rng.uniform(0.5, 2.0, n), np.full(n, 0.01), [Springs(i, j, rng.uniform(10.0, 1000.0, p), rest)])
-    return model, np.stack([q, rng.normal(0.0, 1.0, (n, 3))])
 
 
 @pytest.mark.parametrize("seed", [0, 1, 2])
@@ -165,6 +151,10 @@ def cloth_file(tmp_path, replace=(), extra=""):
      "only the position-based integrators (pbd, xpbd) can step them"),
     ([], "[forces.drag]\n", ["--integrator", "xpbd"], "this model also has 'drag'"),
     ([], "", ["--integrator", "xpbd", "--backend", "jax"], "xpbd runs on the NumPy backend only"),
+    ([], "", ["--integrator", "xpbd", "--substeps", "0"], "--substeps: must be a positive integer, got 0"),
+    ([], "", ["--integrator", "pbd", "--iterations", "-3"], "--iterations: must be a positive integer, got -3"),
+    ([], "", ["--integrator", "semi-implicit-euler", "--substeps", "2"],
+     "set a position-based integrator's sweeps (pbd, xpbd, vbd) or the contact solver"),
 ])
 def test_bad_input_is_one_line_status_2(capsys, tmp_path, replace, extra, argv, message):
     path = cloth_file(tmp_path, replace, "\n" + extra)
@@ -237,7 +227,35 @@ def test_steplab_run_applies_the_scenes_integrator_settings(tmp_path, capsys):
     assert not np.array_equal(finals[XPBD(substeps=4, iterations=1)], default)
 
 
+def test_steplab_run_takes_substeps_and_iterations_for_a_position_based_method(tmp_path, capsys):
+    """``--substeps 4 --iterations 1`` beat the scene's [simulation.xpbd] table: XPBD(4, 1)'s final state."""
+    path = cloth_file(tmp_path, [('integrator = "semi-implicit-euler"', 'integrator = "xpbd"')],
+                      "\n[simulation.xpbd]\nsubsteps = 2\niterations = 7\n")
+    status, out, err = run(capsys, "run", path, "--json", "--steps", "30", "--substeps", "4", "--iterations", "1")
+    assert status == 0, err
+    expected = simulate(CLOTH.model, XPBD(substeps=4, iterations=1), CLOTH.y0, 0.0, n_steps=30, dt=CLOTH.dt)
+    assert np.array_equal(np.array(json.loads(out)["final_positions"]), expected.positions[-1])
+
+
 def test_check_says_a_position_based_method_has_no_dt_limit(capsys):
     status, out, err = run(capsys, "check", "cloth", "--integrator", "xpbd")
     assert status == 0 and err == "" and "stable at every dt" in out
     assert XPBD().stability_limit() is None  # what the line says is the class's theory
+
+
+def test_the_benchmark_step_is_the_integrators_step_in_place():
+    from steplab.integrators.position_based import cloth_benchmark_step
+    from steplab.physics.soft_body import grid
+
+    from steplab.bench.systems import cloth_model
+
+    assert len(grid(160, 160, 1 / 160).edges) == 101_442  # the issue's cloth: 25,600 particles
+    model, y0, springs = cloth_model(20)
+    for method in (XPBD(1, 1), PBD(3, 2)):
+        step = cloth_benchmark_step(model, y0, 5e-4, method)
+        step.advance(7)
+        expected = simulate(model, method, y0, 0.0, n_steps=7, dt=5e-4).y[-1]
+        assert step.y.tobytes() == expected.tobytes() and not np.array_equal(step.y, y0)
+    # the state read and written, and 2 indices + 3 coefficients per constraint, 1/m and a_ext per body read
+    assert step.bytes_read_and_written == 2 * 400 * 3 * 8
+    assert step.bytes_read == springs * 5 * 8 + 400 * 8 + 400 * 3 * 8

@@ -122,14 +122,18 @@ def time_span(scene, args) -> tuple[float | None, float]:
 
 
 def solver_arguments(p) -> None:
-    """Collision handling: --method and the contact solver's --iterations and --substeps."""
+    """Collision handling, --method, and the sweeps of a position-based integrator or of the contact
+    solver: --iterations and --substeps (``run.with_sweeps`` says which one takes them)."""
     p.add_argument("--method", choices=COLLISION_METHODS, metavar="NAME",
                    help="collision handling (event: the lecture's event loop, each impact at its time; "
                    "solver: the engines' contact solver; default: the scene's)")
     p.add_argument("--iterations", type=count, metavar="N",
-                   help="contact solver: sweeps per substep (default: the scene's, else 1, Box2D v3's)")
+                   help="sweeps per substep of a position-based integrator (pbd, xpbd, vbd: default its "
+                   "[simulation.<integrator>] setting, else 10), else of the contact solver (default: the "
+                   "scene's, else 1, Box2D v3's)")
     p.add_argument("--substeps", type=count, metavar="N",
-                   help="contact solver: substeps per step (default: the scene's, else 4)")
+                   help="substeps per step of a position-based integrator (default: its setting, else 1), "
+                   "else of the contact solver (default: the scene's, else 4)")
 
 
 def json_argument(p, help: str = "print machine-readable JSON") -> None:

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import argparse
 import dataclasses
 import json
 import sys
@@ -65,7 +66,8 @@ def command(args) -> int:
         integrator = configured(integrator, scene.integrator_settings, f"scene {scene.name}: [simulation.{name}]")
     rotation_method = rotation_named(scene, args)
     dt, t_end = time_span(scene, args)
-    world = with_method(collision_world(scene, args.detector, args.backend), args)
+    world = collision_world(scene, args.detector, args.backend)
+    integrator, world = with_sweeps(integrator, world, args)
     warning = dt_warning(scene.model, scene.y0[0], integrator, dt)  # before the run: it may be long
     if warning is not None:
         print(f"steplab run: warning: {warning}", file=sys.stderr)
@@ -143,6 +145,32 @@ def _keeping(make_step, kept: list):
         return step
 
     return stepper
+
+
+def with_sweeps(integrator, world, args):
+    """``(integrator, world)`` with --iterations and --substeps applied, and --method.
+
+    The two flags set the integrator's own ``substeps`` / ``iterations`` when it has them (the
+    position-based methods), else the contact solver's; a run that has both is ambiguous.
+    """
+    from steplab.integrators import INTEGRATORS
+    from steplab.integrators.settings import configured
+
+    sweeps = {k: getattr(args, k) for k in ("substeps", "iterations") if getattr(args, k)}
+    fields = {f.name for f in dataclasses.fields(integrator)} if dataclasses.is_dataclass(integrator) else set()
+    if not sweeps or not fields & {"substeps", "iterations"}:
+        if sweeps and world is None:
+            takers = ", ".join(n for n, m in INTEGRATORS.items() if getattr(m, "kind", None) == "position-based")
+            raise ValueError(f"--iterations and --substeps set a position-based integrator's sweeps ({takers}) or "
+                             f"the contact solver (a scene with collisions, --method solver); {integrator.name} "
+                             "has no such setting")
+        return integrator, with_method(world, args)
+    if world is not None and (args.method or world.method) == "solver":
+        raise ValueError(f"--iterations and --substeps: both {integrator.name} and the contact solver have them; "
+                         f"set one of the two in the scene ([simulation.{integrator.name}] or [collisions.solver])")
+    flags = " and ".join(f"--{k}" for k in sweeps)
+    rest = argparse.Namespace(**(vars(args) | {"iterations": None, "substeps": None}))  # the integrator's
+    return configured(integrator, sweeps, flags), with_method(world, rest)
 
 
 def with_method(world, args):
