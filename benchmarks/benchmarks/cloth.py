@@ -20,21 +20,19 @@ class XPBDClothStep:
     timeout = 300
 
     def setup(self, contender, side):
-        from steplab.integrators.position_based import XPBD
+        from steplab.integrators.position_based import XPBD, cloth_benchmark_step
 
         from steplab.bench.cloth import CLOTH_DT, newton_run, numba_xpbd_loop
         from steplab.bench.systems import cloth_model
 
         model, y0, _ = cloth_model(side)
-        method, dt = XPBD(substeps=1, iterations=1), CLOTH_DT
-        carry = method.init(model, 0.0, y0)
+        dt = CLOTH_DT
         if contender == "steplab":
-            self.call = lambda: method.step(model, 0.0, y0, dt, carry)
+            self.call = cloth_benchmark_step(model, y0, dt).advance
         elif contender == "numba":
-            constraints, external, inverse_mass = carry
-            y, external = np.array(y0), np.ascontiguousarray(external)
-            loop = numba_xpbd_loop()
-            self.call = lambda: loop(y[0], y[1], inverse_mass, external, constraints, dt, 1)
+            carry = XPBD(substeps=1, iterations=1).init(model, 0.0, y0)
+            y, loop = np.array(y0), numba_xpbd_loop()
+            self.call = lambda: loop(y[0], y[1], carry.inverse_mass, carry.external, carry.sweep, dt, 1)
         else:
             newton = newton_run(model, dt, y0, solver="xpbd", iterations=1)
             if newton is None:

@@ -6,14 +6,15 @@ frame in 10 substeps, :data:`CLOTH_DT`) by ``xpbd`` with one substep and one ite
 (Macklin et al.'s "small steps" unit). Each side is timed as the large systems are, the
 marginal cost (t(2K) - t(K)) / K of K more steps, in the same interleaved rounds:
 
-- steplab: :meth:`XPBD.step <steplab.integrators.position_based.XPBD.step>` in a Python loop
-  (NumPy predict and update around the Numba Gauss-Seidel sweep);
+- steplab: :func:`~steplab.integrators.position_based.cloth_benchmark_step`, the compiled step
+  every ``xpbd`` step runs (predict, the Gauss-Seidel sweep in colour order, update), in place;
 - the memory-traffic bound: NumPy streaming the bytes a step must move
   (:func:`steplab.peers.memory_stream`), the state q, v read and written in place and the
   constraints (i, j, rest length, compliance, damping), inverse masses and external field read;
-- a plain Numba loop: the whole step (predict, one sweep, update) as one compiled loop over
-  the steps, in place (:func:`numba_xpbd_loop`, the bench's independent copy of the step, as
-  :mod:`steplab.peers` keeps one of semi-implicit Euler);
+- a plain Numba loop: the whole step (predict, one sweep over the constraints in the same
+  order, update) written out as one compiled loop over the steps, in place
+  (:func:`numba_xpbd_loop`, the bench's independent copy of the step, as :mod:`steplab.peers`
+  keeps one of semi-implicit Euler);
 - NVIDIA Newton's SolverXPBD with one iteration on the same cloth, on the CPU
   (:mod:`steplab.engines.newton_engine`), when the extra ``steplab[newton]`` is installed.
 
@@ -98,12 +99,6 @@ def _xpbd_loop(q, v, inverse_mass, external, constraints, dt, n):
                 v[b, c] = dx[b, c] / dt
 
 
-def xpbd_bytes(y, carry) -> tuple[int, int]:
-    """Bytes one XPBD step must move: (read and written: q, v; read only: constraints, 1/m, a_ext)."""
-    constraints, external, inverse_mass = carry
-    return y.nbytes, sum(a.nbytes for a in constraints) + inverse_mass.nbytes + external.nbytes
-
-
 def newton_run(model, dt: float, y, **options):
     """Newton on the cloth (an adapter of :mod:`steplab.engines.newton_engine`), or None when not installed."""
     from steplab.engines import ENGINES, build
@@ -118,25 +113,17 @@ def newton_run(model, dt: float, y, **options):
 def xpbd_cloth(config: Config, record: Record, progress) -> None:
     """steplab's xpbd step on the cloth against the memory bound, a Numba loop and Newton's SolverXPBD."""
     from steplab import peers
-    from steplab.integrators.position_based import XPBD
+    from steplab.integrators.position_based import XPBD, cloth_benchmark_step
 
     model, y0, springs = cloth_model(config.cloth_side)
-    method, dt, k = XPBD(substeps=1, iterations=1), CLOTH_DT, config.loop_steps
-    carry = method.init(model, 0.0, y0)
-    constraints, external, inverse_mass = carry
-    external = np.ascontiguousarray(external)
-
-    def steplab(steps: int):
-        y = y0
-        for _ in range(steps):
-            y = method.step(model, 0.0, y, dt, carry)[0]
-        return y
-
+    dt, k = CLOTH_DT, config.loop_steps
+    step = cloth_benchmark_step(model, y0, dt)  # XPBD(1, 1) in place on step.y: the kernel every xpbd step runs
+    carry = XPBD(substeps=1, iterations=1).init(model, 0.0, y0)  # its constraints in the sweep's order
     buffer = np.array(y0)  # Numba steps this buffer in place, as a game engine would
     loop = numba_xpbd_loop()
-    numba = lambda steps: loop(buffer[0], buffer[1], inverse_mass, external, constraints, dt, steps)
-    read_write, read_only = xpbd_bytes(y0, carry)
-    calls = {("steplab", 1): lambda: steplab(k), ("steplab", 2): lambda: steplab(2 * k),
+    numba = lambda steps: loop(buffer[0], buffer[1], carry.inverse_mass, carry.external, carry.sweep, dt, steps)
+    read_write, read_only = step.bytes_read_and_written, step.bytes_read
+    calls = {("steplab", 1): lambda: step.advance(k), ("steplab", 2): lambda: step.advance(2 * k),
              ("numba", 1): lambda: numba(k), ("numba", 2): lambda: numba(2 * k),
              "stream": peers.memory_stream(read_write, read_only)}
     newton = newton_run(model, dt, y0, solver="xpbd", iterations=1)
@@ -146,9 +133,10 @@ def xpbd_cloth(config: Config, record: Record, progress) -> None:
     samples = settled_samples(calls, config.repeats, config.max_rounds, config.round_budget_seconds)
     per_step = {name: marginal_times(samples[(name, 1)], samples[(name, 2)], k)[0]
                 for name in ("steplab", "numba", "newton") if (name, 1) in samples}
-    ours = steplab(k)
-    buffer[:] = y0
+    step.y[:], buffer[:] = y0, y0
+    step.advance(k)
     numba(k)
+    ours = step.y
     what = (f"cloth of {model.n_bodies:,} particles, {springs:,} springs and dampers, gravity, one xpbd step "
             f"(1 substep, 1 iteration) of dt = 1/600 s")
     record.compare("vs_memory_bound_xpbd_cloth", "cloth (XPBD)", what, "memory-traffic bound (NumPy, in place)",
@@ -217,11 +205,12 @@ def swinging_cloth():
 
 def cloth_references(settings) -> dict:
     """Every steplab method's trajectory on :func:`swinging_cloth` over IDENTIFICATION_STEPS steps:
-    the fixed-step methods (implicit Euler by conjugate gradients, the same converged step) and
-    ``xpbd`` with each setting's iterations, by label; and, under "float32", semi-implicit
+    the fixed-step methods (implicit Euler by conjugate gradients, the same converged step),
+    ``xpbd`` and ``vbd`` with each setting's iterations, by label; and, under "float32", semi-implicit
     Euler in float32 (the problem's round-off). A method that diverges on the cloth is left out."""
     from steplab.integrators import DivergenceError, ImplicitEuler, simulate
     from steplab.integrators.position_based import XPBD
+    from steplab.integrators.vertex_block_descent import VBD
     from steplab.studies.engines import parameters as engines_parameters
 
     model, y0, dt = swinging_cloth()
@@ -229,6 +218,7 @@ def cloth_references(settings) -> dict:
     methods["implicit-euler"] = ImplicitEuler(linear_solver="cg")  # dense: 0.2 s a step here
     for iterations in sorted({s.options.get("iterations", 1) for s in settings}):
         methods[f"xpbd, {iterations} iteration(s)"] = XPBD(iterations=iterations)
+        methods[f"vbd, {iterations} iteration(s)"] = VBD(iterations=iterations)
     references = {}
     for label, method in methods.items():
         try:
@@ -244,8 +234,7 @@ def identify_on_cloth(setting, references: dict) -> dict:
     """Which steplab method a Newton setting steps, on the small cloth scene (12 x 12, swinging).
 
     The setting takes IDENTIFICATION_STEPS steps of the scene's dt from the start of
-    :func:`cloth_references`, against each of those methods' (the fixed-step methods and
-    ``xpbd`` with the setting's iterations); the difference is
+    :func:`cloth_references`, against each of those methods'; the difference is
     :func:`steplab.studies.engines.identify`'s (max |y - y_method| / max |y_method|). The
     nearest method is *equal* when the difference is within ROUND_OFF_FACTOR times this
     problem's float32 round-off (steplab's semi-implicit Euler in float32 against float64,
@@ -257,8 +246,7 @@ def identify_on_cloth(setting, references: dict) -> dict:
 
     model, y0, dt = swinging_cloth()
     n = IDENTIFICATION_STEPS
-    xpbd = f"xpbd, {setting.options.get('iterations', 1)} iteration(s)"
-    methods = {m: y for m, y in references.items() if m != "float32" and (not m.startswith("xpbd") or m == xpbd)}
+    methods = {m: y for m, y in references.items() if m != "float32"}
     problem = Problem("cloth", "the cloth scene, swinging", model, y0, 0.0, n * dt)
     found = identify(engine_system(setting), {"identification_steps": n, "integrators": list(methods)},
                      {"cloth": (problem, dt, methods)})

@@ -75,9 +75,10 @@ class NewtonRun(EngineRun):
         Setting("newton-xpbd", "Newton SolverXPBD", {"solver": "xpbd", "iterations": 1}, None, "xpbd",
                 "a Jacobi sweep (every spring corrected from the same positions, the corrections summed) where "
                 "steplab's is Gauss-Seidel: the same step on a single spring, another one on a cloth"),
-        Setting("newton-vbd", "Newton SolverVBD", {"solver": "vbd", "iterations": 1}, None, None,
-                "block descent on implicit Euler's energy, one particle at a time per graph colour: implicit "
-                "Euler once converged"),
+        Setting("newton-vbd", "Newton SolverVBD", {"solver": "vbd", "iterations": 1}, None, "vbd",
+                "block descent on implicit Euler's energy per graph colour, as steplab's vbd, in another "
+                "colour order and initial guess (1.4e-2 apart at one iteration); with 16 to 64 iterations it "
+                "stays 5e-4 from implicit Euler on the cloth, damped or not, where steplab's vbd converges to 1e-8"),
     )
 
     @classmethod
