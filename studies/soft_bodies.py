@@ -333,7 +333,7 @@ def plot(record: dict, out) -> list[str]:
         ax.grid(True, which="both", alpha=0.3)
     axes[0, 0].legend(fontsize=8)
     fig.tight_layout()
-    names += plotting.save_figure(fig, out, "soft_bodies_error")
+    names += plotting.save_figure(fig, out, "soft-bodies_error")
 
     # 2. iterations and substeps at one frame ("small steps")
     counts = record["against_counts"]
@@ -351,7 +351,7 @@ def plot(record: dict, out) -> list[str]:
     ax.grid(True, which="both", alpha=0.3)
     ax.legend(fontsize=8)
     fig.tight_layout()
-    names += plotting.save_figure(fig, out, "soft_bodies_iterations")
+    names += plotting.save_figure(fig, out, "soft-bodies_iterations")
 
     # 3. effective stiffness against dt; stability at extreme stiffness
     fig, (left, right) = plt.subplots(1, 2, figsize=(13, 5))
@@ -385,7 +385,7 @@ def plot(record: dict, out) -> list[str]:
     right.grid(True, which="both", alpha=0.3)
     right.legend(fontsize=7)
     fig.tight_layout()
-    names += plotting.save_figure(fig, out, "soft_bodies_stiffness")
+    names += plotting.save_figure(fig, out, "soft-bodies_stiffness")
 
     # 4. work-precision
     work = record["work_precision"]
@@ -402,7 +402,7 @@ def plot(record: dict, out) -> list[str]:
     ax.grid(True, which="both", alpha=0.3)
     ax.legend(fontsize=8)
     fig.tight_layout()
-    names += plotting.save_figure(fig, out, "soft_bodies_work_precision")
+    names += plotting.save_figure(fig, out, "soft-bodies_work_precision")
     return names
 
 
