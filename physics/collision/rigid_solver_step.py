@@ -244,7 +244,8 @@ class RigidSolverStep:
         bodies = rs.RigidBodyColumns(q0, v0, self.omega, self.orientation, np.zeros((n, 3)),
                                      np.tile(quat.IDENTITY, (n, 1)).astype(float), self.inverse_masses,
                                      world_inverse_inertia(self.orientation, self.inverse_principal),
-                                     self.inverse_principal, np.ascontiguousarray(a), self.rounding)
+                                     self.inverse_principal, np.ascontiguousarray(a), self.rounding, np.zeros(n))
+        bodies.energy[:] = rs.kinetic_energies(bodies)
         ca, cb = np.asarray(points.a, np.int64), np.asarray(points.b, np.int64)
         static = cb < 0
         cb_body = np.where(static, -1, cb)
