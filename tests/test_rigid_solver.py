@@ -12,6 +12,8 @@ import types
 
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 from steplab.integrators import get_integrator, get_rotation, simulate
 from steplab.integrators.rotation import simulate_rotation
 from steplab.physics import Gravity, Model
@@ -370,6 +372,32 @@ def test_the_symmetric_three_ball_impact_reverses_the_outer_balls_and_keeps_ener
     np.testing.assert_allclose(v[:, 0], [-1.0, 0.0, 1.0], rtol=0, atol=1e-12)
     assert np.max(kinetic) <= 1.0 * (1 + 1e-12)
     assert kinetic[-1] == pytest.approx(1.0, rel=1e-12)
+
+
+@settings(max_examples=20, deadline=None, derandomize=True)
+@given(balls=st.integers(2, 5), seed=st.integers(0, 2**32 - 1), restitution=st.floats(0.0, 1.0))
+def test_spinning_balls_in_a_row_never_gain_energy(balls, seed, restitution):
+    """Balls of random mass, speed along the row and spin, with friction 0.3, 1 cm apart in free
+    space: whatever the order the contacts close in, with eps <= 1 the kinetic energy never rises
+    and the momentum is kept."""
+    rng = np.random.default_rng(seed)
+    masses, radius = rng.uniform(0.5, 3.0, balls), 0.1
+    omega = rng.normal(scale=10.0, size=(balls, 3))
+    world = rigid_world([SPHERE] * balls, [radius] * balls, np.zeros((balls, 3)), masses, omega=omega,
+                        friction=0.3, restitution=restitution)
+    step = RigidSolverStep(world, Model(masses, np.full(balls, radius), []), EULER)
+    q = np.column_stack([0.21 * np.arange(balls), rng.uniform(-0.02, 0.02, (balls, 2))])
+    y = np.stack([q, np.column_stack([rng.uniform(-2.0, 2.0, balls), np.zeros((balls, 2))])])
+    inertia = 0.4 * masses * radius**2
+
+    def kinetic(v, w):
+        return 0.5 * masses @ np.sum(v**2, axis=1) + 0.5 * inertia @ np.sum(w**2, axis=1)
+
+    start, p0 = kinetic(y[1], omega), masses @ y[1]
+    for k in range(30):
+        y, _ = step(k / 60, y, 1 / 60, None)
+        assert kinetic(y[1], step.omega) <= start * (1 + 1e-12)
+    np.testing.assert_allclose(masses @ y[1], p0, rtol=0, atol=1e-13 * max(np.abs(p0).max(), 1.0))
 
 
 def test_a_column_of_boxes_deflects_n_squared_g_over_omega_squared():
