@@ -10,6 +10,8 @@
 10. rotation: 10^5 free tumbling bodies, one exponential-map step against the memory bound (:mod:`.rotation`);
 11. stacking: the 20-row pyramid and 10^3 and 10^4 boxes falling into a box, beside MuJoCo and pybullet
     (:mod:`.stacking`).
+12. the cloth under XPBD: its step against the memory bound, a Numba loop and NVIDIA Newton (:mod:`.cloth`, issue 28);
+13. Newton's rigid-body solvers on the rotation study's tumbling box (:mod:`.newton_rotation`, issue 28).
 
 Each section takes the :class:`.Config`, the :class:`.Record` and a progress callback.
 """
@@ -24,9 +26,11 @@ from steplab.core.timing import Times, interleaved_times, ready
 from steplab.integrators.references import solve_adaptive
 from steplab.integrators.simulate import final_state_function
 
+from .cloth import xpbd_cloth
 from .collisions import ball_pits
 from .config import COMPILE_TARGET_SECONDS, SEED, Config
 from .implicit import implicit_euler_cloth
+from .newton_rotation import newton_tumbling
 from .profile import compiled_text, loop_kernels
 from .record import Record, final_difference, size_label
 from .rotation import tumbling_bodies
@@ -393,4 +397,4 @@ def batching(config: Config, record: Record, progress) -> None:
 
 
 SECTIONS = (small_system, large_systems, accuracy_matched, broadphase, compile_times, batching, ball_pits,
-            implicit_euler_cloth, startup, tumbling_bodies, stacking)
+            implicit_euler_cloth, startup, tumbling_bodies, stacking, xpbd_cloth, newton_tumbling)

@@ -23,7 +23,12 @@ TARGETS = {
     # issue 25: one exponential-map step of 10^5 free tumbling bodies against the memory-traffic bound
     "vs_memory_bound_rotation_1e5": 2.0,
     "implicit_euler_one_newton_cloth_step": 10.0,
+    # issue 28: the 25,600-particle cloth's xpbd step (1 substep, 1 iteration) against the memory-traffic bound
+    "vs_memory_bound_xpbd_cloth": 1.5,
 }
+#: targets against a peer that is an optional extra, checked where it ran (issue 28: steplab's
+#: xpbd step on the cloth against NVIDIA Newton's SolverXPBD on the CPU, steplab[newton])
+PEER_TARGETS = {"vs_newton_xpbd_cloth": 0.5}
 #: smallest acceptable simulated seconds per wall second of a ball pit, by its balls
 #: (issue 13, "Targets": 10^4 spheres at 0.25x real time, MuJoCo's PGS; 2,000 at 1x)
 REAL_TIME_TARGETS = {2_000: 1.0, 10_000: 0.25}

@@ -8,7 +8,7 @@ import numpy as np
 
 from steplab.core.timing import Times
 
-from .config import STABILITY, TARGETS, Config
+from .config import PEER_TARGETS, STABILITY, TARGETS, Config
 
 
 def final_difference(a, b) -> float:
@@ -63,9 +63,10 @@ class Record:
         self._check_target(name)
 
     def _check_target(self, name: str) -> None:
-        if name in TARGETS:
+        target = TARGETS.get(name, PEER_TARGETS.get(name))
+        if target is not None:
             ratio = self.data["ratios"][name]
-            self.data["targets"][name] = {"target": TARGETS[name], "ratio": ratio, "met": ratio <= TARGETS[name]}
+            self.data["targets"][name] = {"target": target, "ratio": ratio, "met": ratio <= target}
             source = self.data["seconds"][name].get("alias_of")
             if source is not None:
                 self.data["targets"][name]["alias_of"] = source

@@ -1,4 +1,5 @@
-"""Game-physics engines as systems under test: MuJoCo, Bullet, Box2D and Chipmunk on steplab's scenes.
+"""Game-physics engines as systems under test: MuJoCo, Bullet, Box2D and Chipmunk on steplab's scenes,
+NVIDIA Newton on its spring-mass scenes.
 
 Each adapter (one module per engine) builds the engine's bodies, forces and shapes from a
 steplab scene and steps it at the scene's dt; ``advance(y0, dt, n_steps)`` returns a
@@ -9,8 +10,9 @@ package, and the settings the engines study measures with the steplab method eac
 expected to step and why its bounce deviates): see :class:`.base.EngineRun`. The registry
 :data:`ENGINES` holds the adapters by key; another engine is its adapter module plus
 ``ENGINES.register(MyRun)`` (or a ``steplab.engines`` entry point). None of the engines is
-a dependency of steplab: they are the optional extra ``pip install -e ".[engines]"`` and
-are imported only when an adapter is built.
+a dependency of steplab: they are the optional extra ``pip install -e ".[engines]"`` (Newton,
+which is large, its own: ``pip install -e ".[newton]"``) and are imported only when an adapter
+is built.
 
 >>> from steplab.engines import SETTINGS
 >>> SETTINGS["mujoco-euler"].engine
@@ -32,6 +34,7 @@ from .box2d_engine import Box2DRun
 from .bullet_engine import BulletRun
 from .chipmunk_engine import ChipmunkRun
 from .mujoco_engine import MujocoRun
+from .newton_engine import NewtonRun
 
 INSTALL_HINT = 'pip install -e ".[engines]"'
 
@@ -46,20 +49,24 @@ def _as_engine(obj) -> tuple[str, type[EngineRun]]:
     return obj.engine, obj
 
 
-#: every engine adapter, by key: steplab's four, then registered ones and those of the
+#: every engine adapter, by key: steplab's four game engines, Newton (spring-mass scenes, no
+#: contacts: the extra ``steplab[newton]``), then registered ones and those of the
 #: "steplab.engines" entry points (loaded on first use)
 ENGINES: Registry = Registry("steplab.engines", "engine", [(cls.engine, cls) for cls in (
-    MujocoRun, BulletRun, Box2DRun, ChipmunkRun)], _as_engine)
+    MujocoRun, BulletRun, Box2DRun, ChipmunkRun, NewtonRun)], _as_engine)
 
 
 class _Settings(Mapping):
-    """Setting key -> :class:`Setting`, read from the registered adapters each time (in their order)."""
+    """Setting key -> :class:`Setting`, read from the registered adapters that express contacts
+    each time (in their order)."""
 
     def __init__(self, kind: str = "study_settings"):
         self.kind = kind
 
     def _all(self) -> dict[str, Setting]:
-        return {s.key: s for cls in ENGINES.values() for s in getattr(cls, self.kind)}
+        # the engines study measures contacts: only the adapters that express them
+        return {s.key: s for cls in ENGINES.values() if cls.contacts or self.kind != "study_settings"
+                for s in getattr(cls, self.kind)}
 
     def __getitem__(self, key: str) -> Setting:
         return self._all()[key]
@@ -71,7 +78,7 @@ class _Settings(Mapping):
         return len(self._all())
 
 
-#: the settings of the engines study, in its order: each adapter's ``study_settings``
+#: the settings of the engines study, in its order: the ``study_settings`` of each adapter with contacts
 SETTINGS: Mapping[str, Setting] = _Settings()
 #: the settings of the rotation study's engines (a free rigid body): each adapter's ``rotation_settings``
 ROTATION_SETTINGS: Mapping[str, Setting] = _Settings("rotation_settings")
@@ -83,8 +90,8 @@ def available(engine: str) -> bool:
 
 
 def missing() -> list[str]:
-    """The distributions of the engines that are not installed."""
-    return [cls.distribution for cls in ENGINES.values() if not cls.available()]
+    """The distributions of the engines the engines study measures (those with contacts) that are not installed."""
+    return [cls.distribution for cls in ENGINES.values() if cls.contacts and not cls.available()]
 
 
 def build(engine: str, model, collisions=None, dt: float = 0.01, y0=None, bodies=None, **options) -> EngineRun:

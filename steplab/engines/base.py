@@ -320,12 +320,12 @@ class EngineRun:
     ``display_name`` (for figures), ``colour`` (its figures' colour), ``planar`` (a 2-D
     engine, bodies in a plane), ``precision`` (its float type, "float64" or "float32"),
     ``package`` and ``distribution`` (the Python package it imports and its name on PyPI;
-    None: it needs none), ``study_settings`` (the :class:`Setting` tuple the engines
-    study measures) and ``rotation_settings`` (those the rotation study measures on a free
-    rigid body: ``equals`` is the steplab *rotation* method each is expected to step, None
-    for none, and ``deviation`` says what the engine does to the rotation) and ``stack_settings``
-    (:mod:`.stacks`: the engine's defaults first, then its documented tuned settings, each
-    ``deviation`` saying what it changes and why).
+    None: it needs none), ``contacts`` (whether it expresses collisions), ``study_settings``
+    (the :class:`Setting` tuple the engines study measures), ``rotation_settings`` (those the
+    rotation study measures on a free rigid body: ``equals`` is the steplab *rotation* method
+    each is expected to step, None for none, and ``deviation`` says what the engine does to the
+    rotation) and ``stack_settings`` (:mod:`.stacks`: the engine's defaults first, then its
+    documented tuned settings, each ``deviation`` saying what it changes and why).
     Instances set ``settings`` (a line saying how the run is set up) and
     implement ``set_state(y)``, ``step(dt)``, ``state() -> y`` and, where the engine reports
     contacts, ``touching() -> {(body, other): normal}`` (``other`` a body index or a shape's name).
@@ -341,6 +341,9 @@ class EngineRun:
     study_settings: ClassVar[tuple[Setting, ...]] = ()
     rotation_settings: ClassVar[tuple[Setting, ...]] = ()
     stack_settings: ClassVar[tuple[Setting, ...]] = ()
+    #: whether the adapter expresses a scene's collisions; the engines study, whose measurements
+    #: are contacts (drops, tunnelling, ball pits), measures only those that do
+    contacts: ClassVar[bool] = True
     settings: str = ""
 
     def __init_subclass__(cls, **kwargs):
