@@ -19,8 +19,9 @@ name = "die"
 mass = 0.1
 radius = 0.05
 position = [0.0, 0.0, 0.3]
-shape = "box"
-size = [0.06, 0.04, 0.02]
+# a sphere with the moments of a 6 x 4 x 2 cm box, m/12 (b^2 + c^2, a^2 + c^2, a^2 + b^2): the event
+# loop collides it as the sphere it is (boxes need the contact solver) while it tumbles as the box
+inertia = [1.6666666666666667e-05, 3.3333333333333335e-05, 4.333333333333334e-05]
 angular_velocity = [0.1, 40.0, 0.1]
 
 [forces.gravity]
