@@ -12,6 +12,8 @@ import types
 
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 from steplab.integrators import get_integrator, get_rotation, simulate
 from steplab.integrators.rotation import simulate_rotation
 from steplab.physics import Gravity, Model
@@ -305,7 +307,7 @@ def energy(world, masses, y, step):
             + G * masses @ y[0][:, 2])
 
 
-@pytest.mark.parametrize("seed", [0, 2])
+@pytest.mark.parametrize("seed", [0, 1, 2])
 @pytest.mark.parametrize("restitution", [1.0, 0.5])
 def test_no_energy_gain_on_random_piles_of_boxes(seed, restitution):
     """Eight boxes of random size, mass, orientation, velocity and spin (seeded) tumble onto the floor
@@ -327,6 +329,75 @@ def test_no_energy_gain_on_random_piles_of_boxes(seed, restitution):
     assert step.log.count() >= n  # every box hit something
     assert highest <= start
     assert energy(world, masses, y, step) < 0.5 * start  # and most of it went
+
+
+def sphere_row(velocities, restitution, iterations, substeps):
+    """Rotating spheres (1 kg, r = 0.1 m, frictionless) touching in a row along x in free space, the
+    moving ones 1 cm off the row: (final velocities, step, the kinetic energy after each step)."""
+    n = len(velocities)
+    v0 = np.zeros((n, 3))
+    v0[:, 0] = velocities
+    x = 0.2 * np.arange(n) - np.sign(velocities) * 0.01
+    world = rigid_world([SPHERE] * n, [0.1] * n, np.zeros((n, 3)), np.ones(n), restitution=restitution,
+                        iterations=iterations, substeps=substeps)
+    step = RigidSolverStep(world, Model(np.ones(n), np.full(n, 0.1), []), EULER)
+    y = np.stack([np.column_stack([x, np.zeros(n), np.zeros(n)]), v0])
+    kinetic = []
+    for k in range(30):
+        y, _ = step(k / 60, y, 1 / 60, None)
+        kinetic.append(0.5 * np.sum(y[1] ** 2) + 0.5 * 0.4 * 0.01 * np.sum(step.omega**2))
+    return y[1], step, np.array(kinetic)
+
+
+@pytest.mark.parametrize("balls", [3, 5])
+@pytest.mark.parametrize("restitution", [1.0, 0.9])
+@pytest.mark.parametrize("iterations, substeps", [(4, 4), (30, 16)])
+def test_newtons_cradle_in_the_solver_never_gains_energy_and_keeps_momentum(balls, restitution, iterations,
+                                                                           substeps):
+    """One ball at 1 m/s into a row: the impulses that an earlier contact's impulse raised must not
+    bounce back too (that gave 1.31 times the energy). Kinetic energy never rises above 1/2 J, and
+    sum m v stays 1 kg m/s."""
+    v, step, kinetic = sphere_row([1.0] + [0.0] * (balls - 1), restitution, iterations, substeps)
+    assert step.log.count() >= balls - 1  # every contact was hit
+    assert np.max(kinetic) <= 0.5 * (1 + 1e-12)
+    np.testing.assert_allclose(v.sum(axis=0), [1.0, 0.0, 0.0], rtol=0, atol=1e-14)
+    assert np.all(np.diff(v[:, 0]) >= -1e-12)  # the balls break away: none approaches the next
+
+
+def test_the_symmetric_three_ball_impact_reverses_the_outer_balls_and_keeps_energy():
+    """Smith et al. (2012): +-1 m/s into a ball at rest between, eps = 1. By symmetry the middle ball
+    gets equal and opposite impulses and stays; energy and momentum then make the outer ones
+    reverse: v = (-1, 0, 1)."""
+    v, _, kinetic = sphere_row([1.0, 0.0, -1.0], 1.0, 30, 16)
+    np.testing.assert_allclose(v[:, 0], [-1.0, 0.0, 1.0], rtol=0, atol=1e-12)
+    assert np.max(kinetic) <= 1.0 * (1 + 1e-12)
+    assert kinetic[-1] == pytest.approx(1.0, rel=1e-12)
+
+
+@settings(max_examples=20, deadline=None, derandomize=True)
+@given(balls=st.integers(2, 5), seed=st.integers(0, 2**32 - 1), restitution=st.floats(0.0, 1.0))
+def test_spinning_balls_in_a_row_never_gain_energy(balls, seed, restitution):
+    """Balls of random mass, speed along the row and spin, with friction 0.3, 1 cm apart in free
+    space: whatever the order the contacts close in, with eps <= 1 the kinetic energy never rises
+    and the momentum is kept."""
+    rng = np.random.default_rng(seed)
+    masses, radius = rng.uniform(0.5, 3.0, balls), 0.1
+    omega = rng.normal(scale=10.0, size=(balls, 3))
+    world = rigid_world([SPHERE] * balls, [radius] * balls, np.zeros((balls, 3)), masses, omega=omega,
+                        friction=0.3, restitution=restitution)
+    step = RigidSolverStep(world, Model(masses, np.full(balls, radius), []), EULER)
+    q = np.column_stack([0.21 * np.arange(balls), rng.uniform(-0.02, 0.02, (balls, 2))])
+    y = np.stack([q, np.column_stack([rng.uniform(-2.0, 2.0, balls), np.zeros((balls, 2))])])
+    inertia = 0.4 * masses * radius**2
+
+    def kinetic(v, w):
+        return 0.5 * masses @ np.sum(v**2, axis=1) + 0.5 * inertia @ np.sum(w**2, axis=1)
+
+    start, p0 = kinetic(y[1], omega), masses @ y[1]
+    for k in range(30):
+        y, _ = step(k / 60, y, 1 / 60, None)
+        assert kinetic(y[1], step.omega) <= start * (1 + 1e-12)
+    np.testing.assert_allclose(masses @ y[1], p0, rtol=0, atol=1e-13 * max(np.abs(p0).max(), 1.0))
 
 
 def test_a_column_of_boxes_deflects_n_squared_g_over_omega_squared():

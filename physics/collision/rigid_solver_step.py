@@ -36,7 +36,7 @@ from .. import quaternion as quat
 from . import rigid_solver as rs
 from .contact_buffer import MARGIN_OF_RADIUS, Materials
 from .events import CollisionLog, ImpactBlock, cancel_triggers
-from .manifolds import BOX, CAPSULE, SPHERE
+from .manifolds import BOX, CAPSULE, SPHERE, check_shapes
 from .pairs import SweptSpheres
 from .resting import rest_speed
 from .solver_step import INTEGRATOR
@@ -167,7 +167,8 @@ class RigidSolverStep:
         if np.any(rigid.kind < 0):
             raise ValueError('the contact solver has no manifold for a cylinder; give the body shape = "capsule"')
         n = len(rigid.kind)
-        self.shapes = self.narrow_phase.RigidShapes(rigid.kind, rigid.radius, rigid.half)
+        # checked once here (one line naming the body), not in every step's narrow phase
+        self.shapes = check_shapes(self.narrow_phase.RigidShapes(rigid.kind, rigid.radius, rigid.half))
         self.bounding = np.asarray(self.narrow_phase.bounding_radius(self.shapes), dtype=float)
         self.inverse_masses = np.ascontiguousarray(self.model.inverse_masses, dtype=float)
         field = self.model.constant_acceleration
@@ -244,7 +245,8 @@ class RigidSolverStep:
         bodies = rs.RigidBodyColumns(q0, v0, self.omega, self.orientation, np.zeros((n, 3)),
                                      np.tile(quat.IDENTITY, (n, 1)).astype(float), self.inverse_masses,
                                      world_inverse_inertia(self.orientation, self.inverse_principal),
-                                     self.inverse_principal, np.ascontiguousarray(a), self.rounding)
+                                     self.inverse_principal, np.ascontiguousarray(a), self.rounding, np.zeros(n))
+        bodies.energy[:] = rs.kinetic_energies(bodies)
         ca, cb = np.asarray(points.a, np.int64), np.asarray(points.b, np.int64)
         static = cb < 0
         cb_body = np.where(static, -1, cb)
