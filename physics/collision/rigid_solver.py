@@ -50,6 +50,9 @@ from typing import NamedTuple
 import numpy as np
 from numba import njit
 
+from .manifold_geometry import cross3
+from .sphere_contacts import dot3
+
 #: the velocity stage's gyroscopic term: omega_b += -h I^-1 (omega_b x I omega_b) (body frame),
 #: the same, then omega_b rescaled to keep |I omega_b|, or one Newton step of its backward Euler
 EXPLICIT, RESCALED, IMPLICIT = 0, 1, 2
@@ -126,16 +129,6 @@ def _row(x, k):
 
 
 @njit(cache=True, inline="always")
-def _cross(a, b):
-    return a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]
-
-
-@njit(cache=True, inline="always")
-def _dot(a, b):
-    return a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
-
-
-@njit(cache=True, inline="always")
 def _matrix_times(m, k, x):
     """m[k] @ x for a stack m of 3 x 3 matrices."""
     return (m[k, 0, 0] * x[0] + m[k, 0, 1] * x[1] + m[k, 0, 2] * x[2],
@@ -144,24 +137,24 @@ def _matrix_times(m, k, x):
 
 
 @njit(cache=True, inline="always")
-def rotate(q, k, x):
-    """q[k] x q[k]*: v + 2 w (u x v) + 2 u x (u x v), as :func:`steplab.physics.quaternion.rotate`."""
-    u = (q[k, 1], q[k, 2], q[k, 3])
-    t = _cross(u, x)
+def _rotate_by(w, u, x):
+    """(w, u) x (w, u)* for a unit quaternion: v + 2 w (u x v) + 2 u x (u x v)."""
+    t = cross3(u, x)
     t = (2.0 * t[0], 2.0 * t[1], 2.0 * t[2])
-    c = _cross(u, t)
-    w = q[k, 0]
+    c = cross3(u, t)
     return x[0] + w * t[0] + c[0], x[1] + w * t[1] + c[1], x[2] + w * t[2] + c[2]
 
 
 @njit(cache=True, inline="always")
+def rotate(q, k, x):
+    """q[k] x q[k]*, as :func:`steplab.physics.quaternion.rotate`."""
+    return _rotate_by(q[k, 0], (q[k, 1], q[k, 2], q[k, 3]), x)
+
+
+@njit(cache=True, inline="always")
 def _rotate_inverse(q, k, x):
-    u = (-q[k, 1], -q[k, 2], -q[k, 3])
-    t = _cross(u, x)
-    t = (2.0 * t[0], 2.0 * t[1], 2.0 * t[2])
-    c = _cross(u, t)
-    w = q[k, 0]
-    return x[0] + w * t[0] + c[0], x[1] + w * t[1] + c[1], x[2] + w * t[2] + c[2]
+    """q[k]* x q[k]: the conjugate's rotation, world to body."""
+    return _rotate_by(q[k, 0], (-q[k, 1], -q[k, 2], -q[k, 3]), x)
 
 
 @njit(cache=True, inline="always")
@@ -202,12 +195,12 @@ def _geometry(bodies, contacts, k):
     pa = (ta[0] + rho * n[0], ta[1] + rho * n[1], ta[2] + rho * n[2])
     da = (bodies.dq[a, 0] + ta[0] - ca[0], bodies.dq[a, 1] + ta[1] - ca[1], bodies.dq[a, 2] + ta[2] - ca[2])
     if b < 0:
-        return contacts.s0[k] - _dot(da, n), pa, pa
+        return contacts.s0[k] - dot3(da, n), pa, pa
     rb, rho = _row(contacts.rb, k), bodies.rounding[b]
     cb = (rb[0] + rho * n[0], rb[1] + rho * n[1], rb[2] + rho * n[2])
     tb = rotate(bodies.turn, b, cb)
     db = (bodies.dq[b, 0] + tb[0] - cb[0], bodies.dq[b, 1] + tb[1] - cb[1], bodies.dq[b, 2] + tb[2] - cb[2])
-    s = contacts.s0[k] + _dot((db[0] - da[0], db[1] - da[1], db[2] - da[2]), n)
+    s = contacts.s0[k] + dot3((db[0] - da[0], db[1] - da[1], db[2] - da[2]), n)
     d = (bodies.q[b, 0] - bodies.q[a, 0], bodies.q[b, 1] - bodies.q[a, 1], bodies.q[b, 2] - bodies.q[a, 2])
     pb = (tb[0] - rho * n[0], tb[1] - rho * n[1], tb[2] - rho * n[2])
     la = (0.5 * (pa[0] + d[0] + pb[0]), 0.5 * (pa[1] + d[1] + pb[1]), 0.5 * (pa[2] + d[2] + pb[2]))
@@ -218,11 +211,11 @@ def _geometry(bodies, contacts, k):
 def _relative_velocity(bodies, contacts, k, la, lb):
     """(v_b + omega_b x l_b) - (v_a + omega_a x l_a) at contact k."""
     a, b = contacts.a[k], contacts.b[k]
-    wa = _cross(_row(bodies.omega, a), la)
+    wa = cross3(_row(bodies.omega, a), la)
     ua = (bodies.v[a, 0] + wa[0], bodies.v[a, 1] + wa[1], bodies.v[a, 2] + wa[2])
     if b < 0:
         return -ua[0], -ua[1], -ua[2]
-    wb = _cross(_row(bodies.omega, b), lb)
+    wb = cross3(_row(bodies.omega, b), lb)
     return bodies.v[b, 0] + wb[0] - ua[0], bodies.v[b, 1] + wb[1] - ua[1], bodies.v[b, 2] + wb[2] - ua[2]
 
 
@@ -232,13 +225,13 @@ def _apply(bodies, contacts, k, la, lb, p):
     a, b = contacts.a[k], contacts.b[k]
     v, omega, inverse_mass, inverse_inertia = bodies.v, bodies.omega, bodies.inverse_mass, bodies.inverse_inertia
     wa = inverse_mass[a]
-    ja = _matrix_times(inverse_inertia, a, _cross(la, p))
+    ja = _matrix_times(inverse_inertia, a, cross3(la, p))
     for x in range(3):
         v[a, x] -= wa * p[x]
         omega[a, x] -= ja[x]
     if b >= 0:
         wb = inverse_mass[b]
-        jb = _matrix_times(inverse_inertia, b, _cross(lb, p))
+        jb = _matrix_times(inverse_inertia, b, cross3(lb, p))
         for x in range(3):
             v[b, x] += wb * p[x]
             omega[b, x] += jb[x]
@@ -269,13 +262,13 @@ def prepare(bodies, contacts):
         for d in range(3):
             axis = _row(contacts.normal, k) if d == 0 else (tangent[k, d - 1, 0], tangent[k, d - 1, 1],
                                                             tangent[k, d - 1, 2])
-            ca = _cross(_row(ra, k), axis)
-            inverse = inverse_mass[a] + _dot(ca, _matrix_times(inverse_inertia, a, ca))
+            ca = cross3(_row(ra, k), axis)
+            inverse = inverse_mass[a] + dot3(ca, _matrix_times(inverse_inertia, a, ca))
             if b >= 0:
-                cb = _cross(_row(rb, k), axis)
-                inverse += inverse_mass[b] + _dot(cb, _matrix_times(inverse_inertia, b, cb))
+                cb = cross3(_row(rb, k), axis)
+                inverse += inverse_mass[b] + dot3(cb, _matrix_times(inverse_inertia, b, cb))
             mass[k, d] = 1.0 / inverse if inverse > 0.0 else 0.0
-        contacts.vn0[k] = _dot(_relative_velocity(bodies, contacts, k, _row(ra, k), _row(rb, k)),
+        contacts.vn0[k] = dot3(_relative_velocity(bodies, contacts, k, _row(ra, k), _row(rb, k)),
                                _row(contacts.normal, k))
 
 
@@ -286,7 +279,7 @@ def _gyroscopic(bodies, body, h, kind):
     w = _rotate_inverse(bodies.orientation, body, _row(bodies.omega, body))
     inertia = (1.0 / inverse[0], 1.0 / inverse[1], 1.0 / inverse[2])
     momentum = (inertia[0] * w[0], inertia[1] * w[1], inertia[2] * w[2])
-    g = _cross(w, momentum)  # omega x I omega
+    g = cross3(w, momentum)  # omega x I omega
     if kind == IMPLICIT:
         # one Newton step on f(w2) = I (w2 - w) + h w2 x I w2 = 0 from w2 = w:
         # J = I + h ([w]x I - [I w]x), w2 = w - J^-1 h (w x I w)
@@ -305,9 +298,9 @@ def _gyroscopic(bodies, body, h, kind):
     else:
         w1 = (w[0] - h * inverse[0] * g[0], w[1] - h * inverse[1] * g[1], w[2] - h * inverse[2] * g[2])
         if kind == RESCALED:  # |I omega| kept: the explicit step's growth of |L| undone
-            before = np.sqrt(_dot(momentum, momentum))
+            before = np.sqrt(dot3(momentum, momentum))
             m1 = (inertia[0] * w1[0], inertia[1] * w1[1], inertia[2] * w1[2])
-            after = np.sqrt(_dot(m1, m1))
+            after = np.sqrt(dot3(m1, m1))
             f = before / after if after > 0.0 else 1.0
             w1 = (w1[0] * f, w1[1] * f, w1[2] * f)
     return rotate(bodies.orientation, body, w1)
@@ -343,7 +336,7 @@ def integrate_positions(bodies, sub):
 @njit(cache=True, inline="always")
 def _solve_normal(bodies, contacts, k, sub, use_bias, s, la, lb):
     n = _row(contacts.normal, k)
-    vn = _dot(_relative_velocity(bodies, contacts, k, la, lb), n)
+    vn = dot3(_relative_velocity(bodies, contacts, k, la, lb), n)
     scale, leak = 1.0, 0.0
     if s > 0.0:
         bias = s / sub.h  # speculative: may close the gap in this substep, not more
@@ -369,8 +362,8 @@ def _solve_friction(bodies, contacts, k, la, lb):
     u = _relative_velocity(bodies, contacts, k, la, lb)
     t1 = (tangent[k, 0, 0], tangent[k, 0, 1], tangent[k, 0, 2])
     t2 = (tangent[k, 1, 0], tangent[k, 1, 1], tangent[k, 1, 2])
-    p1 = pt[k, 0] - mass[k, 1] * _dot(u, t1)
-    p2 = pt[k, 1] - mass[k, 2] * _dot(u, t2)
+    p1 = pt[k, 0] - mass[k, 1] * dot3(u, t1)
+    p2 = pt[k, 1] - mass[k, 2] * dot3(u, t2)
     limit = contacts.friction[k] * contacts.pn[k]
     size = np.sqrt(p1 * p1 + p2 * p2)
     if size > limit:  # outside the friction cone: slide, at most mu P
@@ -398,7 +391,7 @@ def _solve_rolling(bodies, contacts, k):
     if trace <= 0.0:
         return
     n = _row(contacts.normal, k)
-    along = _dot(w, n)
+    along = dot3(w, n)
     m = 3.0 / trace
     p = (pr[k, 0] - m * (w[0] - along * n[0]), pr[k, 1] - m * (w[1] - along * n[1]),
          pr[k, 2] - m * (w[2] - along * n[2]))
@@ -457,7 +450,7 @@ def _energy_line(bodies, body, v, w, dv, dw):
 
     The spin's energy is 1/2 sum I_j s_j^2, s = R^T omega in the body frame of the orientation now."""
     m = 1.0 / bodies.inverse_mass[body] if bodies.inverse_mass[body] > 0.0 else 0.0
-    e, g, c = 0.5 * m * _dot(v, v), m * _dot(v, dv), m * _dot(dv, dv)
+    e, g, c = 0.5 * m * dot3(v, v), m * dot3(v, dv), m * dot3(dv, dv)
     if bodies.inverse_principal[body, 0] > 0.0:
         s = _rotate_inverse(bodies.orientation, body, w)
         ds = _rotate_inverse(bodies.orientation, body, dw)
@@ -508,7 +501,7 @@ def _restitution(bodies, contacts, sub):
                 continue
             n = _row(contacts.normal, k)
             _, la, lb = _geometry(bodies, contacts, k)
-            vn = _dot(_relative_velocity(bodies, contacts, k, la, lb), n)
+            vn = dot3(_relative_velocity(bodies, contacts, k, la, lb), n)
             dp = -contacts.mass[k, 0] * (vn + contacts.restitution[k] * approach)
             accumulated = max(contacts.pn[k] + extra[k] + dp, 0.0)
             dp = accumulated - contacts.pn[k] - extra[k]
@@ -549,7 +542,7 @@ def _limit_to_the_energy_taken(bodies, contacts, extra, v1, w1):
         e1, g, c = _energy_line(bodies, body, v, w, dv, dw)
         m = 1.0 / bodies.inverse_mass[body] if bodies.inverse_mass[body] > 0.0 else 0.0
         root = _island(parent, body)
-        budget[root] += bodies.energy[body] + m * _dot(_row(bodies.accel, body), _row(bodies.dq, body)) - e1
+        budget[root] += bodies.energy[body] + m * dot3(_row(bodies.accel, body), _row(bodies.dq, body)) - e1
         slope[root] += g
         curve[root] += c
     scale = np.ones(n)
@@ -585,7 +578,7 @@ def finish(bodies, contacts, sub):
     residual = 0.0
     for k in range(count):
         s, la, lb = _geometry(bodies, contacts, k)
-        vn = _dot(_relative_velocity(bodies, contacts, k, la, lb), _row(contacts.normal, k))
+        vn = dot3(_relative_velocity(bodies, contacts, k, la, lb), _row(contacts.normal, k))
         mass = contacts.mass[k, 0]
         residual = max(residual, abs(min(vn + max(s, 0.0) / sub.h, contacts.pn[k] / mass if mass > 0 else 0.0)))
     v1, w1 = bodies.v.copy(), bodies.omega.copy()
