@@ -32,14 +32,27 @@ LINEAR_AMPLITUDE = 0.25
 
 
 class SweepCarry(NamedTuple):
-    """What a pbd or xpbd run keeps between steps: the constraints in ``sweep`` order
+    """What a pbd or xpbd run keeps between steps: the ``constraints`` in the sweep's order
     (:func:`.constraint_projection.ordered`), ``external`` (N, 3), m/s^2, ``inverse_mass`` (N,),
-    1/kg, and ``work`` (:class:`.constraint_projection.Workspace`), the step's scratch."""
+    1/kg, ``work`` (:class:`.constraint_projection.Workspace`), the step's scratch, and ``sweep``,
+    the columns the kernel reads for substeps of ``h`` (:func:`.constraint_projection.sweep_columns`;
+    None before the first step, rebuilt when the step changes)."""
 
-    sweep: tuple
+    constraints: tuple
     external: np.ndarray
     inverse_mass: np.ndarray
     work: tuple
+    colours: np.ndarray
+    h: float = float("nan")
+    sweep: tuple | None = None
+
+    def for_substep(self, h: float) -> SweepCarry:
+        """This carry with its ``sweep`` for substeps of ``h`` (itself when it has it)."""
+        from .constraint_projection import sweep_columns
+
+        if h == self.h:
+            return self
+        return self._replace(h=h, sweep=sweep_columns(self.constraints, self.colours, self.inverse_mass, h))
 
 
 @dataclasses.dataclass(frozen=True)
@@ -106,16 +119,24 @@ class PositionBased(Integrator):
         from .constraint_projection import ordered, workspace
 
         c, external, inverse_mass = self.constraints(model)
-        return SweepCarry(ordered(c, model.n_bodies), external, inverse_mass, workspace(model.n_bodies, len(c.i)))
+        c, colours = ordered(c, model.n_bodies)
+        return SweepCarry(c, external, inverse_mass, workspace(model.n_bodies, len(c.i), colours), colours)
+
+    def substeps_of(self, dt: float):
+        """:class:`.constraint_projection.Substeps` of a step of ``dt``."""
+        from .constraint_projection import Substeps
+
+        return Substeps(dt / self.substeps, self.substeps, self.iterations, self.accumulate and self.iterations > 1)
 
     def step(self, model, t, y, dt, carry):
         from .constraint_projection import advance  # Numba: only when a position-based run steps
 
         if carry is None:  # a caller that did not call init
             carry = self.init(model, t, y)
+        steps = self.substeps_of(dt)
+        carry = carry.for_substep(steps.h)
         y1 = np.array(y, float)
-        advance(y1[0], y1[1], carry.external, carry.inverse_mass, carry.sweep, dt / self.substeps, self.substeps,
-                self.iterations, self.accumulate, carry.work)
+        advance(y1[0], y1[1], carry.external, carry.inverse_mass, carry.sweep, steps, carry.work)
         return y1.astype(y.dtype, copy=False), carry
 
     def linear_map(self, omega_dt: float, zeta: float = 0.0) -> np.ndarray:
@@ -219,14 +240,15 @@ def cloth_benchmark_step(model, y0, dt: float, method: PositionBased | None = No
     from .constraint_projection import advance
 
     method = XPBD(substeps=1, iterations=1) if method is None else method
-    carry = method.init(model, 0.0, y0)
+    substeps = method.substeps_of(dt)
+    carry = method.init(model, 0.0, y0).for_substep(substeps.h)
     y = np.array(y0, float)
-    h, substeps, iterations = dt / method.substeps, method.substeps, method.iterations
 
     def steps(n: int = 1) -> None:
         for _ in range(n):
-            advance(y[0], y[1], carry.external, carry.inverse_mass, carry.sweep, h, substeps, iterations,
-                    method.accumulate, carry.work)
+            advance(y[0], y[1], carry.external, carry.inverse_mass, carry.sweep, substeps, carry.work)
 
-    data = sum(a.nbytes for a in carry.sweep) + carry.inverse_mass.nbytes + carry.external.nbytes
+    # the columns the sweep reads: alpha_tilde only where the multipliers are carried
+    read = [a for name, a in carry.sweep._asdict().items() if name != "alpha_tilde" or substeps.carried]
+    data = sum(a.nbytes for a in read) + carry.inverse_mass.nbytes + carry.external.nbytes
     return InPlaceStep(y, steps, y.nbytes, data)

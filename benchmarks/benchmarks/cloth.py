@@ -32,7 +32,7 @@ class XPBDClothStep:
         elif contender == "numba":
             carry = XPBD(substeps=1, iterations=1).init(model, 0.0, y0)
             y, loop = np.array(y0), numba_xpbd_loop()
-            self.call = lambda: loop(y[0], y[1], carry.inverse_mass, carry.external, carry.sweep, dt, 1)
+            self.call = lambda: loop(y[0], y[1], carry.inverse_mass, carry.external, carry.constraints, dt, 1)
         else:
             newton = newton_run(model, dt, y0, solver="xpbd", iterations=1)
             if newton is None:

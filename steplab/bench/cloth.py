@@ -118,10 +118,10 @@ def xpbd_cloth(config: Config, record: Record, progress) -> None:
     model, y0, springs = cloth_model(config.cloth_side)
     dt, k = CLOTH_DT, config.loop_steps
     step = cloth_benchmark_step(model, y0, dt)  # XPBD(1, 1) in place on step.y: the kernel every xpbd step runs
-    carry = XPBD(substeps=1, iterations=1).init(model, 0.0, y0)  # its constraints in the sweep's order
+    carry = XPBD(substeps=1, iterations=1).init(model, 0.0, y0)  # carry.constraints: in the sweep's order
     buffer = np.array(y0)  # Numba steps this buffer in place, as a game engine would
     loop = numba_xpbd_loop()
-    numba = lambda steps: loop(buffer[0], buffer[1], carry.inverse_mass, carry.external, carry.sweep, dt, steps)
+    numba = lambda steps: loop(buffer[0], buffer[1], carry.inverse_mass, carry.external, carry.constraints, dt, steps)
     read_write, read_only = step.bytes_read_and_written, step.bytes_read
     calls = {("steplab", 1): lambda: step.advance(k), ("steplab", 2): lambda: step.advance(2 * k),
              ("numba", 1): lambda: numba(k), ("numba", 2): lambda: numba(2 * k),
