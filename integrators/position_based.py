@@ -13,7 +13,8 @@ h = dt / substeps, each:
 XPBD's converged sweep is implicit Euler on the springs (its multiplier lambda = -C / alpha
 is the spring force times h^2), so it is stable at every dt and damps like implicit Euler;
 with substeps and one iteration it is Macklin et al.'s "Small steps in physics simulation"
-(SCA 2019). NumPy backend only: the sweep is a sequential Numba loop.
+(SCA 2019). On NumPy the sweep is a Numba loop; on JAX (``backend="jax"``, the compiled loop)
+the same Gauss-Seidel sweep in the same colour order, traced (:mod:`.constraint_projection_jax`).
 """
 
 from __future__ import annotations
@@ -96,11 +97,8 @@ class PositionBased(Integrator):
                 raise ValueError(f"{self.name}: {key} must be a whole number >= 1, got {value!r}")
 
     def constraints(self, model):
-        """The model's springs as constraints, its external accelerations (N, 3) and inverse masses (N,),
-        refusing (one line) what the method cannot step: the JAX backend, other forces, negative compliance."""
-        if model.xp is not np:
-            raise ValueError(f"{self.name} runs on the NumPy backend only (its constraint sweep is a sequential "
-                             "Numba loop); use --backend numpy")
+        """The model's springs as constraints, its external accelerations (N, 3) and inverse masses (N,)
+        (NumPy, float64), refusing (one line) what the method cannot step: other forces, negative compliance."""
         c = model.distance_constraints()  # refuses forces it cannot express, before the first step
         bad = np.flatnonzero((c.compliance < 0) | (c.damping < 0))
         if bad.size:
@@ -108,18 +106,23 @@ class PositionBased(Integrator):
             raise ValueError(f"{self.name}: the spring between bodies {c.i[p]} and {c.j[p]} has compliance "
                              f"{c.compliance[p]:g} m/N and damping {c.damping[p]:g} N s/m; both must be >= 0 "
                              "(a stiffness k > 0, alpha = 1 / k)")
-        field = model.constant_field
+        field = None if model.constant_field is None else np.asarray(model.constant_field, float)
         external = np.zeros((model.n_bodies, 3)) if field is None else np.broadcast_to(field, (model.n_bodies, 3))
         return c, np.ascontiguousarray(external, float), np.asarray(model.inverse_masses, float)
 
-    def init(self, model, t, y) -> SweepCarry:
+    def init(self, model, t, y):
         """What :meth:`step` keeps for a run: the constraints in the sweep's colour order
         (:func:`.constraint_projection.ordered`), the external accelerations, the inverse masses
-        and the scratch the step writes."""
+        and the scratch the step writes (a :class:`SweepCarry`); on the JAX backend the same
+        constraints as a padded table by colour (:class:`.constraint_projection_jax.ColourTable`)."""
         from .constraint_projection import ordered, workspace
 
         c, external, inverse_mass = self.constraints(model)
         c, colours = ordered(c, model.n_bodies)
+        if model.xp is not np:
+            from .constraint_projection_jax import colour_table
+
+            return colour_table(c, colours, inverse_mass, external, model.dtype)
         return SweepCarry(c, external, inverse_mass, workspace(model.n_bodies, len(c.i), colours), colours)
 
     def substeps_of(self, dt: float):
@@ -134,6 +137,10 @@ class PositionBased(Integrator):
         if carry is None:  # a caller that did not call init
             carry = self.init(model, t, y)
         steps = self.substeps_of(dt)
+        if model.xp is not np:
+            from .constraint_projection_jax import advance as traced
+
+            return model.xp.stack(traced(carry, y[0], y[1], steps)), carry
         carry = carry.for_substep(steps.h)
         y1 = np.array(y, float)
         advance(y1[0], y1[1], carry.external, carry.inverse_mass, carry.sweep, steps, carry.work)

@@ -53,6 +53,9 @@ class VBD(PositionBased):
     def init(self, model, t, y):
         from .block_descent import VertexSprings
 
+        if model.xp is not np:
+            raise ValueError(f"{self.name} runs on the NumPy backend only (its sweep over the vertices is a Numba loop "
+                             "with a 3x3 solve per vertex, not ported to JAX); use --backend numpy")
         c, external, inverse_mass = self.constraints(model)
         if np.any(c.compliance == 0.0):
             p = int(np.flatnonzero(c.compliance == 0.0)[0])
