@@ -3,7 +3,9 @@
 from __future__ import annotations
 
 import dataclasses
+import functools
 import warnings
+from typing import NamedTuple
 
 import numpy as np
 
@@ -22,6 +24,15 @@ DENSE_MAX_BODIES = 200
 #: the Jacobians, their scatter, the Newton matrix): 1 GiB is N = 3,862 bodies
 DENSE_MAX_MATRIX_BYTES = 2**30
 LINEAR_SOLVERS = ("auto", "dense", "cg")
+
+
+class NewtonSettings(NamedTuple):
+    """How a conjugate-gradient step iterates: Newton stops at ``rtol`` (or after exactly ``iterations``,
+    when given), each CG solve at relative residual ``cg_rtol``."""
+
+    rtol: float
+    cg_rtol: float
+    iterations: int | None = None
 
 
 @dataclasses.dataclass(frozen=True)
@@ -119,11 +130,18 @@ class ImplicitEuler(Stepper):
                              "use backend 'numpy', or linear_solver='dense' on JAX")
         return self.linear_solver == "cg"
 
+    def newton_settings(self, rtol: float) -> NewtonSettings:
+        """The CG step's :class:`NewtonSettings` at Newton tolerance ``rtol``."""
+        from . import conjugate_gradients
+
+        cg_rtol = conjugate_gradients.CG_RTOL if self.cg_rtol is None else self.cg_rtol
+        return NewtonSettings(rtol, cg_rtol, self.newton_iterations)
+
     def step(self, model, t, y, dt, carry):
         rtol = self.rtol if self.rtol is not None else float(np.sqrt(np.finfo(y.dtype).eps))
         if self.uses_cg(model):
             q, v = y[0], y[1]
-            v1 = _newton_cg(model, t + dt, q, v, dt, rtol, self.cg_rtol, self.newton_iterations)
+            v1 = _newton_cg(model, t + dt, q, v, dt, self.newton_settings(rtol))
             return np.stack([q + dt * v1, v1]), carry
         xp = model.xp
         q, v = y[0], y[1]
@@ -155,29 +173,28 @@ def newton_report(stepper: ImplicitEuler, model, t, y, dt) -> list[dict]:
     """
     rtol = stepper.rtol if stepper.rtol is not None else float(np.sqrt(np.finfo(np.asarray(y).dtype).eps))
     report = []
-    _newton_cg(model, t + dt, y[0], y[1], dt, rtol, stepper.cg_rtol, stepper.newton_iterations, report)
+    _newton_cg(model, t + dt, y[0], y[1], dt, stepper.newton_settings(rtol), report)
     return report
 
 
-def _newton_cg(model, t1, q, v, dt, rtol, cg_rtol, iterations=None, report=None):
+def _newton_cg(model, t1, q, v, dt, settings: NewtonSettings, report=None):
     """v1 of implicit Euler by Newton's method with CG solves (NumPy); NaN if it never converges.
 
     Each iteration: G = v1 - v - dt a(t1, q + dt v1, v1); A delta = -M G over the free
     bodies (:func:`_solve_newton_system`); v1 += delta. Stops when the error estimate
     theta / (1 - theta) |delta| (theta = |delta_k| / |delta_k-1|; the plain |delta| at
-    the first iteration) is below rtol (1 + |v1|). An iteration that does not contract
-    (theta >= 1: far from the solution, where compressed springs make the symmetric
-    Newton step overshoot) switches to the definite matrix for the rest of the step,
-    whose steps are shorter and safer (projected Newton). With ``iterations``, exactly
-    that many (unless the state stops being finite). ``report``: a list each iteration
+    the first iteration) is below rtol (1 + |v1|) (``settings``, a :class:`NewtonSettings`).
+    An iteration that does not contract (theta >= 1: far from the solution, where compressed
+    springs make the symmetric Newton step overshoot) switches to the definite matrix for
+    the rest of the step, whose steps are shorter and safer (projected Newton). With
+    ``settings.iterations``, exactly that many (unless the state stops being finite). ``report``: a list each iteration
     appends its numbers to (:func:`newton_report`).
     """
-    from steplab.physics.sparse_jacobian import newton_system
+    from steplab.physics.sparse_jacobian import newton_matrix, newton_system
 
     from . import conjugate_gradients
 
-    cg_rtol = conjugate_gradients.CG_RTOL if cg_rtol is None else cg_rtol
-
+    rtol, cg_rtol, iterations = settings
     masses = np.asarray(model.masses, dtype=float)
     pinned = np.asarray(model.pinned)
     v1, previous, definite = v, None, False
@@ -191,7 +208,8 @@ def _newton_cg(model, t1, q, v, dt, rtol, cg_rtol, iterations=None, report=None)
         free = pattern.kept
         b = residual[free] if free.size < v.shape[0] else residual.copy()
         b *= -masses[free, None]
-        solved, definite = _solve_newton_system(model, t1, q1, v1, dt, matrix, b, cg_rtol, definite)
+        solved, definite = _solve_newton_system(matrix, b, cg_rtol, definite,
+                                                functools.partial(newton_matrix, model, t1, q1, v1, dt, True))
         del matrix  # its 10 MB go back before the next one is made, which can then reuse them
         if not np.all(np.isfinite(solved.x)):
             break
@@ -222,7 +240,7 @@ def _newton_cg(model, t1, q, v, dt, rtol, cg_rtol, iterations=None, report=None)
     return np.full_like(v, np.nan)
 
 
-def _solve_newton_system(model, t1, q1, v1, dt, matrix, b, cg_rtol, definite):
+def _solve_newton_system(matrix, b, cg_rtol, definite, definite_matrix):
     """CG on A delta = b (b = -M G over the free bodies): (CGResult, definite).
 
     ``matrix`` is A from the symmetric part of the forces' Jacobian (or, with
@@ -230,11 +248,10 @@ def _solve_newton_system(model, t1, q1, v1, dt, matrix, b, cg_rtol, definite):
     springs' negative stiffness or the dampers' dependence on positions outweighs the
     masses; where it is not (CG meets p^T A p <= 0, or a diagonal block is not positive
     definite), the system is solved again with the definite part, which always is
-    (unless it overflows: then a NaN solution, a failed step); the flag returned says
-    which was solved.
+    (unless it overflows: then a NaN solution, a failed step), built by ``definite_matrix()`` (which
+    returns :func:`~steplab.physics.sparse_jacobian.newton_matrix`'s pair);
+    the flag returned says which was solved.
     """
-    from steplab.physics.sparse_jacobian import newton_matrix
-
     from . import conjugate_gradients
 
     b = b.ravel()
@@ -245,7 +262,7 @@ def _solve_newton_system(model, t1, q1, v1, dt, matrix, b, cg_rtol, definite):
             if definite:
                 return conjugate_gradients.CGResult(np.full_like(b, np.nan), 0, float("nan"), False), True
             definite = True
-            matrix, _ = newton_matrix(model, t1, q1, v1, dt, definite)
+            matrix, _ = definite_matrix()
 
 
 def _newton(xp, update, x0, iterations=None):
