@@ -68,6 +68,30 @@ def test_xpbd_is_steplabs_on_one_spring_and_a_jacobi_sweep_on_the_cloth(cloth):
     assert relative(theirs, ours) > 1e-3
 
 
+@pytest.mark.slow  # 30 s on a loaded 2-core machine: pytest tests/test_newton_engine.py -m slow -n 0
+def test_vbd_is_implicit_euler_but_for_float32_positions(cloth):
+    """Newton's SolverVBD, iterated, stays about 5e-4 from implicit Euler on the cloth: not a
+    different fixed point but float32 positions. It solves for x and takes v = (x - x_prev) / h,
+    so its round-off is eps32 |x| / h: the same cloth 20 m from the origin is many times further
+    from implicit Euler (which moves with it to 1e-13), 1 m nearer it is closer, and more
+    iterations change nothing."""
+    needs_newton()
+    from steplab.integrators import ImplicitEuler
+
+    model, y0, dt = cloth
+    # the velocities of implicit Euler, which a shift of the cloth leaves unchanged (uniform gravity)
+    ours = simulate(model, ImplicitEuler(rtol=1e-12), y0, 0.0, dt=dt, n_steps=STEPS).y[:, 1]
+    gaps = {}
+    for shift, iterations in ((0.0, 8), (0.0, 32), (-1.0, 8), (20.0, 8)):
+        y = y0.copy()
+        y[0, :, 2] += shift
+        theirs = build("newton", model, None, dt, y, solver="vbd", iterations=iterations).advance(y, dt, STEPS).y
+        gaps[shift, iterations] = float(np.max(np.abs(theirs[:, 1] - ours)))  # m/s
+    assert 1e-4 < gaps[0.0, 8] < 5e-3  # 9e-4 m/s measured; eps32 x 2 m / 2 ms = 1.2e-4 m/s a step
+    assert 0.5 < gaps[0.0, 32] / gaps[0.0, 8] < 2  # converged: iterations do not close the gap
+    assert gaps[-1.0, 8] < gaps[0.0, 8] < gaps[20.0, 8] / 5  # it grows with |x|
+
+
 @pytest.mark.parametrize("solver", ["SolverSemiImplicit", "SolverXPBD", "SolverFeatherstone"])
 def test_rigid_solvers_step_the_tumbling_box_as_the_first_order_quaternion_update(solver):
     """Each Newton rigid solver turns the dzhanibekov box as steplab's first-order-quaternion
