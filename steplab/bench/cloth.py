@@ -10,7 +10,9 @@ marginal cost (t(2K) - t(K)) / K of K more steps, in the same interleaved rounds
   every ``xpbd`` step runs (predict, the Gauss-Seidel sweep in colour order, update), in place;
 - the memory-traffic bound: NumPy streaming the bytes a step must move
   (:func:`steplab.peers.memory_stream`), the state q, v read and written in place and the
-  constraints (i, j, rest length, compliance, damping), inverse masses and external field read;
+  columns the sweep reads (uint32 i, j; rest length, gamma, denominator), inverse masses and
+  external field read. The positions each projection reads and writes are cache traffic, not
+  counted: the sweep is bound by its loads and stores, not by memory (docs/performance.md);
 - a plain Numba loop: the whole step (predict, one sweep over the constraints in the same
   order, update) written out as one compiled loop over the steps, in place
   (:func:`numba_xpbd_loop`, the bench's independent copy of the step, as :mod:`steplab.peers`
