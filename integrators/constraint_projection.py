@@ -19,8 +19,10 @@ implicit-Euler step and writing v = (x - x_prev) / h.) ``accumulate`` False hold
 lambda at 0 in every iteration: each projection then removes the fraction
 w / (w + alpha_tilde) of C, Mueller et al.'s (2007) stiffness per iteration, with nothing
 carried between iterations. The sweep is Gauss-Seidel (each projection sees the positions
-the previous ones moved), a Numba loop, the only definition of the projection; the NumPy
-path calls it, and the JAX path (:mod:`.constraint_projection_jax`) is the same sweep.
+the previous ones moved), a Numba loop; the NumPy path calls it, and the JAX path
+(:mod:`.constraint_projection_jax`) is the same sweep. Both evaluate the projection through the
+one definition here, :func:`factors` and :func:`projection` (plain arithmetic, which Numba
+compiles into the kernel and JAX evaluates on a colour's columns).
 
 The constraints are swept in the order of a greedy edge colouring (:func:`ordered`), colour
 after colour. Within a colour no two constraints share a body, so its projections are
@@ -40,6 +42,30 @@ from typing import NamedTuple
 
 import numpy as np
 from numba import njit
+
+
+def factors(compliance, damping, inverse_mass_sum, h):
+    """(alpha_tilde, gamma, denominator) of a constraint for substeps of ``h``: alpha / h^2, alpha beta / h and
+    (1 + gamma) w + alpha_tilde (w = ``inverse_mass_sum``; a pair of pinned bodies, w = 0, is the caller's to skip)."""
+    inv_h = 1.0 / h
+    alpha_tilde = compliance * (inv_h * inv_h)
+    gamma = compliance * damping * inv_h
+    return alpha_tilde, gamma, (1.0 + gamma) * inverse_mass_sum + alpha_tilde
+
+
+def projection(rest_length, length, approach, gamma, below, held):
+    """s = dlambda / l, the projection's move per unit of d (x_i -= w_i s d, x_j += w_j s d).
+
+    dlambda = (-C - alpha_tilde lambda - gamma grad C . (x - x_prev)) / denominator with C = l - L,
+    grad C . (x - x_prev) = d . u / l (``approach`` = d . u) and ``held`` = alpha_tilde lambda;
+    numerator and denominator multiplied by l, ``below`` = denominator l^2 = denominator |d|^2, leave
+    one square root (l) and one division per projection. ``below`` = 0 (no direction, or two pinned
+    bodies) gives inf or NaN: the callers take s = 0 there.
+    """
+    return ((rest_length - length - held) * length - gamma * approach) / below
+
+
+_projection = njit(inline="always", error_model="numpy")(projection)
 
 
 class Sweep(NamedTuple):
@@ -93,11 +119,9 @@ def ordered(constraints, n_bodies: int):
 def sweep_columns(constraints, colours, inverse_mass, h: float) -> Sweep:
     """The :class:`Sweep` of ``constraints`` (in sweep order, colour starts ``colours``) for substeps of ``h``:
     the per-constraint factors evaluated as the projection would, the same operations in the same order."""
-    inv_h = 1.0 / h
-    alpha_tilde = constraints.compliance * (inv_h * inv_h)
-    gamma = constraints.compliance * constraints.damping * inv_h
     w = inverse_mass[constraints.i] + inverse_mass[constraints.j]
-    denominator = np.where(w == 0.0, 0.0, (1.0 + gamma) * w + alpha_tilde)
+    alpha_tilde, gamma, denominator = factors(constraints.compliance, constraints.damping, w, h)
+    denominator = np.where(w == 0.0, 0.0, denominator)
     return Sweep(constraints.i.astype(np.uint32), constraints.j.astype(np.uint32), constraints.rest_length,
                  alpha_tilde, gamma, denominator, colours)
 
@@ -135,15 +159,14 @@ def project(dx, x_prev, inverse_mass, sweep, iterations, carried, work):
                 d0_[k], d1_[k], d2_[k] = d0, d1, d2
                 squared_[k] = d0 * d0 + d1 * d1 + d2 * d2
                 s_[k] = d0 * u0 + d1 * u1 + d2 * u2
-            # solve, vectorised: dlambda n = s d with n = d / l; dlambda's numerator and denominator
-            # multiplied by l leave one square root and one division per projection
+            # solve, vectorised: dlambda n = s d with n = d / l (:func:`projection`)
             rest, gamma, denominator = sweep.rest_length[lo:hi], sweep.gamma[lo:hi], sweep.denominator[lo:hi]
             if carried:
                 alpha_tilde, held = sweep.alpha_tilde[lo:hi], lam[lo:hi]
                 for k in range(hi - lo):
                     length = np.sqrt(squared_[k])
                     below = denominator[k] * squared_[k]
-                    s = ((rest[k] - length - alpha_tilde[k] * held[k]) * length - gamma[k] * s_[k]) / below
+                    s = _projection(rest[k], length, s_[k], gamma[k], below, alpha_tilde[k] * held[k])
                     s = s if below != 0.0 else 0.0
                     held[k] += s * length
                     s_[k] = s
@@ -151,7 +174,7 @@ def project(dx, x_prev, inverse_mass, sweep, iterations, carried, work):
                 for k in range(hi - lo):
                     length = np.sqrt(squared_[k])
                     below = denominator[k] * squared_[k]
-                    s = ((rest[k] - length) * length - gamma[k] * s_[k]) / below
+                    s = _projection(rest[k], length, s_[k], gamma[k], below, 0.0)
                     s_[k] = s if below != 0.0 else 0.0
             # scatter: x_i -= w_i s d, x_j += w_j s d
             for k in range(hi - lo):

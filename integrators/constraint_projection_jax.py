@@ -71,12 +71,12 @@ def advance(table: ColourTable, q, v, steps):
     import jax.numpy as jnp
     from jax import lax
 
+    from .constraint_projection import factors, projection
+
     h = steps.h
-    inv_h = 1.0 / h
-    alpha_tilde = table.compliance * (inv_h * inv_h)
-    gamma = table.compliance * table.damping * inv_h
     w = table.inverse_mass[table.i] + table.inverse_mass[table.j]
-    denominator = jnp.where(table.live & (w != 0.0), (1.0 + gamma) * w + alpha_tilde, 0.0)
+    alpha_tilde, gamma, denominator = factors(table.compliance, table.damping, w, h)
+    denominator = jnp.where(table.live & (w != 0.0), denominator, 0.0)
 
     def colour(c, state):
         dx, lam, x_prev = state
@@ -87,10 +87,8 @@ def advance(table: ColourTable, q, v, steps):
         du = d[:, 0] * u[:, 0] + d[:, 1] * u[:, 1] + d[:, 2] * u[:, 2]
         length = jnp.sqrt(squared)
         below = denominator[c] * squared
-        rest = table.rest_length[c] - length
-        if steps.carried:
-            rest = rest - alpha_tilde[c] * lam[c]
-        s = (rest * length - gamma[c] * du) / jnp.where(below != 0.0, below, 1.0)
+        held = alpha_tilde[c] * lam[c] if steps.carried else 0.0
+        s = projection(table.rest_length[c], length, du, gamma[c], below, held)
         s = jnp.where(below != 0.0, s, 0.0)
         if steps.carried:
             lam = lam.at[c].add(s * length)

@@ -330,3 +330,22 @@ def test_the_jax_path_is_the_numba_sweep(method):
     scale = np.abs(runs[0]).max()
     assert np.abs(runs[1] - runs[0]).max() <= 1e-12 * scale
     assert np.abs(runs[0][-1] - y0).max() > 1e-2 * scale  # the run went somewhere
+
+
+def test_both_sweeps_evaluate_the_one_projection():
+    # the projection and its per-substep factors are written once (constraint_projection): the
+    # Numba kernel compiles them, the JAX path evaluates them on a colour's columns
+    import ast
+    import inspect
+
+    from steplab.integrators import constraint_projection, constraint_projection_jax
+
+    for module, names in ((constraint_projection, {"_projection", "factors"}),
+                          (constraint_projection_jax, {"projection", "factors"})):
+        tree = ast.parse(inspect.getsource(module))
+        used = {node.id for node in ast.walk(tree) if isinstance(node, ast.Name)}
+        assert names <= used, module.__name__
+    # the law's text appears once, in projection itself
+    assert inspect.getsource(constraint_projection).count("* length - gamma") == 1
+    assert "* length - gamma" not in inspect.getsource(constraint_projection_jax)
+    assert constraint_projection._projection.py_func is constraint_projection.projection
