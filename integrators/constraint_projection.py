@@ -30,10 +30,12 @@ independent: the sweep gathers a whole colour's differences d = x_j - x_i first,
 every projection of the colour in one loop that the compiler vectorises (the square roots
 and divisions, the costliest operations, four or eight at a time), then scatters the moves.
 That is the sequential Gauss-Seidel sweep exactly, the same operations in the same order per
-constraint (so the same bytes). What depends only on the constraint and the substep h (alpha_tilde, gamma and
-the denominator (1 + gamma) w + alpha_tilde) is computed once per run (:func:`sweep_columns`).
-On the 25,600-particle cloth, one sweep: 1.40 ms in the springs' order, 0.67-0.84 ms
-projection by projection in colour order, 0.53-0.57 ms gathered per colour (load 5-6).
+constraint (so the same bytes). What depends only on the constraint and the substep h
+(alpha_tilde, gamma and the denominator (1 + gamma) w + alpha_tilde) is computed once per run
+(:func:`sweep_columns`). On the 25,600-particle cloth, one sweep: 1.40 ms in the springs'
+order, 0.67-0.84 ms projection by projection in colour order, 0.53-0.57 ms gathered per colour
+(load 5-6). What is left is the gather's and the scatter's scalar loads and stores, about 28 per
+constraint: 7 ns per constraint at every cloth size, in cache or not (docs/performance.md).
 """
 
 from __future__ import annotations
