@@ -35,7 +35,7 @@ constraint (so the same bytes). What depends only on the constraint and the subs
 (:func:`sweep_columns`). On the 25,600-particle cloth, one sweep: 1.40 ms in the springs'
 order, 0.67-0.84 ms projection by projection in colour order, 0.53-0.57 ms gathered per colour
 (load 5-6). What is left is the gather's and the scatter's scalar loads and stores, about 28 per
-constraint: 7 ns per constraint at every cloth size, in cache or not (docs/performance.md).
+constraint: 5 to 7 ns a constraint (whole step) at every cloth size, in cache or not (docs/performance.md).
 """
 
 from __future__ import annotations
