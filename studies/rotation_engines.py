@@ -268,30 +268,54 @@ def plot(engines: dict, out, styles) -> list[str]:
     fig.colorbar(image, ax=heat, label="log10 distance (rad; relative omega)")
     panels = ((axes[0, 1], "flip box", "energy"), (axes[1, 0], "flip box", "momentum"),
               (axes[1, 1], "Bullet demo body", "energy"))
+    engine_styles = setting_styles(engines["settings"], engines["colours"])
     for ax, body, key in panels:
-        for row in engines["drift"]:
-            if row["body"] != body:
-                continue
+        rows = [row for row in engines["drift"] if row["body"] == body]
+        curves = [[(t, max(abs(v), floor)) for t, v in zip(row.get("time", [])[1:], row.get(key, [])[1:])
+                   if v is not None] for row in rows]
+        # the top of the scale: a decade above the largest value drawn (a gaining method reaches 60)
+        top = 10.0 ** np.ceil(np.log10(max([10.0] + [3 * v for c in curves for _, v in c])))
+        for n, (row, pts) in enumerate(zip(rows, curves)):
+            # markers spread out and staggered, so that curves drawn over each other stay visible
+            every = (n % 7 * max(len(pts) // 49, 1), max(len(pts) // 7, 1))
             if row["kind"] == "steplab":
-                style = styles(row["name"]) | {"marker": None, "lw": 0.9, "alpha": 0.55}
+                style = styles(row["name"]) | {"lw": 0.9, "alpha": 0.8, "ms": 3.5, "markevery": every}
             else:
-                style = {"color": engines["colours"][row["name"]], "lw": 2.2, "label": f"{row['name']} (engine)",
-                         "ls": ("-", "--", ":", "-.")[engines["settings"].index(row["name"]) % 4]}
-            pts = [(t, max(abs(v), floor)) for t, v in zip(row.get("time", [])[1:], row.get(key, [])[1:])
-                   if v is not None]
+                style = engine_styles[row["name"]] | {"lw": 2.0, "ms": 6.5, "mfc": "none", "mew": 1.4,
+                                                      "markevery": every, "label": f"{row['name']} (engine)"}
             ax.loglog(*zip(*pts) if pts else ([], []), **style)
             if "diverged_at" in row:  # where the run stopped, on the top edge
-                ax.plot([row["diverged_at"]], [5.0], marker="x", ms=7, color=style["color"], ls="none")
+                ax.plot([row["diverged_at"]], [top / 2], marker="x", ms=7, color=style["color"], ls="none")
         ax.set_xlabel("time (s), dt = 1/60 s")
         ax.set_ylabel("|E / E0 - 1|" if key == "energy" else "| |L| / |L0| - 1 |")
         ax.set_title(f"{body}: {'energy' if key == 'energy' else '|L|'} (exact: 1e-17; x: diverged)", fontsize=10)
-        ax.set_ylim(floor / 2, 10)
+        ax.set_ylim(floor / 2, top)
         ax.grid(True, which="major", alpha=0.3)
     handles, labels = axes[0, 1].get_legend_handles_labels()
     fig.tight_layout(rect=(0, 0.07, 1, 1))
     # below the panels, hiding no curve; an engine is drawn over the steplab method it equals
     fig.legend(handles, labels, loc="lower center", ncol=7, fontsize=7.5, frameon=False)
     return plotting.save_figure(fig, out, "rotation_engines")
+
+
+#: the markers of an engine's settings, in the order the engine lists them
+SETTING_MARKERS = ("o", "s", "D", "^", "v", "P")
+
+
+def setting_styles(settings, colours: dict) -> dict:
+    """Each engine setting's line style: its engine's colour (the adapter's ``colour``) in a shade of
+    its own, darkest first, and a marker of its own, so that the settings of one engine differ."""
+    from matplotlib import colors
+
+    styles = {}
+    for colour in dict.fromkeys(colours[k] for k in settings):
+        same = [k for k in settings if colours[k] == colour]
+        rgb = np.array(colors.to_rgb(colour))
+        # towards black (negative) and towards white (positive), about the engine's colour
+        for n, (key, mix) in enumerate(zip(same, np.linspace(-0.5, 0.45, len(same)) if len(same) > 1 else [0.0])):
+            shade = rgb * (1 + mix) if mix < 0 else rgb + (1 - rgb) * mix
+            styles[key] = {"color": tuple(shade), "marker": SETTING_MARKERS[n % len(SETTING_MARKERS)], "ls": "-"}
+    return styles
 
 
 def _identified(row: dict) -> str:
