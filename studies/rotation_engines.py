@@ -23,7 +23,7 @@ and says which are missing in one line (``missing``).
 from __future__ import annotations
 
 import numpy as np
-from steplab.integrators import DivergenceError, get_rotation
+from steplab.integrators import ROTATIONS, DivergenceError, get_rotation
 from steplab.integrators.rotation import simulate_rotation
 from steplab.physics import Model
 from steplab.physics import quaternion as quat
@@ -249,7 +249,8 @@ def plot(engines: dict, out, styles) -> list[str]:
     ident = engines["identification"]
     if not ident:
         return []
-    methods = list(next(iter(ident[0]["differences"].values())))
+    measured = next(iter(ident[0]["differences"].values()))
+    methods = [m for m in ROTATIONS if m in measured]  # the registry's order, also from a record read back
     fig, axes = plt.subplots(2, 2, figsize=(13.5, 9.4))
     heat = axes[0, 0]
     floor = 1e-17
@@ -276,8 +277,9 @@ def plot(engines: dict, out, styles) -> list[str]:
         # the top of the scale: a decade above the largest value drawn (a gaining method reaches 60)
         top = 10.0 ** np.ceil(np.log10(max([10.0] + [3 * v for c in curves for _, v in c])))
         for n, (row, pts) in enumerate(zip(rows, curves)):
-            # markers spread out and staggered, so that curves drawn over each other stay visible
-            every = (n % 7 * max(len(pts) // 49, 1), max(len(pts) // 7, 1))
+            # markers evenly spaced along the drawn line (in fractions of the panel's diagonal), each
+            # curve's starting elsewhere, so that curves drawn over each other stay visible
+            every = (0.11 * (n % 7) / 7, 0.11)
             if row["kind"] == "steplab":
                 style = styles(row["name"]) | {"lw": 0.9, "alpha": 0.8, "ms": 3.5, "markevery": every}
             else:

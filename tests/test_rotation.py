@@ -407,3 +407,36 @@ def test_exponential_map_step_is_the_textbook_step_to_1e_14():
     for q1, omega1 in ((q_loop, omega_loop), (q_numpy[-1], omega_numpy[-1])):
         np.testing.assert_allclose(np.asarray(q1), qt, rtol=0, atol=1e-14)
         np.testing.assert_allclose(np.asarray(omega1), omegat, rtol=0, atol=1e-14)
+
+
+def test_the_numba_kernel_is_the_numpy_step_bit_for_bit_and_the_textbook_step_beyond_the_series():
+    """backend="numba" (the vectorised kernel the bench times): the same IEEE operations in the same order as
+    NumPy's exponential-map, so the same bits; bodies beyond the series' radius take libm's sin and cos, one
+    by one, so they are the textbook step, and the others differ from NumPy (which switches every body to
+    libm then) by the series' round-off only."""
+    rng = np.random.default_rng(11)
+    n, dt = 1001, 1 / 60  # not a multiple of the vector width: the loop's remainder too
+    inertia = np.sort(rng.uniform(1.0, 2.0, (n, 3)), axis=1)
+    q = rng.normal(size=(n, 4))
+    q /= np.linalg.norm(q, axis=1, keepdims=True)
+    omega = rng.normal(size=(n, 3))
+    method, model = get_rotation("exponential-map"), RotationModel(inertia)
+    numpy = simulate_rotation(method, model, q, omega, dt, 40, save_every=15)
+    numba = simulate_rotation(method, model, q, omega, dt, 40, save_every=15, backend="numba")
+    for a, b in zip(numpy, numba):
+        assert a.shape == b.shape and np.array_equal(a, b)
+    fast = omega.copy()
+    fast[::9] *= 150  # h |omega| ~ 4 rad on every ninth body
+    _, q_numpy, omega_numpy = simulate_rotation(method, model, q, fast, dt, 3)
+    _, q_numba, omega_numba = simulate_rotation(method, model, q, fast, dt, 3, backend="numba")
+    np.testing.assert_array_equal(omega_numba, omega_numpy)  # the omega update has no branch
+    np.testing.assert_allclose(q_numba, q_numpy, rtol=0, atol=1e-15)
+    assert not np.array_equal(q_numba, q_numpy)  # the slow bodies took the series here, libm there
+
+
+def test_the_numba_backend_refuses_what_its_kernel_does_not_step():
+    top = RotationModel(INERTIA[None], (ForceAtPoint(np.array([0.0, 0.0, 0.5]), np.array([0.0, 0.0, -9.81])),))
+    for method, model, message in ((get_rotation("dlm"), FREE, "not dlm: use backend numpy or jax"),
+                                   (get_rotation("exponential-map"), top, "not exponential-map with torques")):
+        with pytest.raises(ValueError, match=message):
+            simulate_rotation(method, model, Q0[None], FLIP[None], 0.01, 2, backend="numba")
