@@ -440,3 +440,29 @@ def test_the_numba_backend_refuses_what_its_kernel_does_not_step():
                                    (get_rotation("exponential-map"), top, "not exponential-map with torques")):
         with pytest.raises(ValueError, match=message):
             simulate_rotation(method, model, Q0[None], FLIP[None], 0.01, 2, backend="numba")
+
+
+#: omega dt of the flip-period test, per declared order: inside each method's asymptotic range
+PERIOD_OMEGA_DT = {1: [0.01, 0.005], 2: [0.1, 0.05], 4: [0.4, 0.2]}
+#: the measured order of the flip period where it is not the method's order (the orientation's still is):
+#: momentum-rescaled keeps |L| exactly, and the period depends on the run only through E and |L|
+PERIOD_ORDER = {"momentum-rescaled": 2}
+
+
+@pytest.mark.parametrize("name", METHODS)
+def test_every_methods_flip_period_converges_to_the_closed_form_at_its_order(name):
+    """The period of omega(t) on the Dzhanibekov flip (the study's measurement: the upward zero crossings of
+    omega2, located by Hermite interpolation) against the closed form T = 4 K(m) / lambda, at two omega dt."""
+    from steplab.studies import rotation as study
+
+    method = get_rotation(name)
+    grid = [w / 2 for w in PERIOD_OMEGA_DT[1]] if name in PERIOD_ORDER else PERIOD_OMEGA_DT[method.order]
+    rows = study.flip(study.parameters(True) | {"flip_omega_dt": grid, "period_omega_dt_min": 0.0,
+                                                "flip_periods": 2}, name)
+    errors = np.array([r["period_error"] for r in rows])
+    assert rows[0]["period_exact"] == pytest.approx(flip_period(INERTIA, FLIP * grid[0] * 60 / np.linalg.norm(FLIP)),
+                                                    rel=1e-12)
+    slope = np.log(errors[0] / errors[1]) / np.log(grid[0] / grid[1])
+    expected = PERIOD_ORDER.get(name, method.order)
+    assert slope == pytest.approx(expected, abs=0.2 if expected < 4 else 0.45), errors
+    assert errors[1] < 5e-3  # near the closed form already
