@@ -17,9 +17,10 @@ read and written in place (56 bytes a body), the principal moments read (24 byte
 all at 10^5 bodies; no step can move fewer. (8 MB fits in a large last-level cache: the bound
 is then that cache's bandwidth, the same for both sides.) NumPy streams them in two passes (the
 in-place multiply, then the sum), so the record adds a tighter bound beside it: the same bytes
-in one compiled pass over the kernel's own arrays (:func:`_stream_pass`, vectorised as the kernel
-is). The record also counts the step's floating-point operations per body (:data:`FLOPS_PER_BODY`),
-for the rate each side reaches.
+in one compiled pass over the kernel's own arrays
+(:func:`~steplab.integrators.rotation_compiled.stream_pass`, vectorised as the kernel is). The
+record also counts the step's floating-point operations per body (:data:`FLOPS_PER_BODY`), for
+the rate each side reaches.
 """
 
 from __future__ import annotations
@@ -43,32 +44,6 @@ TUMBLING_DT = 1 / 60
 FLOPS_PER_BODY = 108
 
 
-def _stream_pass(bodies, n: int) -> None:
-    """``n`` passes that read q, omega and the moments and write q and omega, and compute nothing:
-    the least a step of ``bodies`` (a :class:`~steplab.integrators.rotation_compiled.FreeBodies`) moves."""
-    from numba import njit, prange
-
-    global _stream_kernel
-    if _stream_kernel is None:
-        @njit(cache=True, parallel=True)
-        def stream(q, omega, inertia):
-            total = 0.0
-            for b in prange(q.shape[1]):
-                for c in range(4):
-                    q[c, b] *= 1.0
-                for c in range(3):
-                    omega[c, b] *= 1.0
-                    total += inertia[c, b]
-            return total
-
-        _stream_kernel = stream
-    for _ in range(n):
-        _stream_kernel(bodies.q, bodies.omega, bodies.inertia)
-
-
-_stream_kernel = None
-
-
 def tumbling_bodies(config: Config, record: Record, progress) -> None:
     """The exponential-map step of 10^5 free tumbling bodies against the memory bound, in the same rounds."""
     import jax.numpy as jnp
@@ -76,7 +51,7 @@ def tumbling_bodies(config: Config, record: Record, progress) -> None:
     from steplab import peers
     from steplab.integrators import get_rotation
     from steplab.integrators.rotation import compiled_steps, simulate_rotation
-    from steplab.integrators.rotation_compiled import exponential_map_steps, free_bodies
+    from steplab.integrators.rotation_compiled import exponential_map_steps, free_bodies, stream_pass
     from steplab.physics.rigid_body import RotationModel
 
     rng = np.random.default_rng(SEED)
@@ -99,7 +74,7 @@ def tumbling_bodies(config: Config, record: Record, progress) -> None:
         "xla 2": lambda: ready(runs[2](qj, omegaj)[0]),
         "trigonometric": lambda: ready(runs[1](qj, fast)[0]),
         "stream": peers.memory_stream(read_write, read_only),
-        "compiled stream": lambda: _stream_pass(kernel[1], 1),
+        "compiled stream": lambda: stream_pass(kernel[1]),
     }, config.repeats)
     per_step, estimate = marginal_times(samples[1], samples[2], k)
     xla, _ = marginal_times(samples["xla 1"], samples["xla 2"], k)
