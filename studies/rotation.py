@@ -302,8 +302,7 @@ def plot(record: dict, out) -> list[str]:
     for ax, key in ((left, "energy"), (right, "momentum")):
         curves = [[(x, max(abs(y), floor)) for x, y in zip(d["periods"][1:], d[key][1:]) if y is not None]
                   for d in record["drift"]]
-        # the top of the scale: a decade above the largest value drawn (the explicit methods reach 150)
-        top = 10.0 ** np.ceil(np.log10(max([10.0] + [3 * y for c in curves for _, y in c])))
+        top = rotation_engines.scale_top(curves)
         for n, (d, pts) in enumerate(zip(record["drift"], curves)):
             # markers evenly spaced along the line, staggered, so that the curves that coincide stay visible
             style = _style(d["method"]) | {"ms": 4, "markevery": (0.1 * (n % 8) / 8, 0.1)}

@@ -274,8 +274,7 @@ def plot(engines: dict, out, styles) -> list[str]:
         rows = [row for row in engines["drift"] if row["body"] == body]
         curves = [[(t, max(abs(v), floor)) for t, v in zip(row.get("time", [])[1:], row.get(key, [])[1:])
                    if v is not None] for row in rows]
-        # the top of the scale: a decade above the largest value drawn (a gaining method reaches 60)
-        top = 10.0 ** np.ceil(np.log10(max([10.0] + [3 * v for c in curves for _, v in c])))
+        top = scale_top(curves)
         for n, (row, pts) in enumerate(zip(rows, curves)):
             # markers evenly spaced along the drawn line (in fractions of the panel's diagonal), each
             # curve's starting elsewhere, so that curves drawn over each other stay visible
@@ -298,6 +297,12 @@ def plot(engines: dict, out, styles) -> list[str]:
     # below the panels, hiding no curve; an engine is drawn over the steplab method it equals
     fig.legend(handles, labels, loc="lower center", ncol=7, fontsize=7.5, frameon=False)
     return plotting.save_figure(fig, out, "rotation_engines")
+
+
+def scale_top(curves) -> float:
+    """The top of a log scale of relative drifts: a decade above the largest value of the curves
+    [(x, y), ...] and at least 10 (a gaining method reaches 150 before it diverges)."""
+    return 10.0 ** np.ceil(np.log10(max([10.0] + [3 * y for c in curves for _, y in c])))
 
 
 #: the markers of an engine's settings, in the order the engine lists them
