@@ -16,30 +16,119 @@ stage orders:
   ``implicit-gyroscopic``, ``momentum-rescaled``) this is their declared stage order, "forces and
   torques at t; v and omega; then x and q".
 
-NumPy only (each stage rebuilds the model at the new lever arms, :func:`.attachments.model_at`).
-A scene without attachments never comes here: :func:`.scene_rotation.rotate_scene` runs its free
-rotation beside the translation.
+Each stage rebuilds the model at the new lever arms (:func:`.attachments.model_at`). On NumPy
+:class:`AttachedStep` is the step of :func:`.simulate`'s Python loop; on JAX the same stage
+functions, traced, are the step of the one compiled loop (:func:`.loop.compiled_loop`), which
+carries the translation and the rotation packed into one flat state (:class:`_Packed`), so that
+its divergence check covers both. A scene without attachments never comes here:
+:func:`.scene_rotation.rotate_scene` runs its free rotation beside the translation, and a scene
+without rotating bodies does no rotation work at all.
 """
 
 from __future__ import annotations
+
+import time
+from typing import NamedTuple
 
 import numpy as np
 from steplab.physics import attachments
 from steplab.physics import quaternion as quat
 from steplab.physics.rigid_body import RigidBodies, RotationModel
 
+from .base import Stepper
+from .loop import compiled_loop
 from .scene_rotation import RotationTrajectory
-from .simulate import DivergenceError
+from .simulate import DivergenceError, Trajectory, saved_steps
+
+
+class Coupling(NamedTuple):
+    """What a coupled step needs, fixed over a run.
+
+    model : physics.Model
+        NumPy, float64 (:func:`.attachments.model_at` rebuilds it on ``xp`` at each state); its
+        attached forces carry their body-frame offsets.
+    bodies : physics.rigid_body.RigidBodies
+        The rotating bodies at the start (their ``index`` and ``inertia``).
+    integrator : integrators.base.Stepper
+    rotation : integrators.rotation.RotationMethod
+    xp, dtype : the run's array namespace and precision
+    """
+
+    model: object
+    bodies: RigidBodies
+    integrator: object
+    rotation: object
+    xp: object = np
+    dtype: object = np.dtype(np.float64)
+
+    @property
+    def strang(self) -> bool:
+        """Velocity Verlet with dlm: one Strang splitting (see the module)."""
+        return self.integrator.name == "velocity-verlet" and self.rotation.name == "dlm"
+
+    def rotation_model(self, torques=()) -> RotationModel:
+        return RotationModel(self.bodies.inertia, tuple(torques), self.xp)
+
+
+def model_at(c: Coupling, q, omega):
+    """The model with its lever arms at the rotating bodies' ``q`` (R, 4) and body-frame ``omega`` (R, 3);
+    with the orientations (N, 4) of all bodies (the identity and zero for a point mass)."""
+    xp, n, index = c.xp, c.model.n_bodies, c.bodies.index
+    identity = np.broadcast_to(quat.IDENTITY, (n, 4))
+    world = quat.rotate(xp, q, omega)
+    if xp is np:
+        orientations, angular_velocities = identity.copy(), np.zeros((n, 3))
+        orientations[index], angular_velocities[index] = q, world
+    else:
+        orientations = xp.asarray(identity, dtype=q.dtype).at[index].set(q)
+        angular_velocities = xp.zeros((n, 3), dtype=q.dtype).at[index].set(world)
+    return attachments.model_at(c.model, orientations, angular_velocities, xp, c.dtype), orientations
+
+
+def accelerations(c: Coupling, t, x, v, q, omega):
+    """The centres' acceleration (N, 3) and the rotating bodies' body-frame torque (R, 3) at one state."""
+    model, orientations = model_at(c, q, omega)
+    torque = attachments.torques(model, x, v, orientations)[c.bodies.index]
+    return model.acceleration(t, x, v), quat.rotate_inverse(c.xp, q, torque)
+
+
+def held_step(c: Coupling, t, y, q, omega, dt):
+    """One step in which each system steps with the other held at the start of the step: (y, q, omega)."""
+    model, orientations = model_at(c, q, omega)
+    y1, _ = c.integrator.step(model, t, y, dt, c.integrator.init(model, t, y))
+    torque = _HeldTorque(c, y[0], y[1], (q, omega, model, orientations))
+    q1, omega1 = c.rotation.step(c.rotation_model((torque,)), t, q, omega, dt)
+    return y1, q1, omega1
+
+
+def strang_step(c: Coupling, t, y, q, omega, kept, dt):
+    """Kick (h/2), drift and free rotation (h), kick (h/2): velocity Verlet and dlm at once.
+
+    ``kept`` is the acceleration and torque at the start of the step (the last step's second
+    kick's); returns (y, q, omega, kept for the next step)."""
+    xp = c.xp
+    inertia = xp.asarray(c.bodies.inertia, dtype=y.dtype)
+    x, v = y[0], y[1]
+    a0, tau0 = kept
+    v_half = v + 0.5 * dt * a0
+    x1 = x + dt * v_half
+    q1, omega_free = c.rotation.step(c.rotation_model(), t, q, omega + 0.5 * dt * tau0 / inertia, dt)
+    # the second kick's velocities as each method estimates them: v + h a0 (Verlet), the rotated pi (dlm)
+    a1, tau1 = accelerations(c, t + dt, x1, v + dt * a0, q1, omega_free)
+    return xp.stack([x1, v_half + 0.5 * dt * a1]), q1, omega_free + 0.5 * dt * tau1 / inertia, (a1, tau1)
 
 
 class AttachedStep:
     """``step(t, y, dt, carry) -> (y, carry)`` of a model with attached forces, its rotating
-    ``bodies`` stepped by ``rotation`` beside ``integrator``; the rotation after every step is kept.
+    ``bodies`` stepped by ``rotation`` beside ``integrator``; the rotation at the saved steps is kept.
+
+    On NumPy it is the step of :func:`.simulate`'s loop, the rotation kept after every step; on
+    JAX, :func:`.simulate` calls :meth:`compiled` instead, which runs the whole loop compiled.
 
     Parameters
     ----------
     model : physics.Model
-        NumPy; its attached forces carry their body-frame offsets.
+        On the run's backend; its attached forces carry their body-frame offsets.
     bodies : physics.rigid_body.RigidBodies
         The rotating bodies at the start.
     integrator : integrators.base.Stepper
@@ -47,67 +136,65 @@ class AttachedStep:
     """
 
     def __init__(self, model, bodies: RigidBodies, integrator, rotation):
-        if model.xp is not np:
-            raise ValueError("springs and dampers at body-frame points (offsets) run on the NumPy backend; "
-                             "use --backend numpy")
-        self.model, self.bodies, self.integrator, self.rotation = model, bodies, integrator, rotation
+        if not isinstance(integrator, Stepper):
+            raise ValueError(f"springs and dampers at body-frame points (offsets) need a fixed-step integrator that "
+                             f"evaluates their forces, not {integrator.name!r} (use semi-implicit-euler or "
+                             "velocity-verlet)")
+        self.coupling = Coupling(model.cast(np, np.float64), bodies, integrator, rotation, model.xp, model.dtype)
+        self.bodies = bodies
         self.q, self.omega = bodies.orientations, bodies.body_angular_velocities()
-        self.strang = integrator.name == "velocity-verlet" and rotation.name == "dlm"
-        self.free = RotationModel(bodies.inertia)  # dlm without torque: its free rotation
-        self.saved = [(self.q, self.omega)]
+        self.saved = {0: (self.q, self.omega)}  # by step
         self.log = None  # no collisions
         self._kept = None  # velocity Verlet's last acceleration and torque, for the next first kick
 
     def model_at(self, q, omega):
-        """The model with its lever arms at the rotating bodies' ``q`` (R, 4) and body-frame ``omega`` (R, 3);
-        with the orientations (N, 4) of all bodies."""
-        n = self.model.n_bodies
-        orientations, angular_velocities = np.zeros((n, 4)), np.zeros((n, 3))
-        orientations[:, 0] = 1.0
-        orientations[self.bodies.index] = q
-        angular_velocities[self.bodies.index] = quat.rotate(np, q, omega)
-        return attachments.model_at(self.model, orientations, angular_velocities), orientations
+        """:func:`model_at` of this run: (model, orientations of all bodies)."""
+        return model_at(self.coupling, q, omega)
 
     def final_model(self):
         """The model with its lever arms at the last step's orientations (for the energy at the end)."""
         return self.model_at(self.q, self.omega)[0]
 
-    def _accelerations(self, t, x, v, q, omega):
-        """The centres' acceleration (N, 3) and the rotating bodies' body-frame torque (R, 3) at one state."""
-        model, orientations = self.model_at(q, omega)
-        torque = attachments.torques(model, x, v, orientations)[self.bodies.index]
-        return model.acceleration(t, x, v), quat.rotate_inverse(np, q, torque)
-
     def __call__(self, t, y, dt, carry):
-        y = self._strang(t, y, dt) if self.strang else self._held(t, y, dt)
+        c = self.coupling
+        if c.strang:
+            kept = self._kept or accelerations(c, t, y[0], y[1], self.q, self.omega)
+            y, self.q, self.omega, self._kept = strang_step(c, t, y, self.q, self.omega, kept, dt)
+        else:
+            y, self.q, self.omega = held_step(c, t, y, self.q, self.omega, dt)
         if not (np.all(np.isfinite(self.q)) and np.all(np.isfinite(self.omega))):
-            raise DivergenceError(f"{self.integrator.name} with {self.rotation.name}", dt, len(self.saved),
-                                  t + dt)
-        self.saved.append((self.q, self.omega))
+            raise DivergenceError(_name(c), dt, len(self.saved), t + dt)
+        self.saved[len(self.saved)] = (self.q, self.omega)
         return y, carry
 
-    def _held(self, t, y, dt):
-        # each system steps with the other held at the start of the step
-        model, orientations = self.model_at(self.q, self.omega)
-        y1, _ = self.integrator.step(model, t, y, dt, self.integrator.init(model, t, y))
-        torque = _HeldTorque(self, y[0], y[1], (self.q, self.omega, model, orientations))
-        self.q, self.omega = self.rotation.step(RotationModel(self.bodies.inertia, (torque,)), t, self.q, self.omega,
-                                                dt)
-        return y1
+    def compiled(self, y0, t_start: float, dt: float, n: int, save_every: int, limit: float):
+        """The run on JAX as one compiled loop (:func:`.loop.compiled_loop`): the :class:`.simulate.Trajectory`.
 
-    def _strang(self, t, y, dt):
-        # kick (h/2), drift and free rotation (h), kick (h/2): velocity Verlet and dlm at once
-        inertia = self.bodies.inertia
-        x, v = y
-        a0, tau0 = self._kept or self._accelerations(t, x, v, self.q, self.omega)
-        v_half = v + 0.5 * dt * a0
-        x1 = x + dt * v_half
-        q1, omega_free = self.rotation.step(self.free, t, self.q, self.omega + 0.5 * dt * tau0 / inertia, dt)
-        # the second kick's velocities as each method estimates them: v + h a0 (Verlet), the rotated pi (dlm)
-        a1, tau1 = self._accelerations(t + dt, x1, v + dt * a0, q1, omega_free)
-        self._kept = (a1, tau1)
-        self.q, self.omega = q1, omega_free + 0.5 * dt * tau1 / inertia
-        return np.stack([x1, v_half + 0.5 * dt * a1])
+        ``y0`` (2, N, 3) in the run's precision; ``n`` steps of ``dt``, every ``save_every``-th
+        state kept (and the last), ``limit`` the divergence limit of every component, the
+        rotation's included. Compilation is timed apart, as :func:`.simulate` does.
+        """
+        import jax.numpy as jnp
+
+        packed = _Packed(self.coupling, y0.shape, y0.dtype)
+        saves = saved_steps(n, save_every)
+        run = compiled_loop(None, packed, chunks=len(saves) - 1, save_every=save_every)
+        z0 = packed.pack(np, y0, self.q, self.omega)
+        args = (jnp.asarray(z0), jnp.asarray(t_start, y0.dtype), jnp.asarray(dt, y0.dtype), n,
+                jnp.asarray(limit, y0.dtype))
+        start = time.perf_counter()
+        compiled = run.lower(*args).compile()
+        compile_time = time.perf_counter() - start
+        start = time.perf_counter()
+        zs, bad = compiled(*args)
+        zs.block_until_ready()
+        wall = time.perf_counter() - start
+        if int(bad) >= 0:
+            raise DivergenceError(packed.name, dt, int(bad), t_start + int(bad) * dt)
+        ys, qs, omegas = packed.unpack(np, np.concatenate([z0[None], np.asarray(zs)]))
+        self.saved = {int(k): (q, omega) for k, q, omega in zip(saves, qs, omegas)}
+        self.q, self.omega = qs[-1], omegas[-1]
+        return Trajectory(t_start + saves * dt, ys, self.coupling.integrator.name, dt, n, "jax", wall, compile_time)
 
     def rotation_trajectory(self, trajectory) -> RotationTrajectory:
         """The rotating bodies at ``trajectory``'s saved times (a run of this step)."""
@@ -115,22 +202,65 @@ class AttachedStep:
         k = np.rint((t - t[0]) / trajectory.dt).astype(int)
         qs = np.array([self.saved[i][0] for i in k])
         omegas = np.array([self.saved[i][1] for i in k])
-        name = f"{self.rotation.name} (with {self.integrator.name}, coupled)"
+        c = self.coupling
+        name = f"{c.rotation.name} (with {c.integrator.name}, coupled)"
         return RotationTrajectory(t, qs, quat.rotate(np, qs, omegas), name, self.bodies)
+
+
+def _name(c: Coupling) -> str:
+    return f"{c.integrator.name} with {c.rotation.name}"
+
+
+class _Packed:
+    """The coupled step as a stepper of :func:`.loop.fixed_step_loop` on one flat state.
+
+    The loop carries, checks and saves one array: here the positions and velocities (2, N, 3),
+    the orientations (R, 4) and the body-frame angular velocities (R, 3), flattened one after
+    the other. Its carry is the Strang step's kept acceleration and torque (nothing otherwise).
+    """
+
+    partitioned = False
+
+    def __init__(self, coupling: Coupling, shape, dtype):
+        self.coupling, self.shape, self.dtype = coupling, tuple(shape), dtype
+        self.rotating = len(coupling.bodies.index)
+        self.name = _name(coupling)
+
+    def pack(self, xp, y, q, omega):
+        return xp.concatenate([xp.ravel(y), xp.ravel(q), xp.ravel(omega)]).astype(self.dtype)
+
+    def unpack(self, xp, z):
+        """(y, q, omega) of a flat state, or of a stack of them (K, size)."""
+        lead, r = z.shape[:-1], self.rotating
+        cut = int(np.prod(self.shape))
+        return (z[..., :cut].reshape(lead + self.shape), z[..., cut:cut + 4 * r].reshape(lead + (r, 4)),
+                z[..., cut + 4 * r:].reshape(lead + (r, 3)))
+
+    def init(self, model, t, z):  # the loop's model is not used: the coupling rebuilds it at each state
+        y, q, omega = self.unpack(self.coupling.xp, z)
+        return accelerations(self.coupling, t, y[0], y[1], q, omega) if self.coupling.strang else ()
+
+    def step(self, model, t, z, dt, kept):
+        y, q, omega = self.unpack(self.coupling.xp, z)
+        if self.coupling.strang:
+            y, q, omega, kept = strang_step(self.coupling, t, y, q, omega, kept, dt)
+        else:
+            y, q, omega = held_step(self.coupling, t, y, q, omega, dt)
+        return self.pack(self.coupling.xp, y, q, omega), kept
 
 
 class _HeldTorque:
     """The attached forces' torque at positions ``x`` and velocities ``v`` held over a rotation step;
     ``start`` is (q, omega, model, orientations) at the step's start, which most methods ask for."""
 
-    def __init__(self, step: AttachedStep, x, v, start):
-        self.step, self.x, self.v, self.start = step, x, v, start
+    def __init__(self, c: Coupling, x, v, start):
+        self.coupling, self.x, self.v, self.start = c, x, v, start
 
     def torque(self, xp, t, q, omega_body):
         q0, omega0, model, orientations = self.start
         if q is not q0 or omega_body is not omega0:  # a stage inside the step (rk4, dlm's second kick)
-            model, orientations = self.step.model_at(q, omega_body)
-        return attachments.torques(model, self.x, self.v, orientations)[self.step.bodies.index]
+            model, orientations = model_at(self.coupling, q, omega_body)
+        return attachments.torques(model, self.x, self.v, orientations)[self.coupling.bodies.index]
 
 
 def attached_stepper(bodies: RigidBodies, rotation, kept: list | None = None):

@@ -356,8 +356,10 @@ def simulate_rotation(method: RotationMethod, model, q0, omega0, dt: float, n_st
 
     ``backend="jax"`` runs the same ``step`` as one compiled loop (``jax.lax.scan`` over the
     saved states, ``fori_loop`` inside; ``n_steps`` a multiple of ``save_every``); it agrees with
-    NumPy to round-off. ``check=False`` lets bodies diverge (a stability scan of many bodies
-    at once): their states become non-finite and the others run on.
+    NumPy to round-off. ``backend="numba"`` runs ``exponential-map`` on free bodies only, as the
+    vectorised kernel of :mod:`.rotation_compiled`, bit for bit NumPy's. ``check=False`` lets
+    bodies diverge (a stability scan of many bodies at once): their states become non-finite
+    and the others run on.
 
     Returns
     -------
@@ -376,6 +378,8 @@ def simulate_rotation(method: RotationMethod, model, q0, omega0, dt: float, n_st
     limit = DIVERGENCE_FACTOR * max(1.0, float(np.max(np.abs(omega), initial=0.0)))
     if backend == "jax":
         ts, qs, omegas = _compiled_rotation(method, model, q, omega, dt, n_steps, t0, save_every)
+    elif backend == "numba":
+        ts, qs, omegas = _numba_rotation(method, model, q, omega, dt, n_steps, t0, save_every)
     else:
         ts, qs, omegas = [t0], [q], [omega]
         errors = np.errstate(all="ignore") if not check else contextlib.nullcontext()
@@ -395,6 +399,23 @@ def simulate_rotation(method: RotationMethod, model, q0, omega0, dt: float, n_st
         k = int(np.argmax(bad))
         raise DivergenceError(method.name, dt, int(round((ts[k] - t0) / dt)), float(ts[k]))
     return ts, qs, omegas
+
+
+def _numba_rotation(method, model, q, omega, dt, n_steps, t0, save_every):
+    from .rotation_compiled import exponential_map_steps, free_bodies
+    from .simulate import saved_steps
+
+    if method.name != "exponential-map" or model.torques:
+        raise ValueError(f"the numba rotation backend runs exponential-map on free bodies, not {method.name}"
+                         f"{' with torques' if model.torques else ''}: use backend numpy or jax")
+    bodies = free_bodies(q, omega, model.inertia)
+    saves = saved_steps(n_steps, save_every)
+    qs, omegas = [q], [omega]
+    for n in np.diff(saves):
+        exponential_map_steps(bodies, dt, n)
+        qs.append(bodies.q.T.copy())
+        omegas.append(bodies.omega.T.copy())
+    return t0 + saves * dt, np.array(qs), np.array(omegas)
 
 
 def compiled_steps(method, model, dt: float, n_steps: int, t0: float = 0.0):

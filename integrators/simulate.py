@@ -148,7 +148,8 @@ def simulate(model, integrator, y0, t_start: float, t_end: float | None = None, 
         with an attribute ``log`` the trajectory keeps as ``collisions`` (None: nothing to
         add to the integrator's step). It receives the model on the run's backend and
         precision, and raises ValueError for an integrator or backend it cannot serve.
-        Such a step runs in the NumPy loop.
+        Such a step runs in the NumPy loop, unless on JAX it has a method
+        ``compiled(y0, t_start, dt, n, save_every, limit) -> Trajectory`` that runs the loop.
     collisions : physics.collision.CollisionWorld, optional
         Shorthand for ``stepper=collisions.stepper``: detect and resolve collisions after
         every step; the trajectory's ``collisions`` is the log of the run.
@@ -203,6 +204,8 @@ def simulate(model, integrator, y0, t_start: float, t_end: float | None = None, 
         return Trajectory(ts, ys, integrator.name, dt, 0, backend, wall)
 
     assert isinstance(integrator, (Stepper, PositionBased))
+    if backend == "jax" and hasattr(step, "compiled"):  # a step that compiles its own loop (attached forces)
+        return step.compiled(np.asarray(y0, dtype=dtype), t_start, dt, n, save_every, limit)
     model = _on_backend(model, backend, dtype)
     run = _run_numpy if backend == "numpy" or step is not None else _run_jax
     return run(model, integrator, np.asarray(y0, dtype=dtype), t_start, dt, n, save_every,

@@ -16,10 +16,13 @@ A force carries its points as an :class:`Attachment`, with their lever arms R(q)
 orientations it is evaluated at; :func:`model_at` gives the model at other orientations. The
 rotation and the translation are then coupled: :mod:`steplab.integrators.attached` steps them
 together. A force without offsets has no attachment and does exactly what it did before.
+Every function here takes the model's array namespace (NumPy, or jax.numpy inside the
+compiled loop), so both backends evaluate the same formulas.
 """
 
 from __future__ import annotations
 
+import contextlib
 import dataclasses
 from typing import NamedTuple
 
@@ -49,13 +52,14 @@ class Attachment(NamedTuple):
     velocities: np.ndarray
 
 
-def attachment_at(offsets, i, j, orientations, angular_velocities) -> Attachment:
+def attachment_at(xp, offsets, i, j, orientations, angular_velocities) -> Attachment:
     """The :class:`Attachment` of pairs (i, j) at body-frame ``offsets`` (P, 2, 3) for the bodies'
     ``orientations`` (N, 4) and world ``angular_velocities`` (N, 3) (identity and zero for a point mass)."""
-    arms = np.stack([quat.rotate(np, orientations[i], offsets[:, 0]), quat.rotate(np, orientations[j], offsets[:, 1])],
+    offsets = xp.asarray(offsets, dtype=orientations.dtype)
+    arms = xp.stack([quat.rotate(xp, orientations[i], offsets[:, 0]), quat.rotate(xp, orientations[j], offsets[:, 1])],
                     axis=1)
-    velocities = np.stack([quat.cross(np, angular_velocities[i], arms[:, 0]),
-                           quat.cross(np, angular_velocities[j], arms[:, 1])], axis=1)
+    velocities = xp.stack([quat.cross(xp, angular_velocities[i], arms[:, 0]),
+                           quat.cross(xp, angular_velocities[j], arms[:, 1])], axis=1)
     return Attachment(offsets, arms, velocities)
 
 
@@ -88,7 +92,7 @@ def initial_attachment(offsets, i, j, bodies) -> Attachment | None:
     """The attachment at the scene's initial orientations (None without offsets)."""
     if offsets is None:
         return None
-    return attachment_at(offsets, i, j, bodies.orientations, bodies.angular_velocities)
+    return attachment_at(np, offsets, i, j, bodies.orientations, bodies.angular_velocities)
 
 
 def point_distance(offsets, k: int, pair, bodies) -> float:
@@ -107,28 +111,50 @@ def attached_forces(model) -> tuple:
     return tuple(f for f in model.forces if getattr(f, "attachment", None) is not None)
 
 
-def model_at(model, orientations, angular_velocities):
+def model_at(model, orientations, angular_velocities, xp=np, dtype=np.float64):
     """``model`` with every attached force's lever arms at these ``orientations`` (N, 4) and world
-    ``angular_velocities`` (N, 3); the other forces are the same objects (a model of the same class:
-    the model imports the forces, which import this module, so it is not imported here)."""
-    forces = [dataclasses.replace(f, attachment=attachment_at(f.attachment.offsets, f.i, f.j, orientations,
+    ``angular_velocities`` (N, 3), on the array namespace ``xp`` in precision ``dtype``.
+
+    ``model`` is a NumPy model (its arrays are read as constants, also when a compiled step traces
+    this with jax.numpy); the other forces are the same objects. The result is a model of the same
+    class: the model imports the forces, which import this module, so it is not imported here.
+    """
+    forces = [dataclasses.replace(f, attachment=attachment_at(xp, f.attachment.offsets, f.i, f.j, orientations,
                                                               angular_velocities))
               if getattr(f, "attachment", None) is not None else f for f in model.forces]
-    return type(model)(np.asarray(model.masses), np.asarray(model.radii), forces, model.pinned, model.names,
-                       model.xp, model.dtype)
+    with contextlib.nullcontext() if xp is np else _constants_folded():
+        return type(model)(np.asarray(model.masses), np.asarray(model.radii), forces, model.pinned, model.names,
+                           xp, dtype)
 
 
-def torques(model, q, v, orientations) -> np.ndarray:
+def _constants_folded():
+    """Inside a compiled step, the model's constant arrays (masses, gravity's field) stay concrete
+    while it is built, as the model reads some of them back with NumPy; the lever arms are traced."""
+    import jax
+
+    return jax.ensure_compile_time_eval()
+
+
+def torques(model, q, v, orientations):
     """The torque about each body's centre, world frame, (N, 3), N m, of ``model``'s attached forces
     at positions ``q`` and velocities ``v`` (N, 3), their arms at ``orientations`` (N, 4).
 
     Each pair's force F on its first end (-F on its second) at the body-frame point r gives
     (R r) x F (:func:`.rigid_body.torque_of_forces`); a point mass's entries are zero.
     """
-    total = np.zeros_like(np.asarray(q, dtype=float))
+    xp = model.xp
+    total = xp.zeros_like(q)
     for f in attached_forces(model):
-        force = f.pair_force(np, q, v)
+        force = f.pair_force(xp, q, v)
         offsets = f.attachment.offsets
-        np.add.at(total, f.i, torque_of_forces(np, orientations[f.i], offsets[:, 0], force))
-        np.add.at(total, f.j, torque_of_forces(np, orientations[f.j], offsets[:, 1], -force))
+        total = _add_rows(xp, total, f.i, torque_of_forces(xp, orientations[f.i], offsets[:, 0], force))
+        total = _add_rows(xp, total, f.j, torque_of_forces(xp, orientations[f.j], offsets[:, 1], -force))
     return total
+
+
+def _add_rows(xp, total, index, rows):
+    """``total`` with ``rows`` added at ``index`` (repeated indices add up)."""
+    if xp is np:
+        np.add.at(total, index, rows)
+        return total
+    return total.at[index].add(rows)

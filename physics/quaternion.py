@@ -19,14 +19,22 @@ from ._array import is_numpy
 IDENTITY = np.array([1.0, 0.0, 0.0, 0.0])
 
 
+def hamilton(pw, px, py, pz, qw, qx, qy, qz):
+    """The four components of the Hamilton product p q from the eight of p and q (numbers or arrays).
+
+    The one formula that :func:`multiply` stacks and the compiled rotation kernel
+    (:mod:`steplab.integrators.rotation_compiled`) evaluates body by body.
+    """
+    return (pw * qw - px * qx - py * qy - pz * qz,
+            pw * qx + px * qw + py * qz - pz * qy,
+            pw * qy - px * qz + py * qw + pz * qx,
+            pw * qz + px * qy - py * qx + pz * qw)
+
+
 def multiply(xp, p, q):
     """Hamilton product p q, shape (..., 4)."""
-    pw, px, py, pz = p[..., 0], p[..., 1], p[..., 2], p[..., 3]
-    qw, qx, qy, qz = q[..., 0], q[..., 1], q[..., 2], q[..., 3]
-    return xp.stack([pw * qw - px * qx - py * qy - pz * qz,
-                     pw * qx + px * qw + py * qz - pz * qy,
-                     pw * qy - px * qz + py * qw + pz * qx,
-                     pw * qz + px * qy - py * qx + pz * qw], axis=-1)
+    return xp.stack(hamilton(p[..., 0], p[..., 1], p[..., 2], p[..., 3], q[..., 0], q[..., 1], q[..., 2], q[..., 3]),
+                    axis=-1)
 
 
 def multiply_vector(xp, q, v):
@@ -54,11 +62,14 @@ def normalize(xp, q):
     return q / norm(xp, q)[..., None]
 
 
+def cross_components(ax, ay, az, bx, by, bz):
+    """The three components of a x b (numbers or arrays): :func:`cross` and the compiled kernel."""
+    return ay * bz - az * by, az * bx - ax * bz, ax * by - ay * bx
+
+
 def cross(xp, a, b):
     """a x b row-wise, shape (..., 3) (elementwise, so XLA fuses it)."""
-    return xp.stack([a[..., 1] * b[..., 2] - a[..., 2] * b[..., 1],
-                     a[..., 2] * b[..., 0] - a[..., 0] * b[..., 2],
-                     a[..., 0] * b[..., 1] - a[..., 1] * b[..., 0]], axis=-1)
+    return xp.stack(cross_components(a[..., 0], a[..., 1], a[..., 2], b[..., 0], b[..., 1], b[..., 2]), axis=-1)
 
 
 def rotate(xp, q, v):
@@ -87,11 +98,26 @@ _COS_SERIES = tuple((-1) ** k / math.factorial(2 * k) for k in range(8))
 _SINC_SERIES = tuple((-1) ** k / math.factorial(2 * k + 1) for k in range(8))
 
 
-def _horner(coefficients, x2):
-    total = coefficients[-1]
-    for c in reversed(coefficients[:-1]):
-        total = total * x2 + c
-    return total
+def half_angle_squared(rx, ry, rz):
+    """x^2 = |r|^2 / 4 of the rotation vector r = (rx, ry, rz): what :func:`exp`'s two formulas take."""
+    return 0.25 * (rx ** 2 + ry ** 2 + rz ** 2)
+
+
+def exp_series(x2):
+    """(cos x, sin x / (2x)) of x^2 = |r|^2 / 4 by the series (x <= :data:`EXP_SERIES_HALF_ANGLE`), by Horner's rule.
+
+    An index loop over module constants, which Numba compiles too."""
+    c, s = _COS_SERIES[-1], _SINC_SERIES[-1]
+    for k in range(len(_COS_SERIES) - 2, -1, -1):
+        c = c * x2 + _COS_SERIES[k]
+        s = s * x2 + _SINC_SERIES[k]
+    return c, 0.5 * s
+
+
+def exp_trigonometric(xp, x2):
+    """(cos x, sin x / (2x)) of x^2 = |r|^2 / 4 by libm: sin(|r|/2) / |r| = sinc(|r| / (2 pi)) / 2, exact at 0."""
+    angle = 2.0 * xp.sqrt(x2)
+    return xp.cos(0.5 * angle), 0.5 * xp.sinc(angle / (2 * np.pi))
 
 
 def exp(xp, rotation_vector):
@@ -105,22 +131,14 @@ def exp(xp, rotation_vector):
     jitted alone). Otherwise sin(|r|/2)/|r| is
     sinc(|r|/(2 pi))/2, exact at 0 (numpy's and jax's sinc switch to the series near 0).
     """
-    x2 = 0.25 * (rotation_vector[..., 0] ** 2 + rotation_vector[..., 1] ** 2 + rotation_vector[..., 2] ** 2)
-
-    def series(x2):
-        return _horner(_COS_SERIES, x2), 0.5 * _horner(_SINC_SERIES, x2)
-
-    def trigonometric(x2):
-        angle = 2.0 * xp.sqrt(x2)
-        return xp.cos(0.5 * angle), 0.5 * xp.sinc(angle / (2 * np.pi))
-
+    x2 = half_angle_squared(rotation_vector[..., 0], rotation_vector[..., 1], rotation_vector[..., 2])
     small = xp.max(x2, initial=0.0) <= EXP_SERIES_HALF_ANGLE**2  # NaN: the trigonometric branch, NaN out
     if is_numpy(xp):
-        c, half_sinc = series(x2) if small else trigonometric(x2)
+        c, half_sinc = exp_series(x2) if small else exp_trigonometric(xp, x2)
     else:  # one branch for all bodies: a where() would compute both
         import jax
 
-        c, half_sinc = jax.lax.cond(small, series, trigonometric, x2)
+        c, half_sinc = jax.lax.cond(small, exp_series, lambda x2: exp_trigonometric(xp, x2), x2)
     return xp.concatenate([c[..., None], half_sinc[..., None] * rotation_vector], axis=-1)
 
 

@@ -299,30 +299,37 @@ def plot(record: dict, out) -> list[str]:
 
     fig, (left, right, third) = plt.subplots(1, 3, figsize=(16.5, 4.6))
     floor = 1e-17  # an exact invariant plotted on the axis floor
-    for d in record["drift"]:
-        style = _style(d["method"]) | {"marker": None}
-        for ax, key in ((left, "energy"), (right, "momentum")):
-            pts = [(x, max(abs(y), floor)) for x, y in zip(d["periods"][1:], d[key][1:]) if y is not None]
+    for ax, key in ((left, "energy"), (right, "momentum")):
+        curves = [[(x, max(abs(y), floor)) for x, y in zip(d["periods"][1:], d[key][1:]) if y is not None]
+                  for d in record["drift"]]
+        top = rotation_engines.scale_top(curves)
+        for n, (d, pts) in enumerate(zip(record["drift"], curves)):
+            # markers evenly spaced along the line, staggered, so that the curves that coincide stay visible
+            style = _style(d["method"]) | {"ms": 4, "markevery": (0.1 * (n % 8) / 8, 0.1)}
             if pts:
                 ax.loglog(*zip(*pts), lw=1.2, **style)
+            if None in d[key]:  # where the run diverged, on the top edge
+                ax.plot([d["periods"][d[key].index(None)]], [top / 2], marker="x", ms=7, color=style["color"],
+                        ls="none")
+        ax.set_ylim(floor / 2, top)
+        ax.set_xlabel("periods of omega(t) (two flips each)")
+        ax.grid(True, which="major", alpha=0.3)
+    for d in record["drift"]:
         pts = [(x, y) for x, y in zip(d["time"], d["nutation_deg"]) if y is not None and y > 0]
         if pts:
-            third.semilogy(*zip(*pts), lw=1.2, **style)
+            third.semilogy(*zip(*pts), lw=1.2, **(_style(d["method"]) | {"marker": None}))
     left.set_ylabel("|E / E0 - 1|")
-    left.set_title(f"energy drift, flip body at |omega| dt = {record['drift_omega_dt']:g}")
+    left.set_title(f"energy drift, flip body at |omega| dt = {record['drift_omega_dt']:g} (x: diverged)")
     right.set_ylabel("| |L| / |L0| - 1 |")
-    right.set_title("drift of |L| (floor 1e-17: kept exactly)")
-    for ax in (left, right):
-        ax.set_xlabel("periods of omega(t) (two flips each)")
-        ax.set_ylim(floor / 2, 10)
-        ax.grid(True, which="major", alpha=0.3)
+    right.set_title("drift of |L| (floor 1e-17: kept exactly; x: diverged)")
     third.axhline(TUMBLER_ANGLE, color="k", lw=0.8, ls=":")
     third.set_xlabel("time (s)")
     third.set_ylabel("nutation: angle between body axis 3 and L (degrees)")
     third.set_title(f"spin about the stable major axis (a tumbler above {TUMBLER_ANGLE:g} degrees)")
     third.grid(True, which="major", alpha=0.3)
-    left.legend(fontsize=7)
-    fig.tight_layout()
+    handles, labels = left.get_legend_handles_labels()
+    fig.tight_layout(rect=(0, 0.07, 1, 1))
+    fig.legend(handles, labels, loc="lower center", ncol=len(labels), fontsize=8, frameon=False)  # hiding no curve
     figures += plotting.save_figure(fig, out, "rotation_drift")
 
     fig, (left, right) = plt.subplots(1, 2, figsize=(12.4, 4.6))

@@ -23,7 +23,7 @@ and says which are missing in one line (``missing``).
 from __future__ import annotations
 
 import numpy as np
-from steplab.integrators import DivergenceError, get_rotation
+from steplab.integrators import ROTATIONS, DivergenceError, get_rotation
 from steplab.integrators.rotation import simulate_rotation
 from steplab.physics import Model
 from steplab.physics import quaternion as quat
@@ -249,7 +249,8 @@ def plot(engines: dict, out, styles) -> list[str]:
     ident = engines["identification"]
     if not ident:
         return []
-    methods = list(next(iter(ident[0]["differences"].values())))
+    measured = next(iter(ident[0]["differences"].values()))
+    methods = [m for m in ROTATIONS if m in measured]  # the registry's order, also from a record read back
     fig, axes = plt.subplots(2, 2, figsize=(13.5, 9.4))
     heat = axes[0, 0]
     floor = 1e-17
@@ -268,30 +269,60 @@ def plot(engines: dict, out, styles) -> list[str]:
     fig.colorbar(image, ax=heat, label="log10 distance (rad; relative omega)")
     panels = ((axes[0, 1], "flip box", "energy"), (axes[1, 0], "flip box", "momentum"),
               (axes[1, 1], "Bullet demo body", "energy"))
+    engine_styles = setting_styles(engines["settings"], engines["colours"])
     for ax, body, key in panels:
-        for row in engines["drift"]:
-            if row["body"] != body:
-                continue
+        rows = [row for row in engines["drift"] if row["body"] == body]
+        curves = [[(t, max(abs(v), floor)) for t, v in zip(row.get("time", [])[1:], row.get(key, [])[1:])
+                   if v is not None] for row in rows]
+        top = scale_top(curves)
+        for n, (row, pts) in enumerate(zip(rows, curves)):
+            # markers evenly spaced along the drawn line (in fractions of the panel's diagonal), each
+            # curve's starting elsewhere, so that curves drawn over each other stay visible
+            every = (0.11 * (n % 7) / 7, 0.11)
             if row["kind"] == "steplab":
-                style = styles(row["name"]) | {"marker": None, "lw": 0.9, "alpha": 0.55}
+                style = styles(row["name"]) | {"lw": 0.9, "alpha": 0.8, "ms": 3.5, "markevery": every}
             else:
-                style = {"color": engines["colours"][row["name"]], "lw": 2.2, "label": f"{row['name']} (engine)",
-                         "ls": ("-", "--", ":", "-.")[engines["settings"].index(row["name"]) % 4]}
-            pts = [(t, max(abs(v), floor)) for t, v in zip(row.get("time", [])[1:], row.get(key, [])[1:])
-                   if v is not None]
+                style = engine_styles[row["name"]] | {"lw": 2.0, "ms": 6.5, "mfc": "none", "mew": 1.4,
+                                                      "markevery": every, "label": f"{row['name']} (engine)"}
             ax.loglog(*zip(*pts) if pts else ([], []), **style)
             if "diverged_at" in row:  # where the run stopped, on the top edge
-                ax.plot([row["diverged_at"]], [5.0], marker="x", ms=7, color=style["color"], ls="none")
+                ax.plot([row["diverged_at"]], [top / 2], marker="x", ms=7, color=style["color"], ls="none")
         ax.set_xlabel("time (s), dt = 1/60 s")
         ax.set_ylabel("|E / E0 - 1|" if key == "energy" else "| |L| / |L0| - 1 |")
         ax.set_title(f"{body}: {'energy' if key == 'energy' else '|L|'} (exact: 1e-17; x: diverged)", fontsize=10)
-        ax.set_ylim(floor / 2, 10)
+        ax.set_ylim(floor / 2, top)
         ax.grid(True, which="major", alpha=0.3)
     handles, labels = axes[0, 1].get_legend_handles_labels()
     fig.tight_layout(rect=(0, 0.07, 1, 1))
     # below the panels, hiding no curve; an engine is drawn over the steplab method it equals
     fig.legend(handles, labels, loc="lower center", ncol=7, fontsize=7.5, frameon=False)
     return plotting.save_figure(fig, out, "rotation_engines")
+
+
+def scale_top(curves) -> float:
+    """The top of a log scale of relative drifts: a decade above the largest value of the curves
+    [(x, y), ...] and at least 10 (a gaining method reaches 150 before it diverges)."""
+    return 10.0 ** np.ceil(np.log10(max([10.0] + [3 * y for c in curves for _, y in c])))
+
+
+#: the markers of an engine's settings, in the order the engine lists them
+SETTING_MARKERS = ("o", "s", "D", "^", "v", "P")
+
+
+def setting_styles(settings, colours: dict) -> dict:
+    """Each engine setting's line style: its engine's colour (the adapter's ``colour``) in a shade of
+    its own, darkest first, and a marker of its own, so that the settings of one engine differ."""
+    from matplotlib import colors
+
+    styles = {}
+    for colour in dict.fromkeys(colours[k] for k in settings):
+        same = [k for k in settings if colours[k] == colour]
+        rgb = np.array(colors.to_rgb(colour))
+        # towards black (negative) and towards white (positive), about the engine's colour
+        for n, (key, mix) in enumerate(zip(same, np.linspace(-0.5, 0.45, len(same)) if len(same) > 1 else [0.0])):
+            shade = rgb * (1 + mix) if mix < 0 else rgb + (1 - rgb) * mix
+            styles[key] = {"color": tuple(shade), "marker": SETTING_MARKERS[n % len(SETTING_MARKERS)], "ls": "-"}
+    return styles
 
 
 def _identified(row: dict) -> str:

@@ -407,3 +407,67 @@ def test_exponential_map_step_is_the_textbook_step_to_1e_14():
     for q1, omega1 in ((q_loop, omega_loop), (q_numpy[-1], omega_numpy[-1])):
         np.testing.assert_allclose(np.asarray(q1), qt, rtol=0, atol=1e-14)
         np.testing.assert_allclose(np.asarray(omega1), omegat, rtol=0, atol=1e-14)
+
+
+def test_the_numba_kernel_is_the_numpy_step_bit_for_bit_and_the_textbook_step_beyond_the_series():
+    """backend="numba" (the vectorised kernel the bench times): the same IEEE operations in the same order as
+    NumPy's exponential-map, so the same bits; bodies beyond the series' radius take libm's sin and cos, one
+    by one, so they are the textbook step, and the others differ from NumPy (which switches every body to
+    libm then) by the series' round-off only."""
+    from steplab.integrators.rotation_compiled import free_bodies, stream_pass
+
+    rng = np.random.default_rng(11)
+    n, dt = 1001, 1 / 60  # not a multiple of the vector width: the loop's remainder too
+    inertia = np.sort(rng.uniform(1.0, 2.0, (n, 3)), axis=1)
+    q = rng.normal(size=(n, 4))
+    q /= np.linalg.norm(q, axis=1, keepdims=True)
+    omega = rng.normal(size=(n, 3))
+    method, model = get_rotation("exponential-map"), RotationModel(inertia)
+    numpy = simulate_rotation(method, model, q, omega, dt, 40, save_every=15)
+    numba = simulate_rotation(method, model, q, omega, dt, 40, save_every=15, backend="numba")
+    for a, b in zip(numpy, numba):
+        assert a.shape == b.shape and np.array_equal(a, b)
+    bodies = free_bodies(q, omega, inertia)
+    stream_pass(bodies)  # the bench's tighter bound moves the bytes and changes none
+    assert np.array_equal(bodies.q, q.T) and np.array_equal(bodies.omega, omega.T)
+    fast = omega.copy()
+    fast[::9] *= 150  # h |omega| ~ 4 rad on every ninth body
+    _, q_numpy, omega_numpy = simulate_rotation(method, model, q, fast, dt, 3)
+    _, q_numba, omega_numba = simulate_rotation(method, model, q, fast, dt, 3, backend="numba")
+    np.testing.assert_array_equal(omega_numba, omega_numpy)  # the omega update has no branch
+    np.testing.assert_allclose(q_numba, q_numpy, rtol=0, atol=1e-15)
+    assert not np.array_equal(q_numba, q_numpy)  # the slow bodies took the series here, libm there
+
+
+def test_the_numba_backend_refuses_what_its_kernel_does_not_step():
+    top = RotationModel(INERTIA[None], (ForceAtPoint(np.array([0.0, 0.0, 0.5]), np.array([0.0, 0.0, -9.81])),))
+    for method, model, message in ((get_rotation("dlm"), FREE, "not dlm: use backend numpy or jax"),
+                                   (get_rotation("exponential-map"), top, "not exponential-map with torques")):
+        with pytest.raises(ValueError, match=message):
+            simulate_rotation(method, model, Q0[None], FLIP[None], 0.01, 2, backend="numba")
+
+
+#: omega dt of the flip-period test, per declared order: inside each method's asymptotic range
+PERIOD_OMEGA_DT = {1: [0.01, 0.005], 2: [0.1, 0.05], 4: [0.4, 0.2]}
+#: the measured order of the flip period where it is not the method's order (the orientation's still is):
+#: momentum-rescaled keeps |L| exactly, and the period depends on the run only through E and |L|
+PERIOD_ORDER = {"momentum-rescaled": 2}
+
+
+@pytest.mark.parametrize("name", METHODS)
+def test_every_methods_flip_period_converges_to_the_closed_form_at_its_order(name):
+    """The period of omega(t) on the Dzhanibekov flip (the study's measurement: the upward zero crossings of
+    omega2, located by Hermite interpolation) against the closed form T = 4 K(m) / lambda, at two omega dt."""
+    from steplab.studies import rotation as study
+
+    method = get_rotation(name)
+    grid = [w / 2 for w in PERIOD_OMEGA_DT[1]] if name in PERIOD_ORDER else PERIOD_OMEGA_DT[method.order]
+    rows = study.flip(study.parameters(True) | {"flip_omega_dt": grid, "period_omega_dt_min": 0.0,
+                                                "flip_periods": 2}, name)
+    errors = np.array([r["period_error"] for r in rows])
+    assert rows[0]["period_exact"] == pytest.approx(flip_period(INERTIA, FLIP * grid[0] * 60 / np.linalg.norm(FLIP)),
+                                                    rel=1e-12)
+    slope = np.log(errors[0] / errors[1]) / np.log(grid[0] / grid[1])
+    expected = PERIOD_ORDER.get(name, method.order)
+    assert slope == pytest.approx(expected, abs=0.2 if expected < 4 else 0.45), errors
+    assert errors[1] < 5e-3  # near the closed form already

@@ -157,3 +157,25 @@ def test_scene_rotation_on_jax_agrees_with_numpy():
     assert jax_run.orientations.shape == (len(traj.t), 1, 4)
     np.testing.assert_allclose(jax_run.orientations, numpy_run.orientations, rtol=0, atol=1e-13)
     np.testing.assert_allclose(jax_run.angular_velocities, numpy_run.angular_velocities, rtol=0, atol=1e-12)
+
+
+@pytest.mark.parametrize("extra, message", [
+    ("inertia = [0, 1, 1]", "inertia must be > 0 kg m^2 in every moment"),
+    ("inertia = [-1, 1, 1]", "inertia must be > 0 kg m^2 in every moment"),
+    ("inertia = [1, 1, inf]", "bodies[0].inertia: must be finite"),
+    ("inertia = [1, 1, 2.5]", "breaks the triangle inequality"),
+    ("orientation = [0, 0, 0, 0]", "orientation must be a non-zero quaternion"),
+    ("orientation = [1, nan, 0, 0]", "orientation must be a finite quaternion"),
+    ('shape = "cone"', "bodies[0].shape: must be one of sphere, box, capsule, cylinder, got 'cone'"),
+    ('[[bodies]]\nname = "point"\nmass = 1.0\nradius = 0.1\nposition = [1, 0, 0]\n[[forces.springs]]\n'
+     'bodies = ["ball", "point"]\nstiffness = 1.0\noffsets = [[0, 0, 0], [0.1, 0, 0]]',
+     "puts an end off the centre of 'point', which does not rotate"),
+])
+def test_bad_rotation_input_at_the_command_line_is_one_line_with_status_2(tmp_path, capsys, extra, message):
+    from steplab.cli import main
+
+    path = tmp_path / "s.toml"
+    path.write_text(f"{SIMULATION}\n{BALL}{extra}\n")
+    assert main(["run", str(path)]) == 2
+    err = capsys.readouterr().err
+    assert message in err and err.count("\n") == 1 and "Traceback" not in err

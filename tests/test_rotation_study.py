@@ -62,3 +62,22 @@ def test_figures_from_the_record_alone(record, tmp_path):
                                                         "rotation_stability_top.png"}
     assert "| explicit | 1 |" in study.rotation_table(record)
     assert STUDIES["rotation"] is study.STUDY
+
+
+def test_each_engine_setting_has_a_colour_and_a_marker_of_its_own():
+    """MuJoCo's four settings share the engine's blue: each gets a shade of it and a marker of its own."""
+    from matplotlib import colors
+    from steplab.studies.rotation_engines import scale_top, setting_styles
+
+    settings = ["mujoco-euler", "mujoco-implicitfast", "mujoco-implicit", "mujoco-rk4", "bullet-default"]
+    engine = {"bullet-default": "tab:orange"} | {k: "tab:blue" for k in settings[:4]}
+    styles = setting_styles(settings, engine)
+    shades = [styles[k]["color"] for k in settings]
+    assert len(set(shades)) == len(settings) and len({styles[k]["marker"] for k in settings[:4]}) == 4
+    blue = np.array(colors.to_rgb("tab:blue"))
+    for k in settings[:4]:  # a shade of the engine's colour: the same hue, darker or lighter
+        shade = np.array(styles[k]["color"])
+        assert np.all(shade >= 0) and np.all(shade <= 1)
+        assert np.argmax(shade) == np.argmax(blue)
+    assert styles["bullet-default"]["color"] == colors.to_rgb("tab:orange")  # alone: the engine's own colour
+    assert scale_top([[(1.0, 1e-5)], [(1.0, 150.0)]]) == 1e3 and scale_top([[(1.0, 0.5)]]) == 10.0

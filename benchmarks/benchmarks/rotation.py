@@ -1,7 +1,8 @@
 """Rotation (issue 25): one compiled step of many free tumbling bodies, and its ratio to the memory bound.
 
 ``time_step`` times one call of the compiled loop of one step (what ``simulate_rotation(backend="jax")``
-runs between saved states) on the exponential map (the engines' method, issue 25's target) and dlm.
+runs between saved states) on the exponential map (the engines' method, issue 25's target) and dlm;
+``TumblingKernel`` the exponential map's Numba kernel (``backend="numba"``), the step the ratio times.
 ``track_ratio_to_memory_bound`` is ``steplab bench``'s comparison: the marginal step in the loop over
 the time NumPy takes to stream the bytes the step moves, in the same rounds (target 2).
 """
@@ -35,6 +36,27 @@ class TumblingStep:
         self.call()  # compile
 
     def time_step(self, rotation, n):
+        self.call()
+
+
+class TumblingKernel:
+    """One exponential-map step of N free bodies by the Numba kernel (structure of arrays), as TumblingStep."""
+
+    params = [1_000, 100_000]
+    param_names = ["bodies"]
+
+    def setup(self, n):
+        from steplab.integrators.rotation_compiled import exponential_map_steps, free_bodies
+
+        rng = np.random.default_rng(0)
+        inertia = np.sort(rng.uniform(1.0, 2.0, (n, 3)), axis=1)
+        q = rng.normal(size=(n, 4))
+        q /= np.linalg.norm(q, axis=1, keepdims=True)
+        bodies = free_bodies(q, rng.normal(size=(n, 3)), inertia)
+        self.call = lambda: exponential_map_steps(bodies, 1 / 60, 1)
+        self.call()  # compile
+
+    def time_step(self, n):
         self.call()
 
 

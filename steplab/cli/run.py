@@ -79,7 +79,7 @@ def command(args) -> int:
     energy_start = float(scene.model.energy(scene.y0, scene.rigid_bodies))  # with the spin's 1/2 omega . I omega
     settings = RunSettings(scene, integrator, dt, world, args.precision, energy_start, run_warnings)
     stepper = None if world is None else _keeping(world.stepper, kept, args.save_every)
-    attached = _attached(scene, world, args.backend)
+    attached = _attached(scene, world)
     if attached:  # forces at body-frame points: the rotation steps with the translation
         from steplab.integrators.attached import attached_stepper
 
@@ -150,15 +150,12 @@ def integrator_named(name: str):
     return get_integrator(name)
 
 
-def _attached(scene, world, backend: str) -> bool:
-    """Whether ``scene`` has springs or dampers at body-frame points (refused on JAX and with collisions, for now)."""
+def _attached(scene, world) -> bool:
+    """Whether ``scene`` has springs or dampers at body-frame points (refused with collisions, for now)."""
     from steplab.physics.attachments import attached_forces
 
     if not attached_forces(scene.model):
         return False
-    if backend != "numpy":
-        raise ValueError("springs and dampers at body-frame points (offsets) run on the NumPy backend; "
-                         "use --backend numpy")
     if world is not None:
         raise ValueError("springs and dampers at body-frame points (offsets) do not run with collisions yet; "
                          "use --detector none")
