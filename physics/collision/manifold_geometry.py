@@ -124,6 +124,15 @@ def round_contact(pa, radius_a, pb, radius_b):
     return normal, -depth, scale3(add3(surface_a, surface_b), 0.5)
 
 
+@njit(cache=True, inline="always")
+def write_point(out, k, normal, separation, point, feature):
+    """Point k of a manifold into ``out`` (a :class:`Scratch`)."""
+    out.normal[k, 0], out.normal[k, 1], out.normal[k, 2] = normal
+    out.point[k, 0], out.point[k, 1], out.point[k, 2] = point
+    out.separation[k] = separation
+    out.feature[k] = feature
+
+
 @njit(cache=True)
 def reduce_to_four(point, separation, feature, count):
     """Keep 4 of ``count`` > 4 coplanar contact points, in place: those that hold the body best.

@@ -206,12 +206,12 @@ def static_solids(statics) -> Solids:
 
 @njit(cache=True, inline="always")
 def solid(solids, k):
-    """Shape k of ``solids`` as a :class:`Solid`."""
-    c, f, h = solids.centre, solids.frame, solids.half
-    return Solid(solids.kind[k], (c[k, 0], c[k, 1], c[k, 2]),
+    """Shape k of ``solids`` (a :class:`Solids`, or a plain tuple of its columns) as a :class:`Solid`."""
+    kind, c, f, h, radius, offset = solids
+    return Solid(kind[k], (c[k, 0], c[k, 1], c[k, 2]),
                  ((f[k, 0, 0], f[k, 1, 0], f[k, 2, 0]), (f[k, 0, 1], f[k, 1, 1], f[k, 2, 1]),
                   (f[k, 0, 2], f[k, 1, 2], f[k, 2, 2])),
-                 (h[k, 0], h[k, 1], h[k, 2]), solids.radius[k], solids.offset[k])
+                 (h[k, 0], h[k, 1], h[k, 2]), radius[k], offset[k])
 
 
 # The table is inlined into its caller: a call passing a Solid by value costs 2 us a pair (10^4 boxes'
@@ -229,12 +229,13 @@ def collide_ordered(a, b, margin, out):
         return sphere_plane_points(a.centre, a.radius, b.frame[2], b.offset, margin, 0, out, 0)
     if a.kind == BOX:
         if b.kind == BOX:
-            return box_box(a.centre, a.frame, a.half, b.centre, b.frame, b.half, margin, out)
+            return box_box((a.centre, a.frame, a.half), (b.centre, b.frame, b.half), margin, out)
         if b.kind == CAPSULE:
-            return box_capsule(a.centre, a.frame, a.half, b.centre, b.frame, b.half, b.radius, margin, out)
+            return box_capsule((a.centre, a.frame, a.half), (b.centre, b.frame, b.half, b.radius), margin, out)
         return box_plane(a.centre, a.frame, a.half, b.frame[2], b.offset, margin, out)
     if b.kind == CAPSULE:
-        return capsule_capsule(a.centre, a.frame, a.half, a.radius, b.centre, b.frame, b.half, b.radius, margin, out)
+        return capsule_capsule((a.centre, a.frame, a.half, a.radius), (b.centre, b.frame, b.half, b.radius), margin,
+                               out)
     return capsule_plane(a.centre, a.frame, a.half, a.radius, b.frame[2], b.offset, margin, out)
 
 
@@ -277,6 +278,11 @@ def static_candidates(bodies, statics, reach):
 def manifold_rows(bodies, statics, pairs, static_pairs, margin, out, scratch):
     """Every pair's manifold into the rows of ``out`` (a ManifoldPoints of capacity 4 per pair): the rows written."""
     rows = 0
+    # the columns out of the NamedTuples before the loop (a field read in a loop costs a reference count)
+    a_out, b_out, normal, point, separation, feature = out
+    bodies, statics = tuple(bodies), tuple(statics)
+    found_normal, found_point, found_separation, found_feature = (scratch.normal, scratch.point, scratch.separation,
+                                                                  scratch.feature)
     for p in range(len(pairs) + len(static_pairs)):
         if p < len(pairs):
             i, j = pairs[p, 0], pairs[p, 1]
@@ -287,10 +293,10 @@ def manifold_rows(bodies, statics, pairs, static_pairs, margin, out, scratch):
             count = collide(solid(bodies, i), solid(statics, s), margin[i], scratch)
             b = -1 - s
         for k in range(count):  # element by element: a row slice would be a view made and freed per point
-            out.a[rows], out.b[rows] = i, b
+            a_out[rows], b_out[rows] = i, b
             for m in range(3):
-                out.normal[rows, m], out.point[rows, m] = scratch.normal[k, m], scratch.point[k, m]
-            out.separation[rows], out.feature[rows] = scratch.separation[k], scratch.feature[k]
+                normal[rows, m], point[rows, m] = found_normal[k, m], found_point[k, m]
+            separation[rows], feature[rows] = found_separation[k], found_feature[k]
             rows += 1
     return rows
 
