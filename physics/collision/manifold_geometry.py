@@ -26,13 +26,12 @@ class Scratch(NamedTuple):
     feature: np.ndarray     # (8,) int64
     polygon: np.ndarray     # (2, 8, 3) the clipped face, in and out of one clipping plane
     label: np.ndarray       # (2, 8, 2) int64 the two lines meeting at each of its vertices
-    axes: np.ndarray        # (3, 3) one box's axes in the other's frame
 
 
 def make_scratch() -> Scratch:
     """A quadrilateral clipped by 4 planes has at most 8 vertices: every buffer holds 8."""
     return Scratch(np.empty((8, 3)), np.empty((8, 3)), np.empty(8), np.empty(8, np.int64),
-                   np.empty((2, 8, 3)), np.empty((2, 8, 2), np.int64), np.empty((3, 3)))
+                   np.empty((2, 8, 3)), np.empty((2, 8, 2), np.int64))
 
 
 @njit(cache=True, inline="always")

@@ -275,8 +275,15 @@ def static_candidates(bodies, statics, reach):
 
 
 @njit(cache=True)
-def manifold_rows(bodies, statics, pairs, static_pairs, margin, out, scratch):
-    """Every pair's manifold into the rows of ``out`` (a ManifoldPoints of capacity 4 per pair): the rows written."""
+def manifold_rows(bodies, statics, pairs, static_pairs, margins, out, scratch):
+    """Every pair's manifold into the rows of ``out`` (a ManifoldPoints of capacity 4 per pair): the rows written.
+
+    ``margins`` = (margin, extent), (N,) each: a body's speculative margin and its bounding radius
+    plus that margin. Two bodies whose centres are farther apart than their extents can have no
+    point, and are passed over before their shapes are read (a box pit's separated pairs: one
+    distance instead of the 15 axes, and 3 numbers of each body read instead of 16)."""
+    margin, extent = margins
+    centre = bodies.centre
     rows = 0
     # the columns out of the NamedTuples before the loop (a field read in a loop costs a reference count)
     a_out, b_out, normal, point, separation, feature = out
@@ -286,6 +293,9 @@ def manifold_rows(bodies, statics, pairs, static_pairs, margin, out, scratch):
     for p in range(len(pairs) + len(static_pairs)):
         if p < len(pairs):
             i, j = pairs[p, 0], pairs[p, 1]
+            d = (centre[j, 0] - centre[i, 0], centre[j, 1] - centre[i, 1], centre[j, 2] - centre[i, 2])
+            if dot3(d, d) >= (extent[i] + extent[j]) ** 2:
+                continue
             count = collide(solid(bodies, i), solid(bodies, j), margin[i] + margin[j], scratch)
             b = j
         else:
@@ -335,10 +345,12 @@ def manifolds(shapes: RigidShapes, poses: Poses, pairs, statics=(), margin=0.0) 
     key = key[np.diff(key, prepend=-1) != 0]
     pairs = np.column_stack([key // n, key % n])
     bodies, static = body_solids(shapes, poses), static_solids(statics)
-    static_pairs = static_candidates(bodies, static, reach(shapes) + margin)
+    extent = np.ascontiguousarray(reach(shapes) + margin)
+    static_pairs = static_candidates(bodies, static, extent)
     capacity = MAX_POINTS * (len(pairs) + len(static_pairs))
     out = ManifoldPoints(np.empty(capacity, np.int64), np.empty(capacity, np.int64), np.empty((capacity, 3)),
                          np.empty((capacity, 3)), np.empty(capacity), np.empty(capacity, np.int64))
-    rows = manifold_rows(bodies, static, pairs, static_pairs, np.ascontiguousarray(margin), out, make_scratch())
+    rows = manifold_rows(bodies, static, pairs, static_pairs, (np.ascontiguousarray(margin), extent), out,
+                         make_scratch())
     order = np.lexsort((out.feature[:rows], out.b[:rows], out.a[:rows]))
     return ManifoldPoints(*(column[:rows][order] for column in out))
