@@ -103,6 +103,12 @@ def world_inverse_inertia(orientation, inverse_principal) -> np.ndarray:
     return np.einsum("nij,nj,nkj->nik", r, inverse_principal, r)
 
 
+def _sorted(a, b, feature) -> bool:
+    """Whether the rows (a, b, feature) are in strictly increasing lexicographic order."""
+    da, db, df = np.diff(a), np.diff(b), np.diff(feature)
+    return bool(np.all((da > 0) | ((da == 0) & ((db > 0) | ((db == 0) & (df > 0))))))
+
+
 @dataclasses.dataclass
 class Solved:
     """A step's contact points and their impulses, for the next step's warm start and the log."""
@@ -220,6 +226,8 @@ class RigidSolverStep:
         margin = reach - self.bounding + self.margin + np.linalg.norm(np.asarray(y_forces[0]) - q0, axis=1)
         points = self.narrow_phase.manifolds(self.shapes, self.narrow_phase.Poses(q0, self.orientation),
                                              np.column_stack([pairs.i, pairs.j]), self.world.shapes, margin)
+        if _sorted(points.a, points.b, points.feature):  # as the narrow phase returns them
+            return type(points)(*(np.ascontiguousarray(column) for column in points))
         order = np.lexsort((points.feature, points.b, points.a))
         return type(points)(*(np.ascontiguousarray(column)[order] for column in points))
 
