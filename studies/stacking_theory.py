@@ -101,7 +101,8 @@ def stack_contacts(centres, sizes, floor: float = 0.0) -> StackContacts:
     return StackContacts(np.array(upper, int), np.array(lower, int), np.array(points, float).reshape(-1, 3))
 
 
-def static_deflection(centres, sizes, masses, contact_hertz: float, g: float = G) -> np.ndarray:
+def static_deflection(centres, sizes, masses, contact_hertz: float, g: float = G,
+                      sticking: bool = False) -> np.ndarray:
     """Each box's sink (m, > 0 downwards) at the equilibrium of the soft contacts' springs.
 
     Parameters
@@ -112,6 +113,8 @@ def static_deflection(centres, sizes, masses, contact_hertz: float, g: float = G
         kg.
     contact_hertz : float
         The soft contact's natural frequency, Hz.
+    sticking : bool
+        Whether friction holds every contact point: no slip across the normal (see Notes).
 
     Notes
     -----
@@ -122,12 +125,27 @@ def static_deflection(centres, sizes, masses, contact_hertz: float, g: float = G
     angular part (r x n) I^-1 (r x n) for n = z; a box's principal moments). The stiffness
     matrix K = sum k a a^T (a the point's row of the compatibility map) and the weights f give
     K u = f, solved densely (3 n unknowns).
+
+    With ``sticking``, each box has all 6 small displacements (u, phi; a point moves by
+    u + phi x r), and friction holds each contact point: the two bodies' points do not slip
+    along x or y. The solver's friction is a rigid constraint (it drives the tangential
+    velocity to 0 while |P_t| <= mu P, with no softness), so this is the rigid limit of
+    tangential springs: K restricted to the displacements C u = 0 that keep every point
+    stuck (u = N z with N a basis of the null space of C, N^T K N z = N^T f; computed as its
+    limit, :func:`_sticking_deflection`). In a pyramid it
+    matters: a box on two others would tilt their tops apart (the normal springs alone let
+    them turn and slide under it), and the stuck points forbid that shear, so the pyramid is
+    stiffer. In a column nothing tilts and both give n^2 g / omega^2. (The springs enter
+    with the weights along -z here, and the sink is returned > 0 down, as without it.)
     """
     centres, sizes, masses = (np.asarray(x, float) for x in (centres, sizes, masses))
     n, omega = len(masses), 2 * math.pi * contact_hertz
     contacts = stack_contacts(centres, sizes)
     a2, b2, c2 = (sizes**2).T
     ix, iy = masses / 12 * (b2 + c2), masses / 12 * (a2 + c2)
+    if sticking:
+        return _sticking_deflection(centres, masses, np.stack([ix, iy, masses / 12 * (a2 + b2)], axis=1),
+                                    contacts, omega, g)
     rows = np.zeros((len(contacts.points), 3 * n))
     inverse_mass = np.zeros(len(contacts.points))
     for sign, body in ((1.0, contacts.upper), (-1.0, contacts.lower)):
@@ -143,3 +161,46 @@ def static_deflection(centres, sizes, masses, contact_hertz: float, g: float = G
     f = np.zeros(3 * n)
     f[0::3] = masses * g
     return np.linalg.solve(K, f)[0::3]
+
+
+#: the no-slip constraints' springs, as a multiple of each point's normal spring: the rigid limit
+#: to 1e-6 relative (the sink converges as 1 / STUCK; an exact null-space solve agrees, tested)
+STUCK = 1e6
+
+
+def _sticking_deflection(centres, masses, inertia, contacts, omega, g) -> np.ndarray:
+    """:func:`static_deflection` with every contact point held by friction (6 unknowns a box, u and phi).
+
+    The no-slip constraints C u = 0 enter as springs :data:`STUCK` times each point's normal
+    spring: one dense solve, where the exact null-space basis of C (an SVD of 2 P x 6 n) takes
+    a minute for the 210-box pyramid."""
+    n, count = len(masses), len(contacts.points)
+    move = sticking_moves(centres, contacts, n)
+    inverse_mass = np.zeros(count)
+    for body in (contacts.upper, contacts.lower):
+        box = body >= 0
+        k, r = body[box], contacts.points[box] - centres[body[box]]
+        inverse_mass[np.nonzero(box)[0]] += 1 / masses[k] + r[:, 1] ** 2 / inertia[k, 0] + r[:, 0] ** 2 / inertia[k, 1]
+    spring = omega**2 / inverse_mass
+    K = sum(move[:, d, :].T @ ((spring * (1.0 if d == 2 else STUCK))[:, None] * move[:, d, :]) for d in range(3))
+    f = np.zeros(6 * n)
+    f[2::6] = -masses * g  # the weights, along -z
+    return -np.linalg.solve(K, f)[2::6]
+
+
+def sticking_moves(centres, contacts, n: int) -> np.ndarray:
+    """(P, 3, 6 n): each contact point's relative displacement (the upper box's point less the
+    lower's) along x, y, z per unknown, u = (u_x, u_y, u_z, phi_x, phi_y, phi_z) per box, a
+    point r from a centre moving by u + phi x r."""
+    move = np.zeros((len(contacts.points), 3, 6 * n))
+    for sign, body in ((1.0, contacts.upper), (-1.0, contacts.lower)):
+        box = body >= 0
+        k, r = body[box], contacts.points[box] - centres[body[box]]
+        p = np.nonzero(box)[0]
+        for d in range(3):
+            move[p, d, 6 * k + d] = sign
+        # phi x r = (phi_y r_z - phi_z r_y, phi_z r_x - phi_x r_z, phi_x r_y - phi_y r_x)
+        move[p, 0, 6 * k + 4], move[p, 0, 6 * k + 5] = sign * r[:, 2], -sign * r[:, 1]
+        move[p, 1, 6 * k + 5], move[p, 1, 6 * k + 3] = sign * r[:, 0], -sign * r[:, 2]
+        move[p, 2, 6 * k + 3], move[p, 2, 6 * k + 4] = sign * r[:, 1], -sign * r[:, 0]
+    return move

@@ -92,3 +92,37 @@ def test_pyramid_springs_carry_its_weight_symmetrically():
     inverse_mass = 1 + 6 * (r[:, 0] ** 2 + r[:, 1] ** 2)  # cubes: 1/m + r_y^2 / I_x + r_x^2 / I_y, I = 1/6
     force = omega**2 / inverse_mass * sink[contacts.upper[floor]]
     assert force.sum() == pytest.approx(210 * G, rel=1e-9)
+
+
+@pytest.mark.parametrize("n", [1, 4])
+def test_friction_does_not_stiffen_a_column(n):
+    """Nothing in a column tilts or shears: held by friction it still sinks n^2 g / omega^2."""
+    omega = 2 * math.pi * 30.0
+    sink = static_deflection(*cubes("column", n), 30.0, sticking=True)
+    assert sink[-1] == pytest.approx(n * n * G / omega**2, rel=1e-8)
+
+
+def test_sticking_pyramid_is_the_rigid_limit_of_its_constraints():
+    """The stuck points' springs (STUCK times the normal ones) against the exact constrained
+    equilibrium, solved on the null space of the no-slip constraints by scipy's SVD; and
+    friction makes the pyramid stiffer than its normal springs alone."""
+    from scipy.linalg import null_space
+
+    centres, sizes, masses = cubes("pyramid", 4)
+    omega = 2 * math.pi * 30.0
+    sink = static_deflection(centres, sizes, masses, 30.0, sticking=True)
+    contacts = stack_contacts(centres, sizes)
+    n, count = len(masses), len(contacts.points)
+    move = theory.sticking_moves(centres, contacts, n)
+    inverse_mass = np.zeros(count)  # cubes of 1 m: I = m / 6 about every axis
+    for body in (contacts.upper, contacts.lower):
+        box = body >= 0
+        r = contacts.points[box] - centres[body[box]]
+        inverse_mass[box] += 1 / masses[body[box]] + (r[:, 0] ** 2 + r[:, 1] ** 2) * 6 / masses[body[box]]
+    K = move[:, 2, :].T @ ((omega**2 / inverse_mass)[:, None] * move[:, 2, :])
+    basis = null_space(move[:, :2, :].reshape(2 * count, 6 * n))
+    f = np.zeros(6 * n)
+    f[2::6] = -masses * G
+    exact = -(basis @ np.linalg.solve(basis.T @ K @ basis, basis.T @ f))[2::6]
+    np.testing.assert_allclose(sink, exact, rtol=1e-5)
+    assert np.all(sink[-1] < static_deflection(centres, sizes, masses, 30.0)[-1])

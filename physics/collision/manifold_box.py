@@ -23,7 +23,18 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-from .manifold_geometry import add3, cross3, madd3, reduce_to_four, scale3, segment_segment, sign_of, to_local, to_world
+from .manifold_geometry import (
+    add3,
+    cross3,
+    madd3,
+    reduce_to_four,
+    scale3,
+    segment_segment,
+    sign_of,
+    to_local,
+    to_world,
+    write_point,
+)
 from .sphere_contacts import dot3, sphere_plane, sub3
 
 #: m, Box2D's b2_linearSlop: the contact distance below which nothing a player can see changes
@@ -43,27 +54,32 @@ EDGE_PARALLEL = 1e-6
 EDGE_FEATURE = 2 * 6 * 6 * 64
 
 
-@njit(cache=True)
-def box_box(ca, fa, ha, cb, fb, hb, margin, out):
+# inlined into the narrow phase's loop: a call costs more than the 15 axes (300 ns a pair against 20)
+@njit(cache=True, inline="always")
+def box_box(box_a, box_b, margin, out):
     """The manifold of box a and box b (up to 4 points with separation < margin) into ``out``: its count.
 
-    ``margin`` m is the speculative distance; the normal points from a to b.
+    Each box is (centre, frame, half); ``margin`` m is the speculative distance; the normal points
+    from a to b. (Boxes whose bounding spheres are ``margin`` apart never come here:
+    :func:`.manifolds.manifold_rows` passes them over.)
     """
+    ca, fa, ha = box_a
+    cb, fb, hb = box_b
     t = to_local(fa, sub3(cb, ca))  # b's centre in a's frame
-    c = out.axes  # c[i, j] = a_i . b_j, b's axes in a's frame by columns
-    for i in range(3):
-        for j in range(3):
-            c[i, j] = dot3(fa[i], fb[j])
+    # c[i][j] = a_i . b_j, b's axes in a's frame by columns (a tuple: kept in registers)
+    c = ((dot3(fa[0], fb[0]), dot3(fa[0], fb[1]), dot3(fa[0], fb[2])),
+         (dot3(fa[1], fb[0]), dot3(fa[1], fb[1]), dot3(fa[1], fb[2])),
+         (dot3(fa[2], fb[0]), dot3(fa[2], fb[1]), dot3(fa[2], fb[2])))
     # the face axes of a: |t_i| against the two boxes' reaches h_i and sum_j |c_ij| hb_j
     sep_a, face_a = -np.inf, 0
     for i in range(3):
-        s = abs(t[i]) - (ha[i] + abs(c[i, 0]) * hb[0] + abs(c[i, 1]) * hb[1] + abs(c[i, 2]) * hb[2])
+        s = abs(t[i]) - (ha[i] + abs(c[i][0]) * hb[0] + abs(c[i][1]) * hb[1] + abs(c[i][2]) * hb[2])
         if s > sep_a:
             sep_a, face_a = s, i
     sep_b, face_b = -np.inf, 0
     for j in range(3):
-        s = (abs(t[0] * c[0, j] + t[1] * c[1, j] + t[2] * c[2, j])
-             - (abs(c[0, j]) * ha[0] + abs(c[1, j]) * ha[1] + abs(c[2, j]) * ha[2] + hb[j]))
+        s = (abs(t[0] * c[0][j] + t[1] * c[1][j] + t[2] * c[2][j])
+             - (abs(c[0][j]) * ha[0] + abs(c[1][j]) * ha[1] + abs(c[2][j]) * ha[2] + hb[j]))
         if s > sep_b:
             sep_b, face_b = s, j
     if max(sep_a, sep_b) >= margin:
@@ -72,7 +88,7 @@ def box_box(ca, fa, ha, cb, fb, hb, margin, out):
     sep_e, edge_a, edge_b = -np.inf, -1, -1
     for i in range(3):
         for j in range(3):
-            bj = (c[0, j], c[1, j], c[2, j])
+            bj = (c[0][j], c[1][j], c[2][j])
             axis = cross3((1.0 if i == 0 else 0.0, 1.0 if i == 1 else 0.0, 1.0 if i == 2 else 0.0), bj)
             length = np.sqrt(dot3(axis, axis))
             if length < EDGE_PARALLEL:
@@ -80,23 +96,26 @@ def box_box(ca, fa, ha, cb, fb, hb, margin, out):
             reach_a = ha[0] * abs(axis[0]) + ha[1] * abs(axis[1]) + ha[2] * abs(axis[2])
             reach_b = 0.0
             for m in range(3):
-                reach_b += hb[m] * abs(axis[0] * c[0, m] + axis[1] * c[1, m] + axis[2] * c[2, m])
+                reach_b += hb[m] * abs(axis[0] * c[0][m] + axis[1] * c[1][m] + axis[2] * c[2][m])
             s = (abs(dot3(t, axis)) - reach_a - reach_b) / length
             if s > sep_e:
                 sep_e, edge_a, edge_b = s, i, j
     if sep_e >= margin:
         return 0
     if sep_e > max(sep_a, sep_b) + AXIS_TOLERANCE:
-        return edge_contact(ca, fa, ha, edge_a, cb, fb, hb, edge_b, sep_e, margin, out)
+        return edge_contact((box_a, edge_a), (box_b, edge_b), sep_e, margin, out)
     if sep_b > sep_a + AXIS_TOLERANCE:
-        count = face_contact(cb, fb, hb, face_b, ca, fa, ha, 1, margin, out)
-        out.normal[:count] = -out.normal[:count]  # the reference normal points from b to a
+        count = face_contact(box_b, face_b, box_a, 1, margin, out)
+        normal = out.normal
+        for k in range(count):  # the reference normal points from b to a
+            for m in range(3):
+                normal[k, m] = -normal[k, m]
         return count
-    return face_contact(ca, fa, ha, face_a, cb, fb, hb, 0, margin, out)
+    return face_contact(box_a, face_a, box_b, 0, margin, out)
 
 
 @njit(cache=True)
-def face_contact(c1, f1, h1, axis, c2, f2, h2, reference, margin, out):
+def face_contact(box1, axis, box2, reference, margin, out):
     """Box 1's face on ``axis`` (the side facing box 2) clips box 2's most opposed face: the points below margin.
 
     The incident face's 4 corners, in box 1's frame, are clipped by the reference face's side
@@ -105,6 +124,9 @@ def face_contact(c1, f1, h1, axis, c2, f2, h2, reference, margin, out):
     features as long as they touch. A vertex's separation is its height above the reference
     face; its point lies halfway down to it. The normal points from box 1 to box 2.
     """
+    c1, f1, h1 = box1
+    c2, f2, h2 = box2
+    out_normal, out_point, out_separation, out_feature = out.normal, out.point, out.separation, out.feature
     side = sign_of(dot3(sub3(c2, c1), f1[axis]))
     normal = scale3(f1[axis], side)
     j, most = 0, -1.0
@@ -126,8 +148,8 @@ def face_contact(c1, f1, h1, axis, c2, f2, h2, reference, margin, out):
     for plane in range(4):
         along = (axis + 1 + plane // 2) % 3
         sense = 1.0 if plane % 2 == 0 else -1.0
-        count = clip(polygon[now], label[now], count, along, sense, h1[along], 4 + plane,
-                     polygon[1 - now], label[1 - now])
+        count = clip((polygon[now], label[now]), count, (along, sense, h1[along], 4 + plane),
+                     (polygon[1 - now], label[1 - now]))
         now = 1 - now
         if count == 0:
             return 0
@@ -141,19 +163,21 @@ def face_contact(c1, f1, h1, axis, c2, f2, h2, reference, margin, out):
         if height >= margin:
             continue
         point = add3(c1, to_world(f1, x))
-        out.point[kept, 0], out.point[kept, 1], out.point[kept, 2] = madd3(point, -0.5 * height, normal)
-        out.normal[kept, 0], out.normal[kept, 1], out.normal[kept, 2] = normal
-        out.separation[kept] = height
-        out.feature[kept] = base + label[now, k, 0] * 8 + label[now, k, 1]
+        out_point[kept, 0], out_point[kept, 1], out_point[kept, 2] = madd3(point, -0.5 * height, normal)
+        out_normal[kept, 0], out_normal[kept, 1], out_normal[kept, 2] = normal
+        out_separation[kept] = height
+        out_feature[kept] = base + label[now, k, 0] * 8 + label[now, k, 1]
         kept += 1
     if kept > 4:  # every normal is the reference face's: only the points need choosing
-        kept = reduce_to_four(out.point, out.separation, out.feature, kept)
+        kept = reduce_to_four(out_point, out_separation, out_feature, kept)
     return kept
 
 
 @njit(cache=True)
-def clip(polygon, label, count, along, sense, limit, plane, clipped, clipped_label):
-    """Sutherland–Hodgman: the polygon's part with sense * x_along <= limit; its vertex count.
+def clip(source, count, cut, target):
+    """Sutherland–Hodgman: the part of the polygon ``source`` = (vertices, labels) with
+    sense * x_along <= limit, ``cut`` = (along, sense, limit, the plane's line id), written into
+    ``target`` = (vertices, labels); its vertex count.
 
     A vertex less than :data:`CLIP_TOLERANCE` outside the plane is kept as it is; an edge
     leaving the kept side is cut where it crosses the plane itself. The cut vertex lies on the
@@ -161,6 +185,9 @@ def clip(polygon, label, count, along, sense, limit, plane, clipped, clipped_lab
     it (plane, that line), so each vertex is named by the line the boundary arrives along and
     the one it leaves along.
     """
+    polygon, label = source
+    along, sense, limit, plane = cut
+    clipped, clipped_label = target
     kept = 0
     for k in range(count):
         q = (k + 1) % count
@@ -184,8 +211,10 @@ def clip(polygon, label, count, along, sense, limit, plane, clipped, clipped_lab
 
 
 @njit(cache=True)
-def support_edge(centre, frame, half, axis, normal, sense):
-    """The edge of a box along ``axis`` farthest along sense * normal: (its start, its direction, its id 0..11)."""
+def support_edge(box, axis, normal, sense):
+    """The edge of a box (centre, frame, half) along ``axis`` farthest along sense * normal: (its start, its
+    direction, its id 0..11)."""
+    centre, frame, half = box
     middle, bits = centre, 0
     for n in range(2):
         k = (axis + 1 + n) % 3
@@ -196,20 +225,24 @@ def support_edge(centre, frame, half, axis, normal, sense):
 
 
 @njit(cache=True)
-def edge_contact(ca, fa, ha, i, cb, fb, hb, j, separation, margin, out):
-    """Edge a_i of box a against edge b_j of box b: the closest points of the two support edges, one point.
+def edge_contact(edge_a, edge_b, separation, margin, out):
+    """Edge a_i of box a against edge b_j of box b, ``edge_a`` = (box a, i) and ``edge_b`` = (box b, j):
+    the closest points of the two support edges, one point.
 
     Both edges are perpendicular to the axis n = a_i x b_j, so their distance along n is the
     axis's separation wherever the closest points fall. For boxes apart the point's gap is the
     distance of the closest points themselves, and its normal joins them: the gap those two
     edges actually have (never less than the boxes' distance, so no contact is reported early).
     """
+    (box_a, i), (box_b, j) = edge_a, edge_b
+    ca, fa = box_a[0], box_a[1]
+    cb, fb = box_b[0], box_b[1]
     normal = cross3(fa[i], fb[j])
     normal = scale3(normal, 1.0 / np.sqrt(dot3(normal, normal)))
     if dot3(normal, sub3(cb, ca)) < 0:
         normal = scale3(normal, -1.0)
-    pa, da, id_a = support_edge(ca, fa, ha, i, normal, 1.0)
-    pb, db, id_b = support_edge(cb, fb, hb, j, normal, -1.0)
+    pa, da, id_a = support_edge(box_a, i, normal, 1.0)
+    pb, db, id_b = support_edge(box_b, j, normal, -1.0)
     s, t = segment_segment(pa, da, pb, db)
     xa, xb = madd3(pa, s, da), madd3(pb, t, db)
     if separation > 0:  # apart: the gap of the closest points, along the line joining them
@@ -218,10 +251,7 @@ def edge_contact(ca, fa, ha, i, cb, fb, hb, j, separation, margin, out):
         if separation >= margin:
             return 0
         normal = scale3(gap, 1.0 / separation)
-    out.point[0, 0], out.point[0, 1], out.point[0, 2] = scale3(add3(xa, xb), 0.5)
-    out.normal[0, 0], out.normal[0, 1], out.normal[0, 2] = normal
-    out.separation[0] = separation
-    out.feature[0] = EDGE_FEATURE + id_a * 12 + id_b
+    write_point(out, 0, normal, separation, scale3(add3(xa, xb), 0.5), EDGE_FEATURE + id_a * 12 + id_b)
     return 1
 
 
@@ -240,16 +270,17 @@ def box_plane(c, frame, half, plane_normal, offset, margin, out):
     side = -sign_of(dot3(plane_normal, frame[j]))
     u, v = (j + 1) % 3, (j + 2) % 3
     kept = 0
+    out_normal, out_point, out_separation, out_feature = out.normal, out.point, out.separation, out.feature
     for k in range(4):
         su, sv = 1.0 if k % 2 == 0 else -1.0, 1.0 if k < 2 else -1.0
         corner = madd3(madd3(madd3(c, side * half[j], frame[j]), su * half[u], frame[u]), sv * half[v], frame[v])
         normal, _, height = sphere_plane(corner, 0.0, plane_normal, offset)  # the corner as a sphere of radius 0
         if height >= margin:
             continue
-        out.point[kept, 0], out.point[kept, 1], out.point[kept, 2] = madd3(corner, -0.5 * height, plane_normal)
-        out.normal[kept, 0], out.normal[kept, 1], out.normal[kept, 2] = normal
-        out.separation[kept] = height
+        out_point[kept, 0], out_point[kept, 1], out_point[kept, 2] = madd3(corner, -0.5 * height, plane_normal)
+        out_normal[kept, 0], out_normal[kept, 1], out_normal[kept, 2] = normal
+        out_separation[kept] = height
         # the corner's id: bit 4 >> k set where it lies on the + side of axis k
-        out.feature[kept] = (4 >> j if side > 0 else 0) + (4 >> u if su > 0 else 0) + (4 >> v if sv > 0 else 0)
+        out_feature[kept] = (4 >> j if side > 0 else 0) + (4 >> u if su > 0 else 0) + (4 >> v if sv > 0 else 0)
         kept += 1
     return kept

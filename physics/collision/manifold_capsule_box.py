@@ -16,8 +16,8 @@ import numpy as np
 from numba import njit
 
 from .manifold_box import AXIS_TOLERANCE, CLIP_TOLERANCE, EDGE_PARALLEL, support_edge
-from .manifold_geometry import add3, cross3, madd3, scale3, segment_segment, sign_of, to_local, to_world
-from .manifold_round import round_points, segment_of, write_point
+from .manifold_geometry import add3, cross3, madd3, scale3, segment_segment, sign_of, to_local, to_world, write_point
+from .manifold_round import round_points, segment_of
 from .sphere_contacts import dot3, sub3
 
 #: feature ids: a face contact is face * 6 + (the end 0 or 1, or 2 + the side plane that cut it);
@@ -73,13 +73,17 @@ def segment_box_closest(p, d, half):
 
 
 @njit(cache=True)
-def face_points(cb, fb, hb, axis, side, p, d, radius, margin, out):
-    """The segment (box frame p + t d) clipped to the prism over the box's face (axis, side): its ends below margin.
+def face_points(box, face, segment, radius, margin, out):
+    """The segment (box frame p + t d, ``segment`` = (p, d)) clipped to the prism over the box's face
+    ``face`` = (axis, side): its ends below margin; ``box`` = (centre, frame, half).
 
     Each end's gap is its height above the face less the radius; the point lies halfway between
     the capsule's surface and the face. Ids: face * 6 + 0 or 1 for an end of the segment, 2 + the
     side plane for an end the clipping made.
     """
+    cb, fb, hb = box
+    axis, side = face
+    p, d = segment
     t0, t1, label0, label1 = 0.0, 1.0, 0, 1
     for n in range(2):
         k = (axis + 1 + n) % 3
@@ -95,7 +99,7 @@ def face_points(cb, fb, hb, axis, side, p, d, radius, margin, out):
     if t0 > t1:
         return 0
     normal = scale3(fb[axis], side)
-    face = 2 * axis + (1 if side > 0 else 0)
+    face_id = 2 * axis + (1 if side > 0 else 0)
     ends = 1 if t1 == t0 or (d[0] == 0 and d[1] == 0 and d[2] == 0) else 2  # a point, or a stretch
     kept = 0
     for end in range(ends):
@@ -106,14 +110,17 @@ def face_points(cb, fb, hb, axis, side, p, d, radius, margin, out):
             continue
         point = add3(cb, to_world(fb, y))
         write_point(out, kept, normal, height - radius, madd3(point, -0.5 * (radius + height), normal),
-                    face * 6 + label)
+                    face_id * 6 + label)
         kept += 1
     return kept
 
 
 @njit(cache=True)
-def box_capsule(cb, fb, hb, cc, fc, hc, radius, margin, out):
-    """The manifold of a box and a capsule: up to 2 points, the normal from the box to the capsule."""
+def box_capsule(box, capsule, margin, out):
+    """The manifold of a box (centre, frame, half) and a capsule (centre, frame, half, radius): up to 2
+    points, the normal from the box to the capsule."""
+    cb, fb, hb = box
+    cc, fc, hc, radius = capsule
     start, d = segment_of(cc, fc, hc)
     p, dl = to_local(fb, sub3(start, cb)), to_local(fb, d)
     t, distance2 = segment_box_closest(p, dl, hb)
@@ -124,7 +131,7 @@ def box_capsule(cb, fb, hb, cc, fc, hc, radius, margin, out):
             if abs(y[k]) > hb[k]:
                 outside, axis = outside + 1, k
         if outside == 1:  # the closest point is inside a face: along that face
-            return face_points(cb, fb, hb, axis, sign_of(y[axis]), p, dl, radius, margin, out)
+            return face_points(box, (axis, sign_of(y[axis])), (p, dl), radius, margin, out)
         clamped = (min(max(y[0], -hb[0]), hb[0]), min(max(y[1], -hb[1]), hb[1]), min(max(y[2], -hb[2]), hb[2]))
         return round_points(add3(cb, to_world(fb, clamped)), 0.0, add3(start, scale3(d, t)), radius, margin,
                             CORNER_FEATURE, out)
@@ -150,12 +157,12 @@ def box_capsule(cb, fb, hb, cc, fc, hc, radius, margin, out):
         return 0
     if best_edge > best_face + AXIS_TOLERANCE:
         normal = to_world(fb, edge_axis)
-        pa, da, edge_id = support_edge(cb, fb, hb, edge, normal, 1.0)
+        pa, da, edge_id = support_edge(box, edge, normal, 1.0)
         s, u = segment_segment(pa, da, start, d)
         xa, xb = madd3(pa, s, da), madd3(madd3(start, u, d), -radius, normal)
         write_point(out, 0, normal, best_edge, scale3(add3(xa, xb), 0.5), EDGE_FEATURE + edge_id)
         return 1
-    count = face_points(cb, fb, hb, face, sign_of(middle[face]), p, dl, radius, margin, out)
+    count = face_points(box, (face, sign_of(middle[face])), (p, dl), radius, margin, out)
     if count == 0:  # the segment crosses the box's middle outside the face's prism: its deepest point alone
         normal = scale3(fb[face], sign_of(middle[face]))
         point = add3(cb, to_world(fb, y))

@@ -26,13 +26,12 @@ class Scratch(NamedTuple):
     feature: np.ndarray     # (8,) int64
     polygon: np.ndarray     # (2, 8, 3) the clipped face, in and out of one clipping plane
     label: np.ndarray       # (2, 8, 2) int64 the two lines meeting at each of its vertices
-    axes: np.ndarray        # (3, 3) one box's axes in the other's frame
 
 
 def make_scratch() -> Scratch:
     """A quadrilateral clipped by 4 planes has at most 8 vertices: every buffer holds 8."""
     return Scratch(np.empty((8, 3)), np.empty((8, 3)), np.empty(8), np.empty(8, np.int64),
-                   np.empty((2, 8, 3)), np.empty((2, 8, 2), np.int64), np.empty((3, 3)))
+                   np.empty((2, 8, 3)), np.empty((2, 8, 2), np.int64))
 
 
 @njit(cache=True, inline="always")
@@ -122,6 +121,15 @@ def round_contact(pa, radius_a, pb, radius_b):
     normal, depth = sphere_sphere(sub3(pb, pa), radius_a + radius_b)
     surface_a, surface_b = madd3(pa, radius_a, normal), madd3(pb, -radius_b, normal)
     return normal, -depth, scale3(add3(surface_a, surface_b), 0.5)
+
+
+@njit(cache=True, inline="always")
+def write_point(out, k, normal, separation, point, feature):
+    """Point k of a manifold into ``out`` (a :class:`Scratch`)."""
+    out.normal[k, 0], out.normal[k, 1], out.normal[k, 2] = normal
+    out.point[k, 0], out.point[k, 1], out.point[k, 2] = point
+    out.separation[k] = separation
+    out.feature[k] = feature
 
 
 @njit(cache=True)

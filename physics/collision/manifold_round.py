@@ -14,16 +14,19 @@ import numpy as np
 from numba import njit
 
 from .manifold_box import LINEAR_SLOP
-from .manifold_geometry import add3, clamp01, madd3, round_contact, scale3, segment_segment, sign_of, to_local, to_world
+from .manifold_geometry import (
+    add3,
+    clamp01,
+    madd3,
+    round_contact,
+    scale3,
+    segment_segment,
+    sign_of,
+    to_local,
+    to_world,
+    write_point,
+)
 from .sphere_contacts import dot3, sphere_plane, sub3
-
-
-@njit(cache=True, inline="always")
-def write_point(out, k, normal, separation, point, feature):
-    out.normal[k, 0], out.normal[k, 1], out.normal[k, 2] = normal
-    out.point[k, 0], out.point[k, 1], out.point[k, 2] = point
-    out.separation[k] = separation
-    out.feature[k] = feature
 
 
 @njit(cache=True, inline="always")
@@ -52,14 +55,17 @@ def sphere_capsule(ca, ra, cb, fb, hb, rb, margin, out):
 
 
 @njit(cache=True)
-def capsule_capsule(ca, fa, ha, ra, cb, fb, hb, rb, margin, out):
-    """Two capsules: the closest points of their segments; 2 points when they lie side by side.
+def capsule_capsule(capsule_a, capsule_b, margin, out):
+    """Two capsules, each (centre, frame, half, radius): the closest points of their segments; 2 points
+    when they lie side by side.
 
     Segments whose common stretch (b's ends projected on a's segment, clamped to it) is longer
     than :data:`.LINEAR_SLOP` and whose gaps at its two ends exceed the least gap by less than
     the slop lie side by side: one point at each end of the stretch (ids 1 and 2), so the pair cannot roll
     about a single point. Otherwise the one point of the closest points (id 0).
     """
+    ca, fa, ha, ra = capsule_a
+    cb, fb, hb, rb = capsule_b
     p, d = segment_of(ca, fa, ha)
     q, e = segment_of(cb, fb, hb)
     s, t = segment_segment(p, d, q, e)

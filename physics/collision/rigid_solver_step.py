@@ -38,7 +38,7 @@ from .contact_buffer import MARGIN_OF_RADIUS, Materials
 from .events import CollisionLog, ImpactBlock, cancel_triggers
 from .manifolds import BOX, CAPSULE, SPHERE, check_shapes
 from .pairs import SweptSpheres
-from .resting import rest_speed
+from .rigid_columns import gather
 from .solver_step import INTEGRATOR
 from .step import ConstantField
 
@@ -97,24 +97,16 @@ def rotation_codes(rotation: str) -> tuple[int, int]:
     return rs.GYROSCOPIC[gyroscopic], rs.UPDATES[update]
 
 
-def tangents(normal: np.ndarray) -> np.ndarray:
-    """Two unit tangents t1, t2 with (n, t1, t2) right-handed and orthonormal, (C, 2, 3).
-
-    The branch-free basis of Duff et al., "Building an Orthonormal Basis, Revisited" (JCGT 2017):
-    continuous except where n_z changes sign."""
-    x, y, z = normal[:, 0], normal[:, 1], normal[:, 2]
-    sign = np.where(z >= 0, 1.0, -1.0)
-    a = -1.0 / (sign + z)
-    b = x * y * a
-    t1 = np.stack([1.0 + sign * x * x * a, sign * b, -sign * x], axis=1)
-    t2 = np.stack([b, sign + y * y * a, -y], axis=1)
-    return np.stack([t1, t2], axis=1)
-
-
 def world_inverse_inertia(orientation, inverse_principal) -> np.ndarray:
     """R diag(1/I1, 1/I2, 1/I3) R^T for each body, (N, 3, 3); zeros for a body that does not rotate."""
     r = quat.to_matrix(np, orientation)
     return np.einsum("nij,nj,nkj->nik", r, inverse_principal, r)
+
+
+def _sorted(a, b, feature) -> bool:
+    """Whether the rows (a, b, feature) are in strictly increasing lexicographic order."""
+    da, db, df = np.diff(a), np.diff(b), np.diff(feature)
+    return bool(np.all((da > 0) | ((da == 0) & ((db > 0) | ((db == 0) & (df > 0))))))
 
 
 @dataclasses.dataclass
@@ -234,8 +226,10 @@ class RigidSolverStep:
         margin = reach - self.bounding + self.margin + np.linalg.norm(np.asarray(y_forces[0]) - q0, axis=1)
         points = self.narrow_phase.manifolds(self.shapes, self.narrow_phase.Poses(q0, self.orientation),
                                              np.column_stack([pairs.i, pairs.j]), self.world.shapes, margin)
+        if _sorted(points.a, points.b, points.feature):  # as the narrow phase returns them
+            return type(points)(*(np.ascontiguousarray(column) for column in points))
         order = np.lexsort((points.feature, points.b, points.a))
-        return type(points)(*(np.asarray(column)[order] for column in points))
+        return type(points)(*(np.ascontiguousarray(column)[order] for column in points))
 
     def columns(self, q0, v0, a, points, dt):
         """The kernels' bodies, contacts (warm-started, effective masses) and step context."""
@@ -247,35 +241,16 @@ class RigidSolverStep:
                                      world_inverse_inertia(self.orientation, self.inverse_principal),
                                      self.inverse_principal, np.ascontiguousarray(a), self.rounding, np.zeros(n))
         bodies.energy[:] = rs.kinetic_energies(bodies)
-        ca, cb = np.asarray(points.a, np.int64), np.asarray(points.b, np.int64)
-        static = cb < 0
-        cb_body = np.where(static, -1, cb)
-        normal = np.ascontiguousarray(points.normal, dtype=float).reshape(-1, 3)
-        point = np.asarray(points.point, dtype=float).reshape(-1, 3)
-        ra = point - q0[ca]
-        rb = np.where(static[:, None], 0.0, point - q0[np.where(static, 0, cb)])
-        m = self.materials
-        other = np.where(static, m.shape[np.where(static, -1 - cb, 0)] if len(m.shape) else 0,
-                         m.body[np.where(static, 0, cb)])
-        friction = m.friction[m.body[ca], other]
-        restitution = m.restitution[m.body[ca], other]
-        pressing = np.sum((a[ca] - np.where(static[:, None], 0.0, a[np.where(static, 0, cb)])) * normal, axis=1)
-        rolling = np.maximum(self.rolling[ca], np.where(static, 0.0, self.rolling[np.where(static, 0, cb)]))
-        basis = tangents(normal)
-        key = np.column_stack([ca, cb, np.asarray(points.feature, np.int64)]).astype(np.int64)
-        old = self._previous
-        rows = rs.previous_rows(old.key, key)
-        found = rows >= 0
-        pn, pt, pr = np.zeros(len(ca)), np.zeros((len(ca), 2)), np.zeros((len(ca), 3))
-        pn[found] = old.pn[rows[found]]
-        pt[found] = np.einsum("cj,cdj->cd", old.pt[rows[found]], basis[found])  # kept in the new contact plane
-        pr[found] = old.pr[rows[found]]
-        count = len(ca)
+        count = len(points.a)
         contacts = rs.RigidContactColumns(
-            ca, cb_body, normal, np.ascontiguousarray(ra), np.ascontiguousarray(rb), np.ascontiguousarray(basis),
-            np.asarray(points.separation, dtype=float), np.zeros(count), np.full(count, np.inf), np.zeros((count, 3)),
-            friction, restitution, rest_speed(self.world.rest_speed, pressing, dt), rolling, pn, pt, pr,
-            np.zeros(count), np.zeros(count))
+            np.empty(count, np.int64), np.empty(count, np.int64), *(np.empty((count, 3)) for _ in range(3)),
+            np.empty((count, 2, 3)), *(np.empty(count) for _ in range(3)), np.zeros((count, 3)),
+            *(np.empty(count) for _ in range(4)), np.empty(count), np.empty((count, 2)), np.empty((count, 3)),
+            np.empty(count), np.empty(count), np.zeros(count), np.zeros((count, 3)), np.zeros((count, 3)))
+        key = np.empty((count, 3), np.int64)
+        old = self._previous
+        rows = gather(points, (q0, np.ascontiguousarray(a, dtype=float), self.rolling), self.materials,
+                      (old.key, old.pn, old.pt, old.pr), (float(self.world.rest_speed), float(dt)), contacts, key)
         rs.prepare(bodies, contacts)
         bias_rate, mass_scale, impulse_scale = s.softness(h)
         sub = rs.RigidSubstep(h, s.iterations, bias_rate, mass_scale, impulse_scale, s.push_speed, s.slop,
