@@ -42,6 +42,9 @@ COMPILE_TARGET_SECONDS = 2.0
 #: when a ratio is flagged as not to be trusted (``ratio_stable`` in the record): a side's
 #: median more than ``spread`` above its minimum in the run, or a known cause, noted here
 STABILITY = {"spread": 0.15, "known": {}}
+#: a side ran on one thread where its CPU seconds are at most this times its wall seconds in its
+#: least-disturbed rounds (:func:`.record.clock`); a second thread busy all along would give 2
+ONE_THREAD = 1.25
 #: the ratios ``--json`` always carries (the issue's JSON contract)
 REQUIRED_RATIOS = ("vs_diffrax_semi_implicit_euler", "vs_numba_semi_implicit_euler", "vs_memory_bound_1e6",
                    "vs_scipy_at_1e-8", "vs_ckdtree_1e5")

@@ -15,6 +15,7 @@ rounds left the minimum of a noisy side to chance. So:
 
 from __future__ import annotations
 
+import dataclasses
 import os
 import sys
 import time
@@ -84,7 +85,8 @@ def settled_samples(calls: dict[object, Callable[[], object]], min_rounds: int, 
     while len(next(iter(samples.values()))) < max_rounds and time.perf_counter() - start < budget_seconds:
         if all(_settled(s) for s in samples.values()):
             break
-        for name, s in interleaved_samples(calls, 1, warm_up=False).items():
+        numbers = {name: s.number for name, s in samples.items()}
+        for name, s in interleaved_samples(calls, 1, warm_up=False, numbers=numbers).items():
             samples[name] += s
     return samples
 
@@ -105,14 +107,26 @@ def marginal_times(once, twice, k: int):
     calls adjacent in time. Minimum: (min t(2k) - min t(k)) / k, the least-disturbed calls
     (the least of the rounds' differences would pick a round whose k-step call was slowed),
     at most the median. Where noise swamps it (a difference not positive), the average
-    over 2k steps instead, an upper bound.
+    over 2k steps instead, an upper bound. Where the rounds are :class:`Samples`, the CPU
+    seconds are estimated the same way, and the page faults per step are the median of the
+    rounds' differences over k.
     """
+    times, how = _marginal(once, twice, k)
+    if getattr(once, "cpu", None) and getattr(twice, "cpu", None):
+        cpu, _ = _marginal(once.cpu, twice.cpu, k)
+        faults = float(np.median(np.subtract(twice.faults, once.faults))) / k
+        preempted = float(np.median(np.add(twice.preempted, once.preempted)))
+        times = dataclasses.replace(times, cpu=cpu, faults=faults, preempted=preempted)
+    return times, how
+
+
+def _marginal(once, twice, k: int):
     differences = np.subtract(twice, once) / k
     least = (np.min(twice) - np.min(once)) / k
     if np.min(differences) > 0 and least > 0:
         median = float(np.median(differences))
         return Times(median, min(float(least), median), len(differences), float(np.max(differences))), "marginal"
-    return Times.of(np.divide(twice, 2 * k)), "average (noise swamped the marginal cost)"
+    return Times.of(list(np.divide(twice, 2 * k))), "average (noise swamped the marginal cost)"
 
 
 def settled_times(calls: dict[object, Callable[[], object]], config, min_rounds: int | None = None) -> dict:
