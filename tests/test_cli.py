@@ -1,6 +1,7 @@
 """The command line: outputs as a user sees them, and one-line errors with status 2."""
 
 import json
+import re
 import subprocess
 import sys
 from pathlib import Path
@@ -423,7 +424,10 @@ def test_a_study_prints_a_line_as_it_finishes_when_not_a_terminal(capsys, tmp_pa
         del STUDIES["toy-progress"]
     lines = out.splitlines()
     assert status == 0 and seen == [0, 1, 2]
-    assert lines[0].startswith("[1/1] toy-progress: computed,") and lines[1].startswith("toy-progress (computed)")
+    # the study's own wall and CPU seconds, then the time since the start
+    assert re.fullmatch(r"\[1/1\] toy-progress: computed in \d+\.\d s \(\d+\.\d s CPU\), \d+ s since the start",
+                        lines[0]), lines[0]
+    assert lines[1].startswith("toy-progress (computed)")
     assert json.loads((tmp_path / "toy-progress.json").read_text())["squares"] == [0, 1, 4]
 
 

@@ -24,7 +24,7 @@ def size_label(n: int) -> str:
 
 def clock(steplab: Times, peer: Times) -> str:
     """The clock a ratio is taken on: "cpu" where both sides carry CPU seconds and ran on one
-    thread (CPU over wall seconds at most ONE_THREAD in their least-disturbed rounds), else "wall".
+    thread (CPU over wall seconds at most ONE_THREAD in every round), else "wall".
 
     On one thread, a call's CPU seconds are its wall seconds less the time the scheduler gave
     to other processes: what the wall time would be on an idle core. A side on more threads
@@ -36,7 +36,10 @@ def clock(steplab: Times, peer: Times) -> str:
 
 
 def _threads(t: Times) -> float:
-    """CPU seconds per wall second in the least-disturbed rounds: about 1 for one thread."""
+    """The largest CPU seconds per wall second of a round (:func:`steplab.core.timing.threads_used`);
+    of the least-disturbed rounds where the rounds' own were not kept."""
+    if t.threads is not None:
+        return t.threads
     return t.cpu.minimum / t.minimum if t.minimum > 0 else float("inf")
 
 
@@ -45,7 +48,8 @@ def _spread(t: Times) -> dict:
 
 
 def _counts(t: Times) -> dict:
-    """A side's CPU per wall second, median minor page faults and preemptions per call (None where not kept)."""
+    """A side's largest CPU per wall second of a round, median minor page faults and preemptions per call
+    (None where not kept)."""
     return {"cpu_per_wall": None if t.cpu is None else _threads(t), "page_faults": t.faults, "preempted": t.preempted}
 
 
@@ -69,14 +73,16 @@ class Record:
         faults and preemptions per call. ``difference`` is the largest |difference| of the
         two final states (None where the peer computes no state, as for the memory bound).
         ``ratio_stable`` is False where a side's median on the ratio's clock lies more than
-        STABILITY["spread"] above its minimum in this run, or where the comparison is known
-        to move (STABILITY["known"], the note why).
+        STABILITY["spread"] above its minimum in this run, where fewer than STABILITY["rounds"]
+        rounds ran, or where the comparison is known to move (STABILITY["known"], the note why).
         """
         sides = {"steplab": steplab, "peer": peer_times}
         chosen = clock(steplab, peer_times)
         on = {side: t.cpu if chosen == "cpu" else t for side, t in sides.items()}
         notes = [f"{side}'s median {t.median / t.minimum - 1:.0%} above its minimum in this run"
                  for side, t in on.items() if t.median > (1 + STABILITY["spread"]) * t.minimum]
+        if min(t.rounds for t in on.values()) < STABILITY["rounds"]:
+            notes.append(f"{min(t.rounds for t in on.values())} round(s): no spread to judge")
         if name in STABILITY["known"]:
             notes.insert(0, STABILITY["known"][name])
         self.data["ratios"][name] = on["steplab"].median / on["peer"].median

@@ -23,7 +23,7 @@ from collections.abc import Callable
 
 import numpy as np
 
-from steplab.core.timing import Times, interleaved_samples
+from steplab.core.timing import Times, interleaved_samples, threads_used
 
 #: one thread everywhere: the memory bound, Numba and scipy are single-threaded, so XLA is too
 PINNED_ENVIRONMENT = {
@@ -116,7 +116,8 @@ def marginal_times(once, twice, k: int):
         cpu, _ = _marginal(once.cpu, twice.cpu, k)
         faults = float(np.median(np.subtract(twice.faults, once.faults))) / k
         preempted = float(np.median(np.add(twice.preempted, once.preempted)))
-        times = dataclasses.replace(times, cpu=cpu, faults=faults, preempted=preempted)
+        times = dataclasses.replace(times, cpu=cpu, faults=faults, preempted=preempted,
+                                    threads=threads_used(once, twice))
     return times, how
 
 

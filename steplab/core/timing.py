@@ -175,6 +175,13 @@ def calls_per_sample(seconds: float) -> int:
     return int(min(max(np.ceil(SAMPLE_SECONDS / max(seconds, 1e-6)), 1), 1000))
 
 
+def threads_used(*samples: Samples) -> float:
+    """The largest CPU seconds per wall second of any round: at most about 1 on one thread,
+    whatever the load (a preempted call loses wall and CPU time alike, or only CPU time),
+    and about n on n busy threads in any round the scheduler left them alone."""
+    return max(float(np.max(np.divide(s.cpu, np.maximum(s, 1e-9)))) for s in samples)
+
+
 @dataclasses.dataclass(frozen=True)
 class Times:
     """Seconds of one contender over the interleaved rounds: the median, the minimum and the maximum.
@@ -194,15 +201,18 @@ class Times:
     cpu: Times | None = None
     faults: float | None = None
     preempted: float | None = None
+    #: the largest CPU seconds per wall second of a round (:func:`threads_used`)
+    threads: float | None = None
 
     @classmethod
     def of(cls, samples) -> Times:
-        cpu, faults, preempted = None, None, None
+        cpu, faults, preempted, threads = None, None, None, None
         if getattr(samples, "cpu", None):
             cpu = cls.of(samples.cpu)
             faults, preempted = float(np.median(samples.faults)), float(np.median(samples.preempted))
+            threads = threads_used(samples)
         return cls(float(np.median(samples)), float(np.min(samples)), len(samples), float(np.max(samples)),
-                   cpu, faults, preempted)
+                   cpu, faults, preempted, threads)
 
     def scaled(self, factor: float) -> Times:
         """The same times (and page faults) times ``factor``: a call's as per step, say."""
