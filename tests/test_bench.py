@@ -256,6 +256,23 @@ def test_marginal_cost_leaves_out_the_fixed_cost_of_a_call():
     assert how.startswith("average") and times.minimum >= step
 
 
+def test_marginal_cost_on_cpu_time_leaves_out_the_preemptions():
+    from steplab.bench import timing
+    from steplab.core.timing import Samples
+
+    # calls of k and 2k steps of 5 ms behind a 100 ms fixed cost; the wall clock also counts
+    # 0 to 40 ms of other processes' slices, the CPU clock does not
+    k, step, fixed = 32, 5e-3, 0.1
+    lost = np.array([0.0, 0.04, 0.02, 0.0, 0.04])
+    cpu_once, cpu_twice = np.full(5, fixed + k * step), np.full(5, fixed + 2 * k * step)
+    once = Samples(cpu_once + lost, cpu_once, [0] * 5, [0, 10, 5, 0, 10])
+    twice = Samples(cpu_twice + lost[::-1], cpu_twice, [0] * 5, [10, 10, 5, 0, 0])
+    times, how = timing.marginal_times(once, twice, k)
+    assert how == "marginal" and times.maximum > 1.2 * step  # the wall clock's rounds move
+    assert times.cpu.minimum == pytest.approx(step) and times.cpu.maximum == pytest.approx(step)
+    assert times.threads <= 1.0 and times.preempted == 5.0
+
+
 def test_bench_pins_one_thread_per_side_in_the_timed_process():
     # a fresh process, as ``steplab bench`` is: pinned before JAX and Numba are imported,
     # then the timing helper runs a compiled call and reports the settings it ran with

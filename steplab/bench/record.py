@@ -24,23 +24,15 @@ def size_label(n: int) -> str:
 
 def clock(steplab: Times, peer: Times) -> str:
     """The clock a ratio is taken on: "cpu" where both sides carry CPU seconds and ran on one
-    thread (CPU over wall seconds at most ONE_THREAD in every round), else "wall".
+    thread (CPU over wall seconds at most ONE_THREAD in every round, ``Times.threads``), else "wall".
 
     On one thread, a call's CPU seconds are its wall seconds less the time the scheduler gave
     to other processes: what the wall time would be on an idle core. A side on more threads
     spends more CPU seconds than wall seconds, and its CPU time is not its speed.
     """
-    if any(t.cpu is None or _threads(t) > ONE_THREAD for t in (steplab, peer)):
+    if any(t.cpu is None or t.threads is None or t.threads > ONE_THREAD for t in (steplab, peer)):
         return "wall"
     return "cpu"
-
-
-def _threads(t: Times) -> float:
-    """The largest CPU seconds per wall second of a round (:func:`steplab.core.timing.threads_used`);
-    of the least-disturbed rounds where the rounds' own were not kept."""
-    if t.threads is not None:
-        return t.threads
-    return t.cpu.minimum / t.minimum if t.minimum > 0 else float("inf")
 
 
 def _spread(t: Times) -> dict:
@@ -50,7 +42,7 @@ def _spread(t: Times) -> dict:
 def _counts(t: Times) -> dict:
     """A side's largest CPU per wall second of a round, median minor page faults and preemptions per call
     (None where not kept)."""
-    return {"cpu_per_wall": None if t.cpu is None else _threads(t), "page_faults": t.faults, "preempted": t.preempted}
+    return {"cpu_per_wall": t.threads, "page_faults": t.faults, "preempted": t.preempted}
 
 
 class Record:

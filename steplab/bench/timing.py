@@ -108,14 +108,14 @@ def marginal_times(once, twice, k: int):
     (the least of the rounds' differences would pick a round whose k-step call was slowed),
     at most the median. Where noise swamps it (a difference not positive), the average
     over 2k steps instead, an upper bound. Where the rounds are :class:`Samples`, the CPU
-    seconds are estimated the same way, and the page faults per step are the median of the
-    rounds' differences over k.
+    seconds are estimated the same way, the page faults per step are the median of the
+    rounds' differences over k, and the preemptions per call the median over both calls.
     """
     times, how = _marginal(once, twice, k)
     if getattr(once, "cpu", None) and getattr(twice, "cpu", None):
         cpu, _ = _marginal(once.cpu, twice.cpu, k)
         faults = float(np.median(np.subtract(twice.faults, once.faults))) / k
-        preempted = float(np.median(np.add(twice.preempted, once.preempted)))
+        preempted = float(np.median(np.add(twice.preempted, once.preempted))) / 2
         times = dataclasses.replace(times, cpu=cpu, faults=faults, preempted=preempted,
                                     threads=threads_used(once, twice))
     return times, how
@@ -127,7 +127,7 @@ def _marginal(once, twice, k: int):
     if np.min(differences) > 0 and least > 0:
         median = float(np.median(differences))
         return Times(median, min(float(least), median), len(differences), float(np.max(differences))), "marginal"
-    return Times.of(list(np.divide(twice, 2 * k))), "average (noise swamped the marginal cost)"
+    return Times.of(np.divide(twice, 2 * k)), "average (noise swamped the marginal cost)"
 
 
 def settled_times(calls: dict[object, Callable[[], object]], config, min_rounds: int | None = None) -> dict:

@@ -147,7 +147,7 @@ def interleaved_samples(calls: dict[object, Callable[[], object]], repeats: int,
     warm-up took less than SAMPLE_SECONDS is made ``number`` times back to back in each
     round (:func:`calls_per_sample`), and its sample is the mean: a 30 µs compiled call
     timed alone carries the timer's own cost and a cold start after the other contenders
-    (its CPU time moved threefold between runs at load 8 to 11). ``numbers`` fixes them
+    (44 µs median against 30 µs back to back, at load 9). ``numbers`` fixes them
     (as later rounds of the same contenders must; each :class:`Samples` keeps its
     ``number``). ``warm_up=False`` leaves out the warm-up calls, for calls too long to make
     twice that the caller has warmed up on a smaller case (a collision run compiled on one
