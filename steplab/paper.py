@@ -68,9 +68,10 @@ def _bench_table(data: dict) -> str:
                     _spread(r["peer_seconds"], r["peer_spread"]), f"{r['ratio']:.3g}", verdict, stable])
     return markdown_table(["comparison", "peer", "steplab (min-max)", "peer time (min-max)", "ratio", "target",
                            "ratio stable"], out) + \
-        "\n\n(medians of interleaved rounds, with the fastest and slowest round in brackets; ratio = steplab / peer, " \
-        "below 1: steplab is faster; a ratio is marked unstable where a side's median lies more than " \
-        f"{STABILITY['spread']:.0%} above its minimum.)"
+        "\n\n(medians of interleaved rounds, with the fastest and slowest round in brackets, in CPU seconds where " \
+        "both sides ran on one thread, else wall seconds; ratio = steplab / peer, below 1: steplab is faster; a " \
+        f"ratio is marked unstable where a side's median lies more than {STABILITY['spread']:.0%} above its " \
+        "minimum, where too few rounds ran, or where it moved across runs on a loaded machine.)"
 
 
 def _spread(median: float, spread: dict | None) -> str:

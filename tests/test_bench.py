@@ -153,6 +153,60 @@ def test_record_says_where_a_ratio_cannot_be_trusted():
     assert "peer's median 50% above its minimum" in record.data["seconds"]["noisy"]["stability_note"]
 
 
+def _busy(seconds: float) -> None:
+    """Spend ``seconds`` of this thread's CPU time (however long that takes on a loaded machine)."""
+    end = time.thread_time() + seconds
+    while time.thread_time() < end:
+        pass
+
+
+def test_cpu_time_leaves_out_waiting_and_keeps_the_work():
+    from steplab.core.timing import Times, interleaved_samples
+
+    samples = interleaved_samples({"asleep": lambda: time.sleep(0.05), "busy": lambda: _busy(0.02)}, 3)
+    # asleep: 50 ms of wall time and next to no CPU time (what a preempted call looks like)
+    assert min(samples["asleep"]) >= 0.05 and max(samples["asleep"].cpu) < 0.01
+    # busy: at least the 20 ms of CPU spent, and no more CPU than wall time on one thread
+    assert min(samples["busy"].cpu) >= 0.02
+    assert all(c <= w * 1.05 + 1e-3 for c, w in zip(samples["busy"].cpu, samples["busy"], strict=True))
+    times = Times.of(samples["busy"])
+    assert times.cpu.minimum >= 0.02 and times.cpu.rounds == 3 and times.faults is not None
+    assert times.scaled(0.5).cpu.median == pytest.approx(times.cpu.median / 2)
+
+
+def test_cpu_time_of_a_call_leaves_out_work_another_thread_left_behind():
+    # as JAX's worker thread goes on releasing a call's buffers after block_until_ready: the
+    # next contender's CPU time must not carry it (the timer waits for the threads to be idle)
+    import threading
+
+    from steplab.core.timing import interleaved_samples
+
+    def leaves_work_behind():
+        threading.Thread(target=_busy, args=(0.02,)).start()
+
+    samples = interleaved_samples({"leaves": leaves_work_behind, "idle": lambda: None}, 3, warm_up=False)
+    assert max(samples["idle"].cpu) < 0.005
+
+
+def test_ratio_is_on_cpu_time_where_both_sides_ran_on_one_thread():
+    from steplab.core.timing import Samples
+
+    record = bench.Record(TINY, quick=True)
+    # steplab preempted in two rounds of three (wall 2x), its CPU steady; the peer undisturbed
+    steplab = bench.Times.of(Samples([1.0, 2.0, 2.0], [1.0, 1.01, 1.0], [0] * 3, [0, 9, 9]))
+    peer = bench.Times.of(Samples([2.0, 2.0, 2.0], [2.0, 2.0, 2.0], [0] * 3, [0] * 3))
+    record.compare("one thread", "g", "what", "peer", steplab, peer)
+    s = record.data["seconds"]["one thread"]
+    assert s["clock"] == "cpu" and record.data["ratios"]["one thread"] == pytest.approx(0.5)
+    assert s["ratio_wall"] == pytest.approx(1.0) and s["ratio_stable"] and s["steplab_preempted"] == 9
+    assert (s["steplab"], s["steplab_wall_spread"]["median"]) == (1.0, 2.0)
+    # a side on two threads (twice the CPU seconds of its wall seconds): its CPU time is not its speed
+    threads = bench.Times.of(Samples([1.0, 1.0, 1.0], [2.0, 2.0, 2.0], [0] * 3, [0] * 3))
+    record.compare("two threads", "g", "what", "peer", threads, peer)
+    assert record.data["seconds"]["two threads"]["clock"] == "wall"
+    assert record.data["ratios"]["two threads"] == pytest.approx(0.5)
+
+
 class _Clock:
     """A fake ``time.perf_counter`` that a call advances by the seconds it says it took."""
 
@@ -202,6 +256,23 @@ def test_marginal_cost_leaves_out_the_fixed_cost_of_a_call():
     assert how.startswith("average") and times.minimum >= step
 
 
+def test_marginal_cost_on_cpu_time_leaves_out_the_preemptions():
+    from steplab.bench import timing
+    from steplab.core.timing import Samples
+
+    # calls of k and 2k steps of 5 ms behind a 100 ms fixed cost; the wall clock also counts
+    # 0 to 40 ms of other processes' slices, the CPU clock does not
+    k, step, fixed = 32, 5e-3, 0.1
+    lost = np.array([0.0, 0.04, 0.02, 0.0, 0.04])
+    cpu_once, cpu_twice = np.full(5, fixed + k * step), np.full(5, fixed + 2 * k * step)
+    once = Samples(cpu_once + lost, cpu_once, [0] * 5, [0, 10, 5, 0, 10])
+    twice = Samples(cpu_twice + lost[::-1], cpu_twice, [0] * 5, [10, 10, 5, 0, 0])
+    times, how = timing.marginal_times(once, twice, k)
+    assert how == "marginal" and times.maximum > 1.2 * step  # the wall clock's rounds move
+    assert times.cpu.minimum == pytest.approx(step) and times.cpu.maximum == pytest.approx(step)
+    assert times.threads <= 1.0 and times.preempted == 5.0
+
+
 def test_bench_pins_one_thread_per_side_in_the_timed_process():
     # a fresh process, as ``steplab bench`` is: pinned before JAX and Numba are imported,
     # then the timing helper runs a compiled call and reports the settings it ran with
@@ -216,6 +287,7 @@ def test_bench_pins_one_thread_per_side_in_the_timed_process():
     out = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True, check=True).stdout
     settings = json.loads(out.splitlines()[-1])
     assert settings["pinned"] and settings["numba_threads"] == 1
+    assert settings["cores"] in (None, 1)  # one core where the OS can set it: XLA's flags alone left it two threads
     assert "--xla_cpu_multi_thread_eigen=false" in settings["XLA_FLAGS"].split()
     assert "intra_op_parallelism_threads=1" in settings["XLA_FLAGS"].split()
     # too late after JAX: the helper says so rather than pretending

@@ -1,6 +1,7 @@
 """The command line: outputs as a user sees them, and one-line errors with status 2."""
 
 import json
+import re
 import subprocess
 import sys
 from pathlib import Path
@@ -423,7 +424,10 @@ def test_a_study_prints_a_line_as_it_finishes_when_not_a_terminal(capsys, tmp_pa
         del STUDIES["toy-progress"]
     lines = out.splitlines()
     assert status == 0 and seen == [0, 1, 2]
-    assert lines[0].startswith("[1/1] toy-progress: computed,") and lines[1].startswith("toy-progress (computed)")
+    # the study's own wall and CPU seconds, then the time since the start
+    assert re.fullmatch(r"\[1/1\] toy-progress: computed in \d+\.\d s \(\d+\.\d s CPU\), \d+ s since the start",
+                        lines[0]), lines[0]
+    assert lines[1].startswith("toy-progress (computed)")
     assert json.loads((tmp_path / "toy-progress.json").read_text())["squares"] == [0, 1, 4]
 
 
@@ -547,3 +551,29 @@ def test_integrators_lists_the_rotation_methods(capsys):
     for line in table_rows:  # aligned: each row's partner starts under the header
         name = line.split()[0]
         assert line[start:].startswith(", ".join(ROTATIONS[name].composes_with))
+
+
+def test_reproduce_keeps_jaxs_compiled_programs_in_its_folder(capsys, tmp_path):
+    # a JAX program compiled during reproduce is written to <out>/.jax-cache, where the next run finds it
+    import jax
+    import jax.numpy as jnp
+    from steplab.studies import STUDIES, runner
+
+    from steplab.cli.study import JAX_CACHE
+
+    def compute(parameters, progress=None):
+        return {"y": float(jax.jit(lambda x: jnp.sin(x) * 3.0 + 0.125)(jnp.float64(0.5)))}
+
+    toy = runner.Study("toy-jax-cache", "a toy that compiles", lambda quick: {}, compute, lambda record, out: [])
+    saved = (jax.config.jax_compilation_cache_dir, jax.config.jax_persistent_cache_min_compile_time_secs)
+    try:
+        with pytest.MonkeyPatch.context() as patch:
+            patch.setattr("steplab.studies.builtin_studies", lambda: [toy])
+            STUDIES.register(toy)
+            status, _, _ = run(capsys, "reproduce", "--quick", "--out", str(tmp_path))
+    finally:
+        del STUDIES["toy-jax-cache"]
+        jax.config.update("jax_compilation_cache_dir", saved[0])
+        jax.config.update("jax_persistent_cache_min_compile_time_secs", saved[1])
+    assert status == 0 and json.loads((tmp_path / "toy-jax-cache.json").read_text())["y"] > 0
+    assert any((tmp_path / JAX_CACHE).iterdir())

@@ -7,8 +7,9 @@
 - :mod:`.collisions` — a run with collisions, detector x scene;
 - :mod:`.accuracy` — ``track_`` benchmarks: global error, fitted order, energy drift, so an
   accuracy regression shows in asv's history next to a speed one;
-- :mod:`.ratios` — ``track_`` benchmarks: ``steplab bench``'s small-system ratios (steplab / peer),
-  so a regression against diffrax, Numba or a Python loop shows in asv's history.
+- :mod:`.ratios` — ``track_`` benchmarks: ``steplab bench``'s ratios (steplab / peer, both timed in
+  the same run), one class per section, so a regression against a peer shows in asv's history
+  (the cloth, rotation, stacking and crowded-pit ratios are in their own modules).
 
 A JAX benchmark times one compiled call and nothing else: its inputs are device arrays made in
 ``setup``, where it is also compiled and run once, and the timed call waits for the result

@@ -11,6 +11,11 @@ from __future__ import annotations
 
 import numpy as np
 
+from steplab.bench.timing import pin_threads
+
+# one thread per side, as ``steplab bench`` runs its ratios: before JAX or Numba is imported
+pin_threads()
+
 
 class XPBDClothStep:
     """One xpbd step of a side x side cloth with dampers, gravity and two pinned corners."""

@@ -12,6 +12,11 @@ from __future__ import annotations
 
 import dataclasses
 
+from steplab.bench.timing import pin_threads
+
+# one thread per side, as ``steplab bench`` runs its ratios: before JAX or Numba is imported
+pin_threads()
+
 #: the full bench's crowded pit: balls, box side (m), steps of dt = 1/60 s
 CROWDED_PIT = (2_000, 6.0, 60)
 

@@ -1,9 +1,14 @@
 """``steplab bench``'s ratios as ``track_`` benchmarks, so a regression against a peer shows in asv's history.
 
-A ratio is steplab's median time over the peer's on the same work (lower is better). Only
-the bench's small system is run here (one oscillator, 10^5 steps, at the quick bench's
-sizes, against diffrax, Numba and a Python loop): a few seconds, where the large systems,
-the accuracy match and the ball pits take minutes (``steplab bench`` runs them all).
+A ratio is steplab's time over the peer's on the same work (lower is better), both timed in
+the same process, interleaved round by round (the project's rule: a speed target is a ratio
+against a peer in the same run, never an absolute time). Each class runs one section of the
+quick bench in its ``setup_cache`` and tracks that section's ratios, named as in the bench's
+record; the ratio is on the clock the bench chose (CPU seconds where both sides ran on one
+thread: ``seconds.<name>.clock`` in ``steplab bench --json``). The ``time_`` benchmarks of the
+other modules are histories of one contender's own time, not comparisons. The sections with
+their own modules: the cloth (:mod:`.cloth`), rotation (:mod:`.rotation`), stacking
+(:mod:`.stacking`) and the crowded pit (:mod:`.crowded_pit`).
 """
 
 from __future__ import annotations
@@ -21,24 +26,85 @@ SMALL_SYSTEM_RATIOS = [f"vs_diffrax_{method.replace('-', '_')}" for method in DI
     "vs_numba_semi_implicit_euler", "vs_python_loop_semi_implicit_euler"]
 
 
-class BenchRatio:
-    """The quick bench's small-system ratios, steplab / peer, measured once in ``setup_cache``."""
+def section_ratios(section: str, **overrides) -> dict[str, float]:
+    """The ratios that one section of the quick bench (``steplab.bench.comparisons.<section>``) records."""
+    import dataclasses
 
-    params = SMALL_SYSTEM_RATIOS
-    param_names = ["ratio"]
+    from steplab.bench import QUICK, Record, comparisons, fair_diffrax
+
+    fair_diffrax()  # Equinox's run-time checks off, as in ``steplab bench`` (before diffrax is imported)
+    config = dataclasses.replace(QUICK, **overrides)
+    record = Record(config, quick=True)
+    getattr(comparisons, section)(config, record, lambda message: None)
+    return record.data["ratios"]
+
+
+class _SectionRatios:
+    """One section's ratios, measured once in ``setup_cache``; a name the section does not
+    record (an older steplab, a peer not installed) shows as n/a."""
+
     unit = "ratio"
-    timeout = 300
+    param_names = ["ratio"]
+    timeout = 900
+    section = ""
 
     def setup_cache(self):
-        from steplab.bench import QUICK, Record, fair_diffrax
-
-        fair_diffrax()  # Equinox's run-time checks off, as in ``steplab bench`` (before diffrax is imported)
-        from steplab.bench.comparisons import small_system
-
-        record = Record(QUICK, quick=True)
-        small_system(QUICK, record, lambda message: None)
-        return record.data["ratios"]
+        return section_ratios(self.section)
 
     def track_ratio(self, ratios, ratio):
-        # a name this commit's bench does not record (an older steplab) shows as n/a
         return ratios.get(ratio, float("nan"))
+
+
+class BenchRatio(_SectionRatios):
+    """The small system (one oscillator, 10^5 steps) against diffrax, Numba and a Python loop."""
+
+    params = SMALL_SYSTEM_RATIOS
+    timeout = 300
+    section = "small_system"
+
+
+class LargeSystemRatios(_SectionRatios):
+    """One step of 10^6 particles and of the 10^5-spring cloth, against the memory bound and Numba."""
+
+    params = ["vs_memory_bound_1e6", "vs_numba_1e6", "vs_memory_bound_cloth_1e5_springs",
+              "vs_numba_cloth_1e5_springs"]
+    section = "large_systems"
+
+
+class AccuracyMatchedRatios(_SectionRatios):
+    """Time to a final error of 1e-8 m against scipy's DOP853 and diffrax's Tsit5 (the worse problem)."""
+
+    params = ["vs_scipy_at_1e-8", "vs_diffrax_tsit5_at_1e-8"]
+    section = "accuracy_matched"
+
+
+class BroadphaseRatio(_SectionRatios):
+    """The fastest broadphase method on 10^5 spheres against scipy's cKDTree."""
+
+    params = ["vs_ckdtree_1e5"]
+    section = "broadphase"
+
+
+class BatchingRatios(_SectionRatios):
+    """Many simulations in one vmapped call against a Python loop of single compiled runs."""
+
+    params = ["batched_vs_loop_initial_conditions", "batched_vs_loop_dt", "batched_vs_loop_springs"]
+    section = "batching"
+
+
+class ImplicitClothRatios(_SectionRatios):
+    """One implicit Euler step of the cloth (Newton to rtol, and one Newton iteration) against a semi-implicit one."""
+
+    params = ["implicit_euler_cloth_step", "implicit_euler_one_newton_cloth_step"]
+    section = "implicit_euler_cloth"
+
+
+class BallPitRatios(_SectionRatios):
+    """10^3 balls for 12 steps: the event loop and the contact solver against MuJoCo and pybullet
+    (names without a peer installed show as n/a)."""
+
+    params = ["vs_mujoco_ball_pit_1e3", "vs_pybullet_ball_pit_1e3", "solver_vs_mujoco_ball_pit_1e3",
+              "solver_vs_pybullet_ball_pit_1e3", "solver_vs_event_loop_ball_pit_1e3"]
+
+    def setup_cache(self):
+        return section_ratios("ball_pits", collision_runs=((1_000, 12),))

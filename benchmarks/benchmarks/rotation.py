@@ -11,7 +11,12 @@ from __future__ import annotations
 
 import numpy as np
 
+from steplab.bench.timing import pin_threads
+
 from .common import ready
+
+# one thread per side, as ``steplab bench`` runs its ratios: before JAX or Numba is imported
+pin_threads()
 
 
 class TumblingStep:

@@ -10,6 +10,11 @@ its spread in one run of the section (``setup_cache``).
 
 from __future__ import annotations
 
+from steplab.bench.timing import pin_threads
+
+# one thread per side, as ``steplab bench`` runs its ratios: before JAX or Numba is imported
+pin_threads()
+
 #: steps per timed call
 STEPS = 10
 PEERS = ["steplab", "mujoco_pgs", "mujoco_newton", "pybullet"]

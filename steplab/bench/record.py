@@ -8,7 +8,7 @@ import numpy as np
 
 from steplab.core.timing import Times
 
-from .config import PEER_TARGETS, STABILITY, TARGETS, Config
+from .config import ONE_THREAD, PEER_TARGETS, STABILITY, TARGETS, Config
 
 
 def final_difference(a, b) -> float:
@@ -20,6 +20,29 @@ def size_label(n: int) -> str:
     """A size in a comparison's name: ``1e5`` for a power of ten, else the number (``2000``)."""
     e = int(round(np.log10(n)))
     return f"1e{e}" if 10**e == n else str(n)
+
+
+def clock(steplab: Times, peer: Times) -> str:
+    """The clock a ratio is taken on: "cpu" where both sides carry CPU seconds and ran on one
+    thread (CPU over wall seconds at most ONE_THREAD in every round, ``Times.threads``), else "wall".
+
+    On one thread, a call's CPU seconds are its wall seconds less the time the scheduler gave
+    to other processes: what the wall time would be on an idle core. A side on more threads
+    spends more CPU seconds than wall seconds, and its CPU time is not its speed.
+    """
+    if any(t.cpu is None or t.threads is None or t.threads > ONE_THREAD for t in (steplab, peer)):
+        return "wall"
+    return "cpu"
+
+
+def _spread(t: Times) -> dict:
+    return {"min": t.minimum, "median": t.median, "max": t.maximum, "rounds": t.rounds}
+
+
+def _counts(t: Times) -> dict:
+    """A side's largest CPU per wall second of a round, median minor page faults and preemptions per call
+    (None where not kept)."""
+    return {"cpu_per_wall": t.threads, "page_faults": t.faults, "preempted": t.preempted}
 
 
 class Record:
@@ -34,24 +57,37 @@ class Record:
                 difference: float | None = None, **details) -> None:
         """Record ratio ``name`` = steplab's median / the peer's, both medians and what was compared.
 
-        ``difference`` is the largest |difference| of the two final states (None where the
-        peer computes no state, as for the memory bound). Each side's spread over its rounds
-        (min, median, max) is kept, and whether the ratio can be trusted: ``ratio_stable``
-        is False where a side's median lies more than STABILITY["spread"] above its minimum
-        in this run, or where the comparison is known to move (STABILITY["known"], the note why).
+        The ratio and the seconds beside it (``steplab``, ``peer``, their minimums and
+        ``*_spread``: min, median, max of the rounds) are on one clock, ``clock``: CPU
+        seconds where both sides ran on one thread, else wall seconds (:func:`clock`).
+        Both clocks' ratios and spreads are kept (``ratio_wall``, ``ratio_cpu``,
+        ``*_wall_spread``, ``*_cpu_spread``), with each side's CPU per wall second, page
+        faults and preemptions per call. ``difference`` is the largest |difference| of the
+        two final states (None where the peer computes no state, as for the memory bound).
+        ``ratio_stable`` is False where a side's median on the ratio's clock lies more than
+        STABILITY["spread"] above its minimum in this run, where fewer than STABILITY["rounds"]
+        rounds ran, or where the comparison is known to move (STABILITY["known"], the note why).
         """
-        spreads = {side: {"min": t.minimum, "median": t.median, "max": t.maximum, "rounds": t.rounds}
-                   for side, t in (("steplab", steplab), ("peer", peer_times))}
-        notes = [f"{side}'s median {s['median'] / s['min'] - 1:.0%} above its minimum in this run"
-                 for side, s in spreads.items() if s["median"] > (1 + STABILITY["spread"]) * s["min"]]
+        sides = {"steplab": steplab, "peer": peer_times}
+        chosen = clock(steplab, peer_times)
+        on = {side: t.cpu if chosen == "cpu" else t for side, t in sides.items()}
+        notes = [f"{side}'s median {t.median / t.minimum - 1:.0%} above its minimum in this run"
+                 for side, t in on.items() if t.median > (1 + STABILITY["spread"]) * t.minimum]
+        if min(t.rounds for t in on.values()) < STABILITY["rounds"]:
+            notes.append(f"{min(t.rounds for t in on.values())} round(s): no spread to judge")
         if name in STABILITY["known"]:
             notes.insert(0, STABILITY["known"][name])
-        self.data["ratios"][name] = steplab.median / peer_times.median
+        self.data["ratios"][name] = on["steplab"].median / on["peer"].median
         self.data["seconds"][name] = {
-            "steplab": steplab.median, "peer": peer_times.median, "peer_name": peer, "group": group, "what": what,
-            "difference": difference, "steplab_min": steplab.minimum, "peer_min": peer_times.minimum,
-            "ratio_of_minimums": steplab.minimum / peer_times.minimum, "rounds": steplab.rounds,
-            "steplab_spread": spreads["steplab"], "peer_spread": spreads["peer"],
+            "steplab": on["steplab"].median, "peer": on["peer"].median, "peer_name": peer, "group": group,
+            "what": what, "difference": difference, "steplab_min": on["steplab"].minimum,
+            "peer_min": on["peer"].minimum, "ratio_of_minimums": on["steplab"].minimum / on["peer"].minimum,
+            "rounds": steplab.rounds, "clock": chosen, "ratio_wall": steplab.median / peer_times.median,
+            "ratio_cpu": None if None in (steplab.cpu, peer_times.cpu) else steplab.cpu.median / peer_times.cpu.median,
+            **{f"{side}_spread": _spread(t) for side, t in on.items()},
+            **{f"{side}_wall_spread": _spread(t) for side, t in sides.items()},
+            **{f"{side}_cpu_spread": None if t.cpu is None else _spread(t.cpu) for side, t in sides.items()},
+            **{f"{side}_{key}": value for side, t in sides.items() for key, value in _counts(t).items()},
             "ratio_stable": not notes, "stability_note": "; ".join(notes) or None, **details}
         self.data["order"].append(name)
         self._check_target(name)

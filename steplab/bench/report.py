@@ -19,6 +19,7 @@ def rows(record: dict) -> list[dict]:
         out.append({"name": name, "group": s["group"], "what": s["what"], "peer": s["peer_name"],
                     "steplab": s["steplab"], "peer_seconds": s["peer"], "ratio": record["ratios"][name],
                     "ratio_of_minimums": s.get("ratio_of_minimums"),
+                    "clock": s.get("clock", "wall"), "ratio_wall": s.get("ratio_wall"),
                     "steplab_spread": s.get("steplab_spread"), "peer_spread": s.get("peer_spread"),
                     "ratio_stable": s.get("ratio_stable"), "stability_note": s.get("stability_note"),
                     "target": None if target is None else target["target"],
@@ -111,24 +112,26 @@ def _verdict(row) -> str:
 
 
 def format_table(record: dict) -> str:
-    lines = [f"{'group':<17} {'comparison':<40} {'peer':<44} {'steplab':>9} {'peer':>9} {'ratio':>7} "
-             f"{'(min)':>7}  {'target on the ratio':<20} stable (spread of the rounds within 15 %)"]
+    lines = [f"{'group':<17} {'comparison':<40} {'peer':<44} {'steplab':>9} {'peer':>9} {'clock':>5} {'ratio':>7} "
+             f"{'(min)':>7} {'(wall)':>7}  {'target on the ratio':<20} stable (spread of the rounds within 15 %)"]
     for r in rows(record):
         lines.append(f"{r['group']:<17} {r['name']:<40} {r['peer'][:44]:<44} {_seconds(r['steplab']):>9} "
-                     f"{_seconds(r['peer_seconds']):>9} {r['ratio']:>7.3g} {_ratio(r['ratio_of_minimums']):>7}  "
-                     f"{_verdict(r):<20} {_stability(r)}")
+                     f"{_seconds(r['peer_seconds']):>9} {r['clock']:>5} {r['ratio']:>7.3g} "
+                     f"{_ratio(r['ratio_of_minimums']):>7} {_ratio(r['ratio_wall']):>7}  {_verdict(r):<20} "
+                     f"{_stability(r)}")
     lines += _collision_table(record)
     lines += _footer(record)
     return "\n".join(lines)
 
 
 def format_markdown(record: dict) -> str:
-    lines = ["| comparison | what | peer | steplab | peer | ratio | ratio of minimums | target | "
-             "steplab min / median / max | peer min / median / max | ratio stable |",
-             "|---|---|---|---|---|---|---|---|---|---|---|"]
+    lines = ["| comparison | what | peer | steplab | peer | clock | ratio | ratio of minimums | wall-time ratio | "
+             "target | steplab min / median / max | peer min / median / max | ratio stable |",
+             "|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
     for r in rows(record):
         lines.append(f"| `{r['name']}` | {r['what']} | {r['peer']} | {_seconds(r['steplab'])} | "
-                     f"{_seconds(r['peer_seconds'])} | {r['ratio']:.3g} | {_ratio(r['ratio_of_minimums'])} | "
+                     f"{_seconds(r['peer_seconds'])} | {r['clock']} | {r['ratio']:.3g} | "
+                     f"{_ratio(r['ratio_of_minimums'])} | {_ratio(r['ratio_wall'])} | "
                      f"{_verdict(r)} | {_spread(r['steplab_spread'])} | {_spread(r['peer_spread'])} | "
                      f"{_stability(r)} |")
     lines += collision_markdown(record)
@@ -154,8 +157,10 @@ def _footer(record: dict) -> list[str]:
     prov = record.get("provenance", {})
     mode = "quick" if record["quick"] else "full"
     pinned = record["details"].get("threads", {}).get("pinned")
-    out.append(f"ratio = steplab median / peer median (below 1: steplab faster), (min) the same of the "
-               f"fastest rounds; {mode} run, "
+    out.append(f"ratio = steplab median / peer median (below 1: steplab faster), on the clock shown: CPU "
+               f"seconds where both sides ran on one thread (what the wall time is on an idle core, and "
+               f"hardly moved by other processes), else wall seconds; (min) the same of the fastest rounds, "
+               f"(wall) of the wall-time medians; {mode} run, "
                f"{record['config']['repeats']} to {record['config'].get('max_rounds', record['config']['repeats'])} "
                f"interleaved rounds (until the minimums settle), "
                f"{'one thread per side' if pinned else 'threads not pinned'}"

@@ -89,7 +89,7 @@ def box_pit(n: int, seed: int = SEED, t_end: float = 1.0):
 
 def per_step(times: Times, steps: int) -> Times:
     """The seconds of calls of ``steps`` steps as seconds per step."""
-    return Times(times.median / steps, times.minimum / steps, times.rounds, times.maximum / steps)
+    return times.scaled(1.0 / steps)
 
 
 def contenders(scene, peers) -> tuple[dict, dict, dict]:

@@ -55,21 +55,46 @@ def command(args) -> int:
         with connect(args.workers, args.scheduler) as client:
             records = run_studies(studies, args.out, client, quick=args.quick, force=args.force, finished=finished)
     else:
+        if args.command == "reproduce" and studies:
+            keep_compiled_programs(Path(args.out) / JAX_CACHE)
         records = [_run(study, args, finished) for study in studies]
     print_summary(records, args.out)
     return 0
 
 
+#: where ``steplab reproduce`` keeps JAX's compiled programs between runs, inside its ``--out`` folder
+JAX_CACHE = ".jax-cache"
+
+
+def keep_compiled_programs(folder: Path) -> None:
+    """Keep every program JAX compiles in ``folder`` (JAX's persistent compilation cache), so a
+    later ``reproduce`` into the same folder loads them instead of compiling again.
+
+    The studies compile hundreds of small programs, each under JAX's default threshold of 1 s
+    for caching: the threshold is lowered to 0. Measured (quick truncation study, 2 cores,
+    load 10): 14.4 s of CPU with no cache, 4.3 s with the cache filled by a previous run. The
+    cache's keys include the program, the JAX version and the machine, so a stale entry is
+    never used.
+    """
+    import jax
+
+    jax.config.update("jax_compilation_cache_dir", str(folder))
+    jax.config.update("jax_persistent_cache_min_compile_time_secs", 0.0)
+
+
 class _Finished:
-    """Called with each record as its study finishes: one line on stdout, flushed."""
+    """Called with each record as its study finishes: one line on stdout, flushed, with the
+    study's own wall and CPU seconds where it ran in this process (the CPU seconds hardly move
+    with the machine's load, the wall seconds do)."""
 
     def __init__(self, total: int):
         self.total, self.done, self.start = total, 0, time.perf_counter()
 
-    def __call__(self, record: dict) -> None:
+    def __call__(self, record: dict, seconds: tuple[float, float] | None = None) -> None:
         self.done += 1
         state = "cached" if record.get("cached") else "computed"
-        print(f"[{self.done}/{self.total}] {record['study']}: {state}, {time.perf_counter() - self.start:.0f} s "
+        own = "" if seconds is None else f" in {seconds[0]:.1f} s ({seconds[1]:.1f} s CPU)"
+        print(f"[{self.done}/{self.total}] {record['study']}: {state}{own}, {time.perf_counter() - self.start:.0f} s "
               "since the start", flush=True)
 
 
@@ -77,13 +102,15 @@ def _run(study, args, finished) -> dict:
     """One study in this process, with a bar over its tasks (or its compute's steps) in a terminal."""
     from tqdm import tqdm
 
+    from steplab.core.timing import cpu_seconds
     from steplab.studies import run_study
 
     total = len(study.tasks(study.parameters(args.quick))) if study.tasks is not None else None
+    wall, cpu = time.perf_counter(), cpu_seconds()
     with tqdm(total=total, desc=f"{study.name} ({finished.done + 1}/{finished.total})", unit="task",
               disable=None, leave=False) as bar:
         record = run_study(study, args.out, quick=args.quick, force=args.force, progress=bar.update)
-    finished(record)
+    finished(record, (time.perf_counter() - wall, cpu_seconds() - cpu))
     return record
 
 
