@@ -140,7 +140,7 @@ class CollisionStep:
         self.cap = self.world.impact_cap(len(self.radii))
         self.coupling = Coupling(self.model)
         field = self.model.constant_acceleration  # (N, 3) when every force is constant, else None
-        self.field = None if field is None else np.array(field, dtype=float)  # writable: one kernel type
+        self.field = None if field is None else np.array(field, dtype=float, order="C")  # writable: one kernel type
         planes = [shape for shape in self.world.shapes if shape.kind == "plane"]
         #: spheres, planes, swept testing and constant forces: the changed pairs' narrow phase compiled
         self.compiled_retest = (self.world.detector == "swept" and self.field is not None
