@@ -206,10 +206,33 @@ def simulate(model, integrator, y0, t_start: float, t_end: float | None = None, 
     assert isinstance(integrator, (Stepper, PositionBased))
     if backend == "jax" and hasattr(step, "compiled"):  # a step that compiles its own loop (attached forces)
         return step.compiled(np.asarray(y0, dtype=dtype), t_start, dt, n, save_every, limit)
-    model = _on_backend(model, backend, dtype)
-    run = _run_numpy if backend == "numpy" or step is not None else _run_jax
-    return run(model, integrator, np.asarray(y0, dtype=dtype), t_start, dt, n, save_every,
-               saves, ts, limit, progress, step)
+    run = _FixedStepRun(_on_backend(model, backend, dtype), integrator, np.asarray(y0, dtype=dtype), t_start, dt,
+                        n, save_every, saves, ts, limit, progress, step)
+    return _run_numpy(run) if backend == "numpy" or step is not None else _run_jax(run)
+
+
+@dataclasses.dataclass(frozen=True)
+class _FixedStepRun:
+    """A fixed-step run as :func:`simulate` checked and planned it: what either loop needs.
+
+    ``model`` is on the run's backend and precision and ``y0`` in it; the run takes ``n``
+    steps of ``dt`` from ``t_start`` and keeps the states after the steps ``saves`` (every
+    ``save_every``-th and the last), at the times ``ts``; a state beyond ``limit`` has
+    diverged. ``step``: the step the loop calls instead of the integrator's (None: its own).
+    """
+
+    model: object
+    integrator: object
+    y0: np.ndarray
+    t_start: float
+    dt: float
+    n: int
+    save_every: int
+    saves: np.ndarray
+    ts: np.ndarray
+    limit: float
+    progress: bool
+    step: object
 
 
 def _requested_steps(t_start, t_end, n_steps, dt, dtype) -> int:
@@ -238,11 +261,15 @@ def _on_backend(model, backend, dtype):
     return model.cast(xp, dtype)
 
 
-def _run_numpy(model, integrator, y, t_start, dt, n, save_every, saves, ts, limit, progress, step=None):
+def _run_numpy(run: _FixedStepRun) -> Trajectory:
+    """The run stepped in Python, one step per iteration (and the collision steps)."""
+    model, integrator, y, t_start, dt, n, saves, limit = (run.model, run.integrator, run.y0, run.t_start, run.dt,
+                                                           run.n, run.saves, run.limit)
     out = np.empty((len(saves),) + y.shape, dtype=y.dtype)
     out[0] = y
     saved = 1
-    bar = _progress_bar(n, progress)
+    bar = _progress_bar(n, run.progress)
+    step = run.step
     if step is None:  # the plain ODE step
 
         def step(t, y, dt, carry):
@@ -263,7 +290,7 @@ def _run_numpy(model, integrator, y, t_start, dt, n, save_every, saves, ts, limi
     wall = time.perf_counter() - start
     if bar is not None:
         bar.close()
-    return Trajectory(ts, out, integrator.name, dt, n, "numpy", wall, collisions=getattr(step, "log", None))
+    return Trajectory(run.ts, out, integrator.name, dt, n, "numpy", wall, collisions=getattr(step, "log", None))
 
 
 def _progress_bar(n, enabled):
@@ -274,14 +301,16 @@ def _progress_bar(n, enabled):
     return tqdm(total=n, unit="step", unit_scale=True, leave=False)
 
 
-def _run_jax(model, integrator, y, t_start, dt, n, save_every, saves, ts, limit, progress, step=None):
+def _run_jax(run: _FixedStepRun) -> Trajectory:
+    """The whole run as one compiled JAX loop (:func:`.loop.compiled_loop`), compiled apart from its timing."""
     import jax.numpy as jnp
 
-    run = compiled_loop(model, integrator, chunks=len(saves) - 1, save_every=save_every)
+    integrator, y, t_start, dt, n = run.integrator, run.y0, run.t_start, run.dt, run.n
+    loop = compiled_loop(run.model, integrator, chunks=len(run.saves) - 1, save_every=run.save_every)
     args = (jnp.asarray(y), jnp.asarray(t_start, y.dtype), jnp.asarray(dt, y.dtype), n,
-            jnp.asarray(limit, y.dtype))
+            jnp.asarray(run.limit, y.dtype))
     start = time.perf_counter()
-    compiled = run.lower(*args).compile()
+    compiled = loop.lower(*args).compile()
     compile_time = time.perf_counter() - start
     start = time.perf_counter()
     ys, bad = compiled(*args)
@@ -291,7 +320,7 @@ def _run_jax(model, integrator, y, t_start, dt, n, save_every, saves, ts, limit,
     if bad >= 0:
         raise DivergenceError(integrator.name, dt, bad, t_start + bad * dt)
     out = np.concatenate([y[None], np.asarray(ys)])
-    return Trajectory(ts, out, integrator.name, dt, n, "jax", wall, compile_time)
+    return Trajectory(run.ts, out, integrator.name, dt, n, "jax", wall, compile_time)
 
 
 def final_state_function(model, integrator, check: bool = True):

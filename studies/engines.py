@@ -186,8 +186,8 @@ def miss_rates(system, planar: bool, params: dict) -> list[dict]:
     phases = (np.arange(trials) + 0.5) / trials
     out = []
     for ratio in params["ratios"]:
-        shot = tunnelling.shoot(ratio, params["wall"], params["tunnelling_dt"], params["radius"], phases, "swept",
-                                batched=True, system=system, planar=planar)
+        shot = tunnelling.shoot(tunnelling.Shot(ratio, params["wall"], params["tunnelling_dt"], params["radius"]),
+                                phases, "swept", batched=True, system=system, planar=planar)
         out.append({"ratio": ratio, "miss_rate": shot["misses"] / trials})
     return out
 
@@ -401,9 +401,10 @@ def _steplab_miss_rates(detector: str, params: dict) -> list[dict]:
     shot's impact splits its steps)."""
     trials = params["trials"]
     phases = (np.arange(trials) + 0.5) / trials
-    return [{"ratio": ratio, "miss_rate": tunnelling.shoot(ratio, params["wall"], params["tunnelling_dt"],
-                                                           params["radius"], phases, detector)["misses"] / trials}
-            for ratio in params["ratios"]]
+    shots = [tunnelling.Shot(ratio, params["wall"], params["tunnelling_dt"], params["radius"])
+             for ratio in params["ratios"]]
+    return [{"ratio": shot.ratio, "miss_rate": tunnelling.shoot(shot, phases, detector)["misses"] / trials}
+            for shot in shots]
 
 
 def _pit_costs(system, params: dict) -> dict:

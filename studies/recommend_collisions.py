@@ -25,6 +25,7 @@ reference's. When nothing passes, :class:`NoCollisionStepError` carries the evid
 from __future__ import annotations
 
 import math
+from typing import NamedTuple
 
 import numpy as np
 from steplab.integrators import INTEGRATORS, Stepper, get_integrator, simulate
@@ -68,19 +69,26 @@ class NoCollisionStepError(NoFixedStepError):
         self.evidence = evidence
 
 
-def recommend_with_collisions(model, y0, t_start: float, t_end: float, world, tol: float, *,
-                              scene_dt: float, dt_max: float | None = None, integrators=None,
-                              progress: bool = False) -> dict:
+class CollisionProblem(NamedTuple):
+    """The run a step is recommended for: ``model`` from ``y0`` (2, N, 3) over [``t_start``,
+    ``t_end``] (s), with the collisions of ``world`` (a physics.collision.CollisionWorld, with
+    the detector to use)."""
+
+    model: object
+    y0: np.ndarray
+    t_start: float
+    t_end: float
+    world: object
+
+
+def recommend_with_collisions(problem: CollisionProblem, tol: float, *, scene_dt: float, dt_max: float | None = None,
+                              integrators=None, progress: bool = False) -> dict:
     """The cheapest fixed-step integrator and dt meeting ``tol`` on a scene with collisions.
 
     Parameters
     ----------
-    model : physics.Model
-    y0 : ndarray, shape (2, N, 3)
-    t_start, t_end : float
-        The run, s.
-    world : physics.collision.CollisionWorld
-        The scene's collisions, with the detector to use.
+    problem : CollisionProblem
+        The scene's model, initial state, interval and collisions.
     tol : float
         Largest position error over the run (trajectories), m; in the statistics regime the
         largest penetration, m (energy and impacts have their own tolerances, above).
@@ -106,7 +114,8 @@ def recommend_with_collisions(model, y0, t_start: float, t_end: float, world, to
     NoCollisionStepError
         Nothing passes; the message names the best candidate and its errors.
     """
-    span = t_end - t_start
+    model, world = problem.model, problem.world
+    span = problem.t_end - problem.t_start
     dt_max = span / 4 if dt_max is None else dt_max
     coarsest = max(1, math.ceil(span / dt_max * (1 - 1e-12)))  # steps of the largest candidate dt
     names = list(integrators) if integrators is not None else [
@@ -121,7 +130,7 @@ def recommend_with_collisions(model, y0, t_start: float, t_end: float, world, to
     # one tick for the reference, one per candidate method; shown after a second
     bar = tqdm(total=len(names) + 1, desc="recommend: reference", unit="method", disable=not progress,
                leave=False, delay=1.0)
-    reference = _reference(model, y0, t_start, span, world, tol, coarsest * 2**halvings)
+    reference = _reference(problem, tol, coarsest * 2**halvings)
     bar.update()
     ref_run, ref_energy, ref_steps = reference.pop("run"), reference.pop("energies"), reference["steps"]
     regime = "trajectories" if reference["converged"] else "statistics"
@@ -132,7 +141,7 @@ def recommend_with_collisions(model, y0, t_start: float, t_end: float, world, to
         """One candidate run: its errors against the reference, or why it has none."""
         point = {"integrator": method, "dt": span / n, "steps": n}
         try:
-            run = _run(model, y0, t_start, span, world, method, n)
+            run = _run(problem, method, n)
         except (DivergenceError, ImpactCapError) as err:  # a coarse dt may crowd a step past the cap
             return point | {"failed": str(err)}
         stride = ref_steps // n
@@ -168,8 +177,7 @@ def recommend_with_collisions(model, y0, t_start: float, t_end: float, world, to
         best = min(measured, key=lambda p: _badness(p, reference, tol, regime), default=None)
         raise NoCollisionStepError(_refusal(reference, regime, tol, best, span / finest), evidence | {"best": best})
     for point in accepted:
-        point["seconds"] = median_time(lambda p=point: _run(model, y0, t_start, span, world, p["integrator"],
-                                                            p["steps"]), TIMING_REPEATS)
+        point["seconds"] = median_time(lambda p=point: _run(problem, p["integrator"], p["steps"]), TIMING_REPEATS)
     best = min(accepted, key=lambda p: p["seconds"])
     result = {k: best[k] for k in ("integrator", "dt", "error", "seconds", "steps", "impacts", "energy_error",
                                    "penetration")} | evidence
@@ -181,18 +189,22 @@ def recommend_with_collisions(model, y0, t_start: float, t_end: float, world, to
     return result
 
 
-def _run(model, y0, t_start, span, world, method, n):
-    return simulate(model, method, y0, t_start, dt=span / n, n_steps=n, collisions=world)
+def _run(problem: CollisionProblem, method, n):
+    """The problem's run with ``method`` in ``n`` steps, with its collisions."""
+    span = problem.t_end - problem.t_start
+    return simulate(problem.model, method, problem.y0, problem.t_start, dt=span / n, n_steps=n,
+                    collisions=problem.world)
 
 
-def _reference(model, y0, t_start, span, world, tol, n) -> dict:
+def _reference(problem: CollisionProblem, tol, n) -> dict:
     """Reference runs at n, 2n, ... steps until two agree to tol / REFERENCE_MARGIN (REFERENCE_RUNS at most)."""
+    model, span = problem.model, problem.t_end - problem.t_start
     method = _reference_method()
-    runs = [_run(model, y0, t_start, span, world, method, n), _run(model, y0, t_start, span, world, method, 2 * n)]
+    runs = [_run(problem, method, n), _run(problem, method, 2 * n)]
     differences = [_difference(runs[-2], runs[-1])]
     while len(runs) < REFERENCE_RUNS and differences[-1] > tol / REFERENCE_MARGIN:
         n *= 2
-        runs.append(_run(model, y0, t_start, span, world, method, 2 * n))
+        runs.append(_run(problem, method, 2 * n))
         differences.append(_difference(runs[-2], runs[-1]))
     fine, coarse = runs[-1], runs[-2]
     energy_fine = _energies(model, fine.y)

@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import itertools
 import math
+from typing import NamedTuple
 
 import numpy as np
 from steplab.integrators import simulate
@@ -123,8 +124,18 @@ def lecture_table_check() -> list[dict]:
     return rows
 
 
-def pseudocode_collision(p_i, p_j, v_init_i, v_init_j, m_i, m_j, eps, telapsed, g):
-    """The lecture's N-particle pseudo-code at one collision, as printed, and corrected.
+class PseudocodeParticle(NamedTuple):
+    """One particle of the lecture's N-particle pseudo-code at a collision: its position there
+    ``p``, its ``V_init`` (the velocity at ``time_init``) and its ``mass``."""
+
+    p: np.ndarray
+    v_init: np.ndarray
+    mass: float
+
+
+def pseudocode_collision(i: PseudocodeParticle, j: PseudocodeParticle, eps: float, telapsed: float, g) -> dict:
+    """The lecture's N-particle pseudo-code at one collision of particles ``i`` and ``j``, as
+    printed, and corrected.
 
     As printed, the velocities at the collision (vi, vj) are used but never computed, and
     the restart ``V_init[i] += impulse / mass[i]`` keeps the *initial* velocity while
@@ -133,10 +144,11 @@ def pseudocode_collision(p_i, p_j, v_init_i, v_init_j, m_i, m_j, eps, telapsed, 
     collision, the printed update and the corrected one (V_init = vi + impulse / m) are
     returned with the momentum just before.
     """
-    vi, vj = v_init_i + g * telapsed, v_init_j + g * telapsed
-    normal = (p_j - p_i) / np.linalg.norm(p_j - p_i)
+    m_i, m_j = i.mass, j.mass
+    vi, vj = i.v_init + g * telapsed, j.v_init + g * telapsed
+    normal = (j.p - i.p) / np.linalg.norm(j.p - i.p)
     lam = impulse(vi, vj, 1 / m_i, 1 / m_j, normal, eps)
-    printed = (v_init_i + lam / m_i, v_init_j - lam / m_j)
+    printed = (i.v_init + lam / m_i, j.v_init - lam / m_j)
     corrected = (vi + lam / m_i, vj - lam / m_j)
     return {"momentum_before": (m_i * vi + m_j * vj).tolist(),
             "momentum_after_printed": (m_i * printed[0] + m_j * printed[1]).tolist(),
@@ -150,8 +162,8 @@ def lecture_errors(rows: list[dict], table: list[dict], params: dict) -> list[di
     ratio = v_plus / -v_minus  # floor at rest: (V+ - 0) / (V- - 0), V- = -impact speed
     energy_ratio = golf["energy_per_bounce_swept"][0] if golf["energy_per_bounce_swept"] else None
     g = np.array([0.0, 0.0, -9.81])
-    code = pseudocode_collision(np.array([0.0, 0, 10]), np.array([0.2, 0, 10]), np.array([2.0, 0, 0]),
-                                np.array([-2.0, 0, 0]), 1.0, 1.0, 1.0, 0.5, g)
+    code = pseudocode_collision(PseudocodeParticle(np.array([0.0, 0, 10]), np.array([2.0, 0, 0]), 1.0),
+                                PseudocodeParticle(np.array([0.2, 0, 10]), np.array([-2.0, 0, 0]), 1.0), 1.0, 0.5, g)
     errors = [
         {"where": "Coefficient of Restitution (2 of 6)",
          "printed": "eps = (V1+ - V2+) / (V1- - V2-)",

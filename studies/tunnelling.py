@@ -34,6 +34,7 @@ from __future__ import annotations
 
 import math
 import time
+from typing import NamedTuple
 
 import numpy as np
 from steplab.integrators import simulate
@@ -70,9 +71,19 @@ def parameters(quick: bool) -> dict:
     }
 
 
-def shoot(ratio: float, w: float, dt: float, r: float, phases, detector: str, iterations: int = 5,
-          substeps: int = 1, batched: bool = False, system=None, planar: bool = False) -> dict:
-    """Shoot spheres at the wall x in [-w/2, w/2] at v = ratio (w + 2r) / dt, one per phase.
+class Shot(NamedTuple):
+    """A sphere of radius ``r`` (m) shot at a wall of thickness ``w`` (m) with the step ``dt``
+    (s), at the speed v = ``ratio`` (w + 2r) / dt."""
+
+    ratio: float
+    w: float
+    dt: float
+    r: float
+
+
+def shoot(shot: Shot, phases, detector: str, iterations: int = 5, substeps: int = 1, batched: bool = False,
+          system=None, planar: bool = False) -> dict:
+    """Shoot spheres at the wall x in [-w/2, w/2] at the ``shot``'s speed, one per phase.
 
     ``phases`` (fractions of a step in [0, 1)) place each sphere's samples along its path.
     Each shot is its own run unless ``batched``: then all spheres fly side by side in one
@@ -82,6 +93,7 @@ def shoot(ratio: float, w: float, dt: float, r: float, phases, detector: str, it
     system under test, :mod:`.system`) runs the shots instead of steplab's integrator and
     ``detector``; ``planar`` puts the lanes side by side in the plane z = 0 (a 2-D engine's).
     """
+    ratio, w, dt, r = shot
     phases = np.asarray(phases, dtype=float)
     v = ratio * (w + 2 * r) / dt
     travel = v * dt
@@ -261,7 +273,7 @@ def task(params: dict, item: list):
         points = []
         for detector, iterations in [("overlap", k) for k in params["bisections"]] + [("swept", None)]:
             swept = iterations is None  # the swept detector does not bisect
-            shot = shoot(ratio, w, dt, r, drawn["miss_rate"], detector, 0 if swept else iterations)
+            shot = shoot(Shot(ratio, w, dt, r), drawn["miss_rate"], detector, 0 if swept else iterations)
             points.append({"detector": detector, "bisections": iterations, "ratio": ratio,
                            "miss_rate": shot["misses"] / trials, "trials": trials, "w": w, "dt": dt,
                            "speed": ratio * (w + 2 * r) / dt,
@@ -270,14 +282,14 @@ def task(params: dict, item: list):
         return points
     if kind == "batched":
         ratio = item[1]
-        shot = shoot(ratio, w, dt, r, drawn["miss_rate"], "overlap", batched=True)
+        shot = shoot(Shot(ratio, w, dt, r), drawn["miss_rate"], "overlap", batched=True)
         return {"ratio": ratio, "miss_rate": shot["misses"] / trials, "trials": trials, "w": w, "dt": dt}
     if kind == "cost":
         ratio, some = item[1], drawn["cost"]
         substeps = math.ceil(ratio)
-        sub = shoot(ratio, w, dt, r, some, "overlap", substeps=substeps)
-        single = shoot(ratio, w, dt, r, some, "overlap")
-        swept = shoot(ratio, w, dt, r, some, "swept")
+        sub = shoot(Shot(ratio, w, dt, r), some, "overlap", substeps=substeps)
+        single = shoot(Shot(ratio, w, dt, r), some, "overlap")
+        swept = shoot(Shot(ratio, w, dt, r), some, "swept")
         return {"ratio": ratio, "substeps": substeps, "trials": len(some),
                 "miss_rate_overlap": single["misses"] / len(some),
                 "miss_rate_overlap_substepped": sub["misses"] / len(some),
@@ -287,12 +299,12 @@ def task(params: dict, item: list):
     some = drawn["bisection"]
     if kind == "bisection":
         iterations = item[1]
-        shot = shoot(params["bisection_ratio"], w, dt, r, some, "overlap", iterations, batched=True)
+        shot = shoot(Shot(params["bisection_ratio"], w, dt, r), some, "overlap", iterations, batched=True)
         errors = np.array([t - true for t, true in zip(shot["toi"], shot["true_toi"]) if t is not None])
         return {"iterations": iterations, "toi_error": float(np.mean(np.abs(errors))),
                 "toi_error_max": float(np.max(np.abs(errors))), "bound": dt * 2.0**-iterations,
                 "detected": int(len(errors)), "overlap_tests_per_collision": iterations + 1}
-    shot = shoot(params["bisection_ratio"], w, dt, r, some, "swept", batched=True)  # "swept_toi"
+    shot = shoot(Shot(params["bisection_ratio"], w, dt, r), some, "swept", batched=True)  # "swept_toi"
     return max(abs(t - true) for t, true in zip(shot["toi"], shot["true_toi"]))
 
 

@@ -34,12 +34,13 @@ def test_recommend_drop_bounces_as_the_ball_does():
     """The answer's run bounces as often as the reference and the closed form, and stays within tol of it."""
     from steplab.integrators import simulate
     from steplab.physics.scene import load_scene
-    from steplab.studies.recommend_collisions import recommend_with_collisions
+    from steplab.studies.recommend_collisions import CollisionProblem, recommend_with_collisions
 
     scene = load_scene("drop")
     t_end, tol = 1.3, 1e-3  # two bounces (at 0.433 s and 1.176 s)
-    r = recommend_with_collisions(scene.model, scene.y0, scene.t_start, t_end, scene.collisions, tol,
-                                  scene_dt=scene.dt, integrators=["semi-implicit-euler", "velocity-verlet"])
+    problem = CollisionProblem(scene.model, scene.y0, scene.t_start, t_end, scene.collisions)
+    r = recommend_with_collisions(problem, tol, scene_dt=scene.dt,
+                                  integrators=["semi-implicit-euler", "velocity-verlet"])
     run = simulate(scene.model, r["integrator"], scene.y0, scene.t_start, dt=r["dt"], n_steps=r["steps"],
                    collisions=scene.collisions)
     floor = [e for e in run.collisions.events if e.kind == "impact" and e.other_name == "floor"]

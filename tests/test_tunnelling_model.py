@@ -12,6 +12,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 from steplab.studies.tunnelling import (
+    Shot,
     analytic_miss_rate,
     bisection_miss_rate,
     nearest_face_miss_rate,
@@ -56,7 +57,7 @@ def test_measured_miss_rate_follows_the_model(iterations, ratios, wall):
     w, dt = wall
     phases = (np.arange(TRIALS) + 0.5) / TRIALS
     for rho in ratios:
-        shot = shoot(rho, w, dt, RADIUS, phases, "overlap", iterations)
+        shot = shoot(Shot(rho, w, dt, RADIUS), phases, "overlap", iterations)
         measured = shot["misses"] / TRIALS
         model = bisection_miss_rate(rho, iterations)
         assert abs(measured - model) <= TOLERANCE, (iterations, rho, measured, model)

@@ -18,6 +18,8 @@ so a game refits for a few frames and rebuilds when the queries slow down.
 
 from __future__ import annotations
 
+from typing import NamedTuple
+
 import numpy as np
 from numba import njit
 
@@ -25,6 +27,17 @@ from .common import append_pair, as_spheres, no_pairs, padding, sort_pairs, sphe
 
 #: spheres per leaf: fewer means a deeper tree, more means more exact tests per leaf pair
 LEAF_SIZE = 4
+
+
+class Topology(NamedTuple):
+    """The tree without its boxes (what a refit keeps): the bodies in leaf order, each node's
+    children (-1 for a leaf; children have larger indices than parents) and its run of ``order``."""
+
+    order: np.ndarray
+    left: np.ndarray
+    right: np.ndarray
+    first: np.ndarray
+    count: np.ndarray
 
 
 class BoundingVolumeHierarchy:
@@ -37,6 +50,8 @@ class BoundingVolumeHierarchy:
 
     Attributes
     ----------
+    topology : Topology
+        ``order, left, right, first, count`` below, as the kernels take them.
     order : ndarray, shape (n,)
         The bodies in leaf order (each leaf a contiguous run).
     left, right : ndarray, shape (m,)
@@ -52,7 +67,8 @@ class BoundingVolumeHierarchy:
             raise ValueError(f"leaf_size must be an integer >= 1, got {leaf_size!r}")
         c, r = as_spheres(centers, radii)
         self.leaf_size = int(leaf_size)
-        self.order, self.left, self.right, self.first, self.count = _build(c, self.leaf_size)
+        self.topology = _build(c, self.leaf_size)
+        self.order, self.left, self.right, self.first, self.count = self.topology
         self.refit(c, r)
 
     @property
@@ -66,15 +82,13 @@ class BoundingVolumeHierarchy:
             raise ValueError(f"refit needs the same {self.n} bodies the hierarchy was built for, got {len(c)}; "
                              "build a new BoundingVolumeHierarchy")
         # bodies in leaf order: leaf tests read memory in sequence
-        self._c, self._r, self.box_lo, self.box_hi = _refit(c, r, padding(c, r), self.order, self.left,
-                                                            self.right, self.first, self.count)
+        self._c, self._r, self.box_lo, self.box_hi = _refit(c, r, padding(c, r), self.topology)
 
     def pairs(self) -> np.ndarray:
         """All overlapping pairs, int64 (k, 2), rows i < j, sorted lexicographically."""
         if self.n < 2:
             return no_pairs()
-        pairs, k = _self_pairs(self._c, self._r, self.order, self.box_lo, self.box_hi, self.left, self.right,
-                               self.first, self.count)
+        pairs, k = _self_pairs(self._c, self._r, self.topology, self.box_lo, self.box_hi)
         return sort_pairs(pairs, k, self.n)
 
 
@@ -147,12 +161,13 @@ def _build(c, leaf_size):
         stack[top + 1, 0], stack[top + 1, 1], stack[top + 1, 2] = m, s, mid
         top += 2
         m += 2
-    return order, left[:m].copy(), right[:m].copy(), first[:m].copy(), count[:m].copy()
+    return Topology(order, left[:m].copy(), right[:m].copy(), first[:m].copy(), count[:m].copy())
 
 
 @njit(cache=True)
-def _refit(c, r, pad, order, left, right, first, count):
+def _refit(c, r, pad, topology):
     """Bodies gathered into leaf order, and every node's box, bottom up."""
+    order, left, right, first, count = topology
     n, m = order.shape[0], left.shape[0]
     cl = np.empty((n, 3))
     rl = np.empty(n)
@@ -177,7 +192,9 @@ def _refit(c, r, pad, order, left, right, first, count):
 
 
 @njit(cache=True)
-def _self_pairs(c, r, order, box_lo, box_hi, left, right, first, count):
+def _self_pairs(c, r, topology, box_lo, box_hi):
+    """Every overlapping pair of the leaf-ordered spheres ``c, r``, by the self-traversal (module docstring)."""
+    order, left, right, first, count = topology
     n = order.shape[0]
     pairs = np.empty((n + 16, 2), dtype=np.int64)
     k = 0

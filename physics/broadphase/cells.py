@@ -35,6 +35,8 @@ same pairs, each once; 2 to 3 times faster than 14 cell lookups on a ball pit of
 
 from __future__ import annotations
 
+from typing import NamedTuple
+
 import numpy as np
 from numba import njit
 
@@ -65,6 +67,19 @@ FIBONACCI = np.uint64(0x9E3779B97F4A7C15)
 #: the 13 neighbour offsets lexicographically after (0, 0, 0): half of the 26 neighbours
 FORWARD = np.array([(dx, dy, dz) for dx in (-1, 0, 1) for dy in (-1, 0, 1) for dz in (-1, 0, 1)
                     if (dx, dy, dz) > (0, 0, 0)], dtype=np.int64)
+
+
+class Cells(NamedTuple):
+    """The hierarchy's cells: ``origin`` (3,) the lowest corner of all boxes, ``hs`` (L,) the cell
+    edge of each level, and where a cell's spheres are counted: ``bits < 0``, densely, ``dims``
+    (L, 3) cells per axis on each level from index ``offset[level]`` (L + 1,); ``bits >= 0``,
+    in one of 2^bits hash buckets (``dims`` and ``offset`` then unused)."""
+
+    origin: np.ndarray
+    hs: np.ndarray
+    dims: np.ndarray
+    offset: np.ndarray
+    bits: int
 
 
 def hierarchy_pairs(c: np.ndarray, r: np.ndarray, hashed: bool) -> np.ndarray:
@@ -108,7 +123,7 @@ def hierarchy_pairs(c: np.ndarray, r: np.ndarray, hashed: bool) -> np.ndarray:
         dims = (np.floor(extent[None, :] / hs[:, None]) + 1).astype(np.int64)
         dims[np.bincount(level, minlength=n_levels) == 0] = 0  # no cells on an empty level
         offset = np.concatenate(([0], np.cumsum(np.prod(dims, axis=1))))
-    pairs, k = _hierarchy_kernel(c, r, pad, origin, hs, level, dims, offset, bits)
+    pairs, k = _hierarchy_kernel(c, r, pad, level, Cells(origin, hs, dims, offset, bits))
     return sort_pairs(pairs, k, n)
 
 
@@ -195,7 +210,9 @@ def _starts(slots, n_slots):
 
 
 @njit(cache=True)
-def _hierarchy_kernel(c, r, pad, origin, hs, level, dims, offset, bits):
+def _hierarchy_kernel(c, r, pad, level, cells):
+    """Every overlapping pair of the spheres ``c, r``, each in its ``level``'s home cell (module docstring)."""
+    origin, hs, dims, offset, bits = cells
     n = c.shape[0]
     hashed = bits >= 0
     n_slots = (1 << bits) if hashed else offset[-1]

@@ -164,7 +164,7 @@ class RigidSolverStep:
         self.bounding = np.asarray(self.narrow_phase.bounding_radius(self.shapes), dtype=float)
         self.inverse_masses = np.ascontiguousarray(self.model.inverse_masses, dtype=float)
         field = self.model.constant_acceleration
-        self.field = None if field is None else np.ascontiguousarray(field, dtype=float)
+        self.field = None if field is None else np.array(field, dtype=float, order="C")  # writable: one kernel type
         self.materials = Materials.of(world, n)
         self.margin = MARGIN_OF_RADIUS * float(np.median(self.bounding)) if n else 0.0
         # spheres and capsules are rounded about their core (centre, segment) by their radius; boxes are not

@@ -83,7 +83,7 @@ class SolverStep:
         self.radii = np.asarray(self.model.radii, dtype=float)
         self.inverse_masses = np.ascontiguousarray(self.model.inverse_masses, dtype=float)
         field = self.model.constant_acceleration  # (N, 3) when every force is constant, else None
-        self.field = None if field is None else np.ascontiguousarray(field, dtype=float)
+        self.field = None if field is None else np.array(field, dtype=float, order="C")  # writable: one kernel type
         self.materials = Materials.of(self.world, len(self.radii))
         self.margin = speculative_margin(self.radii)
         self.log.largest_residual = 0.0

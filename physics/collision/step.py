@@ -140,7 +140,7 @@ class CollisionStep:
         self.cap = self.world.impact_cap(len(self.radii))
         self.coupling = Coupling(self.model)
         field = self.model.constant_acceleration  # (N, 3) when every force is constant, else None
-        self.field = None if field is None else np.ascontiguousarray(field, dtype=float)
+        self.field = None if field is None else np.array(field, dtype=float, order="C")  # writable: one kernel type
         planes = [shape for shape in self.world.shapes if shape.kind == "plane"]
         #: spheres, planes, swept testing and constant forces: the changed pairs' narrow phase compiled
         self.compiled_retest = (self.world.detector == "swept" and self.field is not None
@@ -187,7 +187,7 @@ class CollisionStep:
         queue = ImpactQueue(len(radii))
         chords = Chords(y, y_end, t, t_end, radii, slop)
         grid = SweptGrid(chords.centers, chords.reach)
-        self._test(queue, groups, starts, t, y, y_end, dt, dt, self._accelerations(t, chords))
+        self._test(queue, (groups, starts), t, y, y_end, dt, dt, self._accelerations(t, chords))
         resolved = 0
         while True:
             found = self._next_queued(queue, t, t_end, dt, chords, ignored, resolved, t_start)
@@ -218,7 +218,7 @@ class CollisionStep:
                 new += queue.take_watched()  # resting contacts speeding up along their chords
             if new:
                 y = chords.at(np.unique(np.concatenate([_pair_bodies(pairs) for pairs in new])), t)
-                self._test(queue, new, [start_state(pairs, radii, y, slop) for pairs in new], t, y, y_end,
+                self._test(queue, (new, [start_state(pairs, radii, y, slop) for pairs in new]), t, y, y_end,
                            t_end - t, dt, self._accelerations(t, chords))
         log.most_impacts_in_a_step = max(log.most_impacts_in_a_step, resolved)
         if resolved:
@@ -237,7 +237,7 @@ class CollisionStep:
         grid = SweptGrid(chords.centers, chords.reach)
         # Narrowphase, once per pair: every candidate's time of impact, as the rows of the queue
         tested = TestedPairs()
-        self._test(tested, groups, starts, t, y, y_end, dt, dt, self._accelerations(t, chords))
+        self._test(tested, (groups, starts), t, y, y_end, dt, dt, self._accelerations(t, chords))
         entries, watched, n_watched = tested.arrays()
         sizes = compiled_loop.new_sizes(tested.n, self.cap)
         sizes[N_WATCHED] = n_watched
@@ -320,8 +320,10 @@ class CollisionStep:
         y_rest, _ = integrator.step(self.model, t, y, h, integrator.init(self.model, t, y))
         return np.asarray(y_rest)[:, moved]
 
-    def _test(self, queue, groups, starts, t, y, y_end, h, dt, accelerations):
-        """Test ``groups`` on the sub-step ``[t, t + h]`` (``y -> y_end``) of the step ``dt``; queue their times."""
+    def _test(self, queue, candidates, t, y, y_end, h, dt, accelerations):
+        """Test the ``candidates`` (groups of pairs and their start states) on the sub-step
+        ``[t, t + h]`` (``y -> y_end``) of the step ``dt``; queue their times."""
+        groups, starts = candidates
         self._set_rest_speeds(groups, starts, t, y, dt, accelerations)
         for pairs, start in zip(groups, starts):
             s, lo = pair_times(self.world.detector, pairs, start, self.radii, y, y_end,

@@ -57,7 +57,7 @@ def mujoco_model(scene, iterations: int = 10) -> str:
     soft contact (:mod:`steplab.engines.mjcf`, which writes the file; its keyframe holds
     the initial state).
     """
-    from steplab.engines.mjcf import mjcf
+    from steplab.engines.mjcf import MujocoOption, mjcf
 
-    return mjcf(scene.model, scene.y0, scene.dt, scene.collisions, "Euler", solver="PGS", iterations=iterations,
-                jacobian="sparse", name=scene.name)
+    return mjcf(scene.model, scene.y0, scene.dt, scene.collisions,
+                MujocoOption("Euler", solver="PGS", iterations=iterations, jacobian="sparse"), name=scene.name)

@@ -19,7 +19,7 @@ def add_parser(sub, name: str) -> None:
 
 def command(args) -> int:
     from steplab.core.records import write_atomic
-    from steplab.engines.mjcf import mjcf
+    from steplab.engines.mjcf import MujocoOption, mjcf
     from steplab.engines.mujoco_engine import MujocoRun
     from steplab.physics.scene import load_scene
 
@@ -27,7 +27,7 @@ def command(args) -> int:
     # MuJoCo's integrator that steps as the scene's integrator does (the engines study's identification)
     equivalent = MujocoRun.integrator_stepping_as(scene.integrator)
     integrator = args.integrator or equivalent or "Euler"
-    text = mjcf(scene.model, scene.y0, scene.dt, scene.collisions, integrator, name=scene.name,
+    text = mjcf(scene.model, scene.y0, scene.dt, scene.collisions, MujocoOption(integrator), name=scene.name,
                 bodies=scene.rigid_bodies)
     if args.integrator is None and equivalent is None:
         print(f"steplab export: note: MuJoCo has no integrator that steps as {scene.integrator!r} does; "

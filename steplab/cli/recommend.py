@@ -94,12 +94,12 @@ def _print_rotation(result: dict) -> None:
 
 def _with_collisions(args, scene, t_end, world, integrators, rotation) -> int:
     """``recommend`` measured with the scene's collisions; status 1 with the evidence when nothing passes."""
-    from steplab.studies.recommend_collisions import NoCollisionStepError, recommend_with_collisions
+    from steplab.studies.recommend_collisions import CollisionProblem, NoCollisionStepError, recommend_with_collisions
 
     from .run import plural
 
     try:
-        r = recommend_with_collisions(scene.model, scene.y0, scene.t_start, t_end, world, args.tol,
+        r = recommend_with_collisions(CollisionProblem(scene.model, scene.y0, scene.t_start, t_end, world), args.tol,
                                       scene_dt=scene.dt, dt_max=args.dt_max, integrators=integrators,
                                       progress=not args.json and sys.stderr.isatty())
     except NoCollisionStepError as err:

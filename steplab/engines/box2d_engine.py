@@ -28,6 +28,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import math
 
 import numpy as np
@@ -87,6 +88,17 @@ BOX2D_BOUNCE = ("restitution is the larger of the two fixtures'; the floor's pol
                 "slop (5 mm) turns the ball about 5 mm above the floor; approaches below 1 m/s do not bounce; float32")
 
 
+@dataclasses.dataclass(frozen=True)
+class Box2DOptions:
+    """The settings of a Box2D run (the module docstring): continuous physics, bullets, and the
+    solver's velocity and position iterations."""
+
+    continuous: bool = True
+    bullet: bool = False
+    velocity_iterations: int = VELOCITY_ITERATIONS
+    position_iterations: int = POSITION_ITERATIONS
+
+
 class Box2DRun(PlanarRun):
     engine = "box2d"
     display_name = "Box2D (2-D, float32)"
@@ -114,9 +126,11 @@ class Box2DRun(PlanarRun):
     velocity_attribute = "linearVelocity"
     spin_attribute = "angularVelocity"
 
-    def __init__(self, model, collisions=None, dt: float = 0.01, continuous: bool = True, bullet: bool = False,
-                 velocity_iterations: int = VELOCITY_ITERATIONS, position_iterations: int = POSITION_ITERATIONS,
-                 y0=None, bodies=None):
+    def __init__(self, model, collisions=None, dt: float = 0.01, y0=None, bodies=None, **options):
+        """The scene in a Box2D world of its own; ``options``: the keywords of :class:`Box2DOptions`."""
+        options = Box2DOptions(**options)
+        continuous, bullet = options.continuous, options.bullet
+        velocity_iterations, position_iterations = options.velocity_iterations, options.position_iterations
         b2 = require("Box2D", ENGINE)
         super().__init__(model, collisions, ENGINE, y0, bodies)
         self._skin = float(b2.b2_polygonRadius)

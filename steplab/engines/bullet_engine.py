@@ -28,6 +28,8 @@
 
 from __future__ import annotations
 
+import dataclasses
+
 import numpy as np
 
 from steplab.physics import Dampers, Gravity, Springs
@@ -42,6 +44,17 @@ ENGINE = "Bullet"
 #: why Bullet's bounce is above eps^2 (the drop test's explanation, from Bullet's documented rules)
 PENETRATION_RECOVERY = ("restitution is the product of the two bodies' (the floor gets 1); the penetration "
                         "recovery (ERP) pushes the ball out of the floor with added speed, so h/H is above eps^2")
+
+
+@dataclasses.dataclass(frozen=True)
+class BulletOptions:
+    """The settings of a Bullet run (the module docstring): penetration recovery on or off,
+    continuous collision detection, solver iterations and substeps (None: pybullet's)."""
+
+    position_correction: bool = True
+    ccd: bool = False
+    iterations: int | None = None
+    substeps: int | None = None
 
 
 class BulletRun(EngineRun):
@@ -72,9 +85,11 @@ class BulletRun(EngineRun):
                 "of sequential impulses"),
     )
 
-    def __init__(self, model, collisions=None, dt: float = 0.01, position_correction: bool = True,
-                 ccd: bool = False, iterations: int | None = None, substeps: int | None = None, y0=None,
-                 bodies=None):
+    def __init__(self, model, collisions=None, dt: float = 0.01, y0=None, bodies=None, **options):
+        """The scene in a pybullet world of its own; ``options``: the keywords of :class:`BulletOptions`."""
+        options = BulletOptions(**options)
+        position_correction, ccd, iterations, substeps = (options.position_correction, options.ccd,
+                                                          options.iterations, options.substeps)
         pybullet = require("pybullet", ENGINE)
         super().__init__(scene_parts(model, collisions, ENGINE, forces=(Gravity, Springs, Dampers),
                                      shapes=(Plane, Box, OrientedBox)), model, bodies)

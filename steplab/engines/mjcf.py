@@ -25,6 +25,7 @@ Written from the scene alone (MuJoCo need not be installed):
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from xml.sax.saxutils import quoteattr
 
@@ -63,6 +64,18 @@ def damping_ratio(restitution: float) -> float:
     return max(-log / math.sqrt(math.pi**2 + log**2), SMALLEST_DAMPING_RATIO)
 
 
+@dataclasses.dataclass(frozen=True)
+class MujocoOption:
+    """MJCF's ``<option>`` as steplab sets it: MuJoCo's ``integrator`` (one of
+    :data:`INTEGRATORS`) and its constraint solver's ``solver``, ``iterations`` and ``jacobian``
+    (None: MuJoCo's default)."""
+
+    integrator: str = "Euler"
+    solver: str | None = None
+    iterations: int | None = None
+    jacobian: str | None = None
+
+
 def _vec(values) -> str:
     return " ".join(repr(float(x)) for x in values)
 
@@ -76,24 +89,26 @@ def _geom(shape) -> str:
     return f'type="sphere" size="{float(shape.radius)!r}"'
 
 
-def mjcf(model, y0, dt: float, collisions=None, integrator: str = "Euler", solver: str | None = None,
-         iterations: int | None = None, jacobian: str | None = None, name: str = "steplab", bodies=None) -> str:
+def mjcf(model, y0, dt: float, collisions=None, option: MujocoOption = MujocoOption(), name: str = "steplab",
+         bodies=None) -> str:
     """The MJCF text of a scene: ``model`` and ``y0`` (2, N, 3), the step ``dt``, ``collisions``,
     the rotating ``bodies`` (a :class:`steplab.physics.rigid_body.RigidBodies`, or None).
 
-    ``integrator`` is one of :data:`INTEGRATORS`; ``solver``, ``iterations`` and
-    ``jacobian`` set MuJoCo's constraint solver (default: MuJoCo's). UnsupportedFeatureError
-    for a scene feature MJCF cannot hold (another force than gravity, springs and dampers).
+    ``option`` is MuJoCo's integrator and constraint solver (default: Euler and MuJoCo's
+    solver). UnsupportedFeatureError for a scene feature MJCF cannot hold (another force than
+    gravity, springs and dampers).
     """
+    integrator = option.integrator
     if integrator not in INTEGRATORS:
         raise ValueError(f"unknown MuJoCo integrator {integrator!r}; valid: {', '.join(INTEGRATORS)}")
     parts = scene_parts(model, collisions, ENGINE, forces=(Gravity, Springs, Dampers),
                         shapes=(Plane, Box, OrientedBox))
     q, v = np.asarray(y0[0], float), np.asarray(y0[1], float)
     contacts = parts.collisions is not None
-    option = f'timestep="{float(dt)!r}" gravity="{_vec(parts.gravity)}" integrator="{integrator}"'
-    option += "".join(f' {key}="{value}"' for key, value in (("solver", solver), ("iterations", iterations),
-                                                              ("jacobian", jacobian)) if value is not None)
+    attributes = f'timestep="{float(dt)!r}" gravity="{_vec(parts.gravity)}" integrator="{integrator}"'
+    attributes += "".join(f' {key}="{value}"' for key, value in (("solver", option.solver),
+                                                                  ("iterations", option.iterations),
+                                                                  ("jacobian", option.jacobian)) if value is not None)
     flags = "" if contacts else '<flag contact="disable"/>'
     # the contact is a spring-damper of natural frequency omega_0 = 1 / (CONTACT_STEPS dt) and
     # damping ratio zeta: in solref's (time constant, damping ratio) form, omega_0 = 1 /
@@ -170,7 +185,7 @@ def mjcf(model, y0, dt: float, collisions=None, integrator: str = "Euler", solve
         "  <!-- written by steplab export: bodies are spheres, springs and dampers are tendons -->" if not rigid else
         "  <!-- written by steplab export: bodies are spheres or their shapes, springs and dampers are tendons -->",
         f"  {size}" if size else "",
-        f"  <option {option}>{flags}</option>",
+        f"  <option {attributes}>{flags}</option>",
         "  <worldbody>", *(f"    {line}" for line in world + moving_bodies), "  </worldbody>",
         *(["  <tendon>", *(f"    {line}" for line in tendons), "  </tendon>"] if tendons else []),
         f"  {key}" if key else "",

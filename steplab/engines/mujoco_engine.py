@@ -15,7 +15,7 @@ import numpy as np
 from steplab.physics import quaternion as quat
 
 from .base import EngineRun, Setting, body_indices, require, scene_parts, version
-from .mjcf import ENGINE, mjcf
+from .mjcf import ENGINE, MujocoOption, mjcf
 
 #: why MuJoCo's bounce is not eps^2 (the drop test's explanation, from MuJoCo's documented contact model)
 SOFT_CONTACT = ("soft contact: eps becomes the damping ratio of a spring-damper contact of natural frequency "
@@ -78,9 +78,12 @@ class MujocoRun(EngineRun):
         of two, the later: implicitfast), or None."""
         return {s.equals: s.options["integrator"] for s in cls.study_settings if s.equals}.get(method)
 
-    def __init__(self, model, collisions=None, dt: float = 0.01, integrator: str = "Euler",
-                 solver: str | None = None, iterations: int | None = None, jacobian: str | None = None,
-                 substeps: int = 1, y0=None, bodies=None):
+    def __init__(self, model, collisions=None, dt: float = 0.01, y0=None, bodies=None, substeps: int = 1,
+                 **option):
+        """The scene compiled by MuJoCo; ``option``: the keywords of :class:`.mjcf.MujocoOption`
+        (``integrator``, ``solver``, ``iterations``, ``jacobian``); each step is ``substeps``
+        MuJoCo steps of dt / substeps."""
+        option = MujocoOption(**option)
         mujoco = require("mujoco", ENGINE)
         super().__init__(scene_parts(model, collisions, ENGINE), model, bodies)
         n = self.parts.n
@@ -90,8 +93,7 @@ class MujocoRun(EngineRun):
         self.substeps = int(substeps)
         if self.substeps < 1:
             raise ValueError(f"substeps must be >= 1, got {substeps}")
-        self.xml = mjcf(model, y0, dt / self.substeps, collisions, integrator, solver, iterations, jacobian,
-                        bodies=bodies)
+        self.xml = mjcf(model, y0, dt / self.substeps, collisions, option, bodies=bodies)
         _quiet(mujoco)
         self.model = mujoco.MjModel.from_xml_string(self.xml)
         # MuJoCo puts a diverging simulation back at its start (auto-reset) and carries on;
@@ -104,9 +106,10 @@ class MujocoRun(EngineRun):
         self._rows = [row.get(shape.body) for shape in self.rigid]
         self._dt = dt
         self._y = y0.copy()
-        solver_text = "" if solver is None else f", {solver}" + (f", {iterations} iterations" if iterations else "")
+        solver_text = "" if option.solver is None else f", {option.solver}" + (
+            f", {option.iterations} iterations" if option.iterations else "")
         solver_text += f", {self.substeps} substeps" if self.substeps > 1 else ""
-        self.settings = f"MuJoCo {version('mujoco')} {integrator}{solver_text}"
+        self.settings = f"MuJoCo {version('mujoco')} {option.integrator}{solver_text}"
         # geom id -> body index or shape name, for the contact log
         self._geoms = {}
         for g in range(self.model.ngeom):
