@@ -350,7 +350,7 @@ METHODS = (Explicit(), FirstOrderQuaternion(), ExponentialMap(), ImplicitGyrosco
 DEFAULT_ROTATION = "exponential-map"
 
 
-def simulate_rotation(method: RotationMethod, model, q0, omega0, dt: float, n_steps: int, t0: float = 0.0,
+def simulate_rotation(method: RotationMethod, model, q0, omega0, dt: float, n_steps: int, *, t0: float = 0.0,
                       save_every: int = 1, backend: str = "numpy", check: bool = True):
     """Run ``method`` for ``n_steps`` fixed steps of ``dt`` from (q0, omega0 in the body frame).
 

@@ -30,6 +30,8 @@ DRIVERS = {
     "integrators/simulate.py::simulate": "the run driver, keyword-only options as solve_ivp's",
     # the one call of diffrax's diffeqsolve and scipy's solve_ivp, with solve_ivp's signature
     "integrators/references.py::solve_adaptive": "the adaptive solve, keyword-only options as solve_ivp's",
+    # the rotation methods' driver: method, model, q0, omega0, dt, n_steps, then 4 keyword-only options
+    "integrators/rotation.py::simulate_rotation": "the rotation driver, keyword-only options as simulate's",
 }
 #: functions left above the limit for now, each with its reason; remove an entry once it is
 #: reduced (the test below fails on an entry that no longer needs it)
@@ -37,19 +39,6 @@ ALLOWED = {
     **DRIVERS,
     # the peers' copy is independent of steplab's kernels by design: it stays as written
     "steplab/peers.py::_semi_implicit_euler_loop": "the independent peer, a separate copy on purpose",
-    # the narrow phase of boxes and capsules: reduced by the stacking work, merged separately
-    "physics/collision/manifold_box.py::face_contact": "stacking helper's, in progress",
-    "physics/collision/manifold_box.py::clip": "stacking helper's, in progress",
-    "physics/collision/manifold_box.py::edge_contact": "stacking helper's, in progress",
-    "physics/collision/manifold_capsule_box.py::face_points": "stacking helper's, in progress",
-    "physics/collision/manifold_capsule_box.py::box_capsule": "stacking helper's, in progress",
-    "physics/collision/manifold_round.py::capsule_capsule": "stacking helper's, in progress",
-    # position-based cloth and implicit Euler's Newton solve: reduced by the cloth work, merged separately
-    "integrators/constraint_projection.py::advance": "cloth helper's, in progress",
-    "integrators/implicit_euler.py::_newton_cg": "cloth helper's, in progress",
-    "integrators/implicit_euler.py::_solve_newton_system": "cloth helper's, in progress",
-    # the rotation driver: reduced by the rotation work, merged separately
-    "integrators/rotation.py::simulate_rotation": "rotation helper's, in progress",
 }
 
 
