@@ -39,13 +39,13 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
+from .approach import AT_REST, approach_speed
 from .changed_pairs import _place
 from .chords import _restart, state_at
 from .compiled_response import impact_terms, resolve_pair
 from .resting import rest_speed
 from .retest import retest_spheres_and_planes
 from .sphere_contacts import (
-    dot3,
     plane_height,
     row3,
     row3_of,
@@ -422,24 +422,24 @@ def _retest_watched(chords, now, bodies, planes, split, rows, watched, n_watched
             qb, vb = row3_of(now, 0, b), row3_of(now, 1, b)
             n, depth = sphere_sphere(sub3(qb, qa), radii[a] + radii[b])
         else:
-            vb = (0.0, 0.0, 0.0)
+            vb = AT_REST
             n, depth, _ = sphere_plane(qa, radii[a], row3(normals, -1 - b), offsets[-1 - b])
         x.nx, x.ny, x.nz = n
         x.in_contact = depth >= -slop
-        x.speed = dot3(sub3(va, vb), n)
+        x.speed = approach_speed(va, vb, n)
         pressed = pressed or (x.in_contact and x.speed > 0)
     for p in range(k):
         x = rows[p]
         a, b = x.i, x.j
         n = (x.nx, x.ny, x.nz)
-        acc_b = row3(acc, b) if b >= 0 else (0.0, 0.0, 0.0)
-        x.rest = rest_speed(floor, dot3(sub3(row3(acc, a), acc_b), n), dt) if pressed else 0.0
+        acc_b = row3(acc, b) if b >= 0 else AT_REST
+        x.rest = rest_speed(floor, approach_speed(row3(acc, a), acc_b, n), dt) if pressed else 0.0
         x.lo = 0.0
         if x.in_contact:
             x.s = 0.0 if x.speed > x.rest else np.inf
             if not x.speed > x.rest:  # resting: watched again when its approach ends the step faster
-                end_b = row3_of(y_end, 1, b) if b >= 0 else (0.0, 0.0, 0.0)
-                if dot3(sub3(row3_of(y_end, 1, a), end_b), n) > x.rest:
+                end_b = row3_of(y_end, 1, b) if b >= 0 else AT_REST
+                if approach_speed(row3_of(y_end, 1, a), end_b, n) > x.rest:
                     if n_watched == watched.shape[0]:
                         watched = _grown(watched, n_watched)
                     watched[n_watched] = p

@@ -25,7 +25,7 @@ def impulse_of(v_rel, inverse_sum, normal, restitution, friction):
     Lambda_s = -(1 + eps) v_n / (1/m_A + 1/m_B) while approaching (v_n > 0), then Coulomb
     friction against the sliding velocity v_t: just enough to stop it, at most mu |Lambda_s|.
     """
-    v_n = dot3(v_rel, normal)
+    v_n = approach_speed(v_rel, AT_REST, normal)
     approaching = v_n > 0 and inverse_sum > 0
     safe_sum = inverse_sum if inverse_sum > 0 else 1.0
     lambda_s = -(1 + restitution) * v_n / safe_sum if approaching else 0.0

@@ -20,11 +20,11 @@ from typing import NamedTuple
 import numpy as np
 from numba import njit
 
+from .approach import AT_REST, approach_speed
 from .changed_pairs import _query
 from .chords import state_at
 from .resting import rest_speed
 from .sphere_contacts import (
-    dot3,
     plane_height,
     row3,
     row3_of,
@@ -112,21 +112,21 @@ def retest_spheres_and_planes(grid, chords, bodies, planes, split, changed, is_c
             trigger = False
         else:
             plane = -1 - b
-            qb = vb = end_b = acc_b = (0.0, 0.0, 0.0)  # a plane: at rest
+            qb = vb = end_b = acc_b = AT_REST  # a plane: at rest
             n, depth, _ = sphere_plane(qa, radii[a], row3(normals, plane), offsets[plane])
             trigger = triggers[plane]
         end_a, acc_a = row3_of(y_end, 1, a), row3(acc, a)
         normal[p, 0], normal[p, 1], normal[p, 2] = n
         in_contact[p] = depth >= -slop
-        speed[p] = dot3(sub3(va, vb), n)
-        pressing = dot3(sub3(acc_a, acc_b), n)
+        speed[p] = approach_speed(va, vb, n)
+        pressing = approach_speed(acc_a, acc_b, n)
         rest[p] = rest_speed(rest_floor, pressing, dt)
         if in_contact[p]:
             if speed[p] > rest[p]:
                 s[p] = np.inf if trigger else 0.0
             else:  # resting: watched when its approach ends the step faster than its rest speed
                 s[p] = np.inf
-                watch[p] = (not trigger) and dot3(sub3(end_a, end_b), n) > rest[p]
+                watch[p] = (not trigger) and approach_speed(end_a, end_b, n) > rest[p]
             continue
         if b >= 0:
             ea, eb = row3_of(y_end, 0, a), row3_of(y_end, 0, b)

@@ -34,6 +34,7 @@ import numpy as np
 
 from .. import quaternion as quat
 from . import rigid_solver as rs
+from .approach import approach_speeds
 from .contact_buffer import MARGIN_OF_RADIUS, Materials
 from .events import CollisionLog, ImpactBlock, cancel_triggers
 from .manifolds import BOX, CAPSULE, SPHERE, check_shapes
@@ -259,7 +260,7 @@ class RigidSolverStep:
                          m.body[np.where(static, 0, cb)])
         friction = m.friction[m.body[ca], other]
         restitution = m.restitution[m.body[ca], other]
-        pressing = np.sum((a[ca] - np.where(static[:, None], 0.0, a[np.where(static, 0, cb)])) * normal, axis=1)
+        pressing = approach_speeds(a[ca], np.where(static[:, None], 0.0, a[np.where(static, 0, cb)]), normal)
         rolling = np.maximum(self.rolling[ca], np.where(static, 0.0, self.rolling[np.where(static, 0, cb)]))
         basis = tangents(normal)
         key = np.column_stack([ca, cb, np.asarray(points.feature, np.int64)]).astype(np.int64)

@@ -87,6 +87,7 @@ import dataclasses
 import numpy as np
 
 from . import compiled_loop
+from .approach import approach_speeds
 from .changed_pairs import SweptGrid
 from .chords import Chords
 from .compiled_response import impact_terms, resolve_pair
@@ -96,7 +97,7 @@ from .events import Collision, CollisionLog, ImpactRows
 from .impact_cap import ImpactCapError
 from .impact_queue import ImpactQueue
 from .pairs import BodyPairs, ShapePairs, candidates, changed_candidates
-from .response import normal_speed, resolve
+from .response import resolve
 from .resting import rest_speed, settle, settle_spheres_and_planes
 from .retest import Bodies, Planes, Split, retest_spheres_and_planes
 
@@ -421,7 +422,7 @@ class CollisionStep:
             return
         a = accelerations() if accelerations is not None else np.asarray(self.model.acceleration(t, y[0], y[1]))
         for pairs, start in zip(groups, starts):
-            pressing = normal_speed(a[pairs.i], pairs.velocity_b(a), start.normal)
+            pressing = approach_speeds(a[pairs.i], pairs.velocity_b(a), start.normal)
             start.rest_speed = rest_speed(self.world.rest_speed, pressing, dt)
 
     def _next_collision(self, groups, starts, t, h, dt, y, y_end, ignored):
@@ -454,9 +455,9 @@ class CollisionStep:
         else:
             other, other_name, trigger = pair.shape.name, pair.shape.name, pair.shape.trigger
             restitution, friction = world.properties(body, pair.shape)
-        speed = float(normal_speed(y_hit[1, body], pair.velocity_b(y_hit[1])[0], normal))
+        speed = float(approach_speeds(y_hit[1, body], pair.velocity_b(y_hit[1])[0], normal))
         a = accelerations() if accelerations is not None else np.asarray(model.acceleration(t_hit, y_hit[0], y_hit[1]))
-        pressing = float(normal_speed(a[body], pair.velocity_b(a)[0], normal))
+        pressing = float(approach_speeds(a[body], pair.velocity_b(a)[0], normal))
         kind = "impact"
         if speed <= rest_speed(world.rest_speed, pressing, dt):
             kind, restitution = "resting", 0.0  # a resting contact, not a bounce
@@ -539,7 +540,7 @@ def _speeding_up(pairs, start, y_end):
     if pairs.trigger or not resting.size:
         return None
     sub = pairs.subset(resting)
-    speed = normal_speed(y_end[1][sub.i], sub.velocity_b(y_end[1]), start.normal[resting])
+    speed = approach_speeds(y_end[1][sub.i], sub.velocity_b(y_end[1]), start.normal[resting])
     watch = np.zeros(len(pairs), bool)
     watch[resting] = speed > np.broadcast_to(start.rest_speed, (len(pairs),))[resting]
     return watch
