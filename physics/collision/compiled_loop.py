@@ -17,14 +17,16 @@ calling the same kernels (the one definition of each formula):
   keyed as :class:`.impact_queue.ImpactQueue` keys its heap: time, then body pairs before
   planes, then the pair, then the order the pairs were tested in; lazy deletion by stamps);
 - its bodies placed on their chords (:func:`.chords.state_at`), its contact and approach
-  (:func:`.compiled_response.impact_terms`), resting or impact (:func:`.resting.rest_speed`),
-  the response (:func:`.compiled_response.resolve_pair`, through ``impulse_of``);
+  (:func:`.compiled_response.contact_terms`), resting or impact (:func:`.resting.rest_speed`),
+  the response (:func:`.compiled_response.respond`, through ``impulse_of``);
 - the moved bodies' rest of the step (semi-implicit Euler under the constant field:
   v' = v + h a, q' = q + h v', the integrator's own expressions), their new chords and
   swept bounds (:func:`.chords._restart`), the grid (:func:`.changed_pairs._place`);
-- their pairs re-tested (:func:`.retest.retest_spheres_and_planes`) and the watched
-  resting contacts tested again (:meth:`.impact_queue.ImpactQueue.take_watched`, with the
-  NumPy path's rest speeds: :func:`_retest_watched`);
+- their pairs found (:func:`.changed_pairs.query_into`, :func:`.retest.planes_reached`) and
+  re-tested (:func:`.retest.test_pair`: what :func:`.retest.retest_spheres_and_planes` does
+  for the Python loop, pair by pair) and the watched resting contacts tested again
+  (:meth:`.impact_queue.ImpactQueue.take_watched`, with the NumPy path's rest speeds:
+  :func:`_test_rows`);
 - the impact appended to the log's columns (:data:`LOGGED`).
 
 The arrays it appends to (the pair rows, the heap, the watched list, the log) grow by
@@ -32,6 +34,17 @@ doubling inside the call, so no impact is ever dropped; a step that reaches the 
 returns to Python, which raises :class:`.impact_cap.ImpactCapError` as the Python loop does.
 The numbers are the Python loop's bit for bit (tests/test_event_loop_compiled.py compares
 logs and trajectories on the collision scenes and on random rooms).
+
+Why the code is shaped as it is: Numba counts references to arrays with atomic operations,
+and in three places it does so inside a loop, where they cost more than the arithmetic (on
+the crowded 2,000-ball pit, 1,160 of them per impact, half of the call's time, found by
+counting the calls to ``NRT_incref`` and ``NRT_decref`` in gdb): an array variable replaced
+inside a loop (a buffer grown in place), an inlined function handed an array and left by
+several returns, and a call handed arrays (it holds each one for the call). So buffers are
+given room before a batch of appends (:func:`_room`), never inside it, the per-impact
+kernels are inlined tuple-returning functions (``contact_terms``, ``respond``, ``test_pair``)
+and the query's candidate test takes numbers (:func:`.changed_pairs._may_pair`); the call
+went from 0.44 to 0.17 s of CPU time on that pit (7.5 to 2.8 us per impact), the same bytes.
 """
 
 from __future__ import annotations
@@ -96,75 +109,64 @@ def applies(world, field, planes) -> bool:
             and not world.epilogues)
 
 
-class TestedPairs:
-    """The step's first tests, collected as :data:`ENTRY` rows: the queue :meth:`.step.CollisionStep._test`
-    fills (``add`` as :meth:`.impact_queue.ImpactQueue.add`) before the compiled call."""
+@njit(cache=True)
+def first_rows(pairs, chords, now, bodies, planes, split, stamps):
+    """The step's first tests as :data:`ENTRY` rows: ``(entries, watched, n_watched)``.
 
-    #: the fields ``add`` collects, in the order of its columns
-    FIELDS = ("i", "j", "rank", "s", "lo", "t_sub", "h", "speed", "rest", "in_contact", "nx", "ny", "nz")
-
-    def __init__(self):
-        self.columns, self.watched, self.n = [], [], 0
-
-    def add(self, pairs, start, s, lo, t_sub: float, h: float, watch=None) -> None:
-        k = len(pairs)
-        if hasattr(pairs, "j"):
-            j, rank = pairs.j, np.zeros(k, np.int64)
-        else:
-            j, rank = np.full(k, -1 - pairs.index), np.full(k, 1 + pairs.index)
-        self.columns.append((pairs.i, j, rank, s, lo, np.full(k, t_sub), np.full(k, h), start.speed,
-                             np.broadcast_to(start.rest_speed, (k,)), start.in_contact, *start.normal.T))
-        if watch is not None:
-            self.watched.append(self.n + np.flatnonzero(watch))
-        self.n += k
-
-    def arrays(self):
-        """``(entries, watched, n_watched)``: the rows and the watched rows' numbers, each with room to
-        grow (their stamps are 0, as every body's at a step's start)."""
-        entries = np.zeros(2 * self.n + 64, ENTRY)
-        if self.columns:
-            rows = entries[:self.n]
-            for name, parts in zip(self.FIELDS, zip(*self.columns)):
-                rows[name] = np.concatenate(parts)
-            rows["time"] = rows["t_sub"] + rows["s"] * rows["h"]
-            rows["valid"] = True
-        watched = np.concatenate(self.watched) if self.watched else np.zeros(0, np.int64)
-        room = np.empty(2 * len(watched) + 64, np.int64)
-        room[:len(watched)] = watched
-        return entries, room, len(watched)
+    ``pairs`` = (i, j), the broadphase's candidate groups concatenated in their order (body
+    pairs, then each plane's bodies, ``j = -1 - k`` for the plane k); ``now`` the state at the
+    step's start (the chords' start). Each pair is tested as the NumPy path's
+    :meth:`.step.CollisionStep._test` tests the groups (its start state, the rest speeds when
+    some pair touches and approaches, the impact or resting state of a touching pair, the
+    swept time of impact of a pair apart, the resting contacts to watch): by
+    :func:`_test_rows`, which re-tests the watched contacts, on the whole step.
+    """
+    i, j = pairs
+    t, dt = split[0], split[1]
+    k = i.shape[0]
+    entries = np.zeros(2 * k + 64, ENTRY)
+    for p in range(k):
+        _append(entries, p, i[p], j[p], stamps, t, dt)
+    watched = np.empty(k + 64, np.int64)
+    n_watched = _test_rows(chords, now, bodies, planes, split, entries[:k], watched, 0)
+    for p in range(k):
+        entries[p].time = t + entries[p].s * dt
+    return entries, watched, n_watched
 
 
-def current_groups(rows, stamps, shapes) -> tuple[list, list]:
-    """The current pairs of ``rows`` (valid, their bodies unchanged since tested) as the full
-    re-test's groups with their start states (:meth:`.impact_queue.ImpactQueue.current_groups`):
-    one :class:`.pairs.BodyPairs` in lexicographic order, then one :class:`.pairs.ShapePairs` per
-    plane in the world's order, bodies ascending."""
-    from .detectors import StartState
-    from .pairs import BodyPairs, ShapePairs
-
-    i, j = rows["i"], rows["j"]
-    body = j >= 0
-    ok = rows["valid"] & (stamps[i] == rows["stamp_i"])
-    ok[body] &= stamps[j[body]] == rows["stamp_j"][body]
-    groups, starts = [], []
-
-    def start(index):
-        normal = np.stack([rows["nx"][index], rows["ny"][index], rows["nz"][index]], axis=1)
-        return StartState(rows["in_contact"][index], rows["speed"][index], normal, rows["rest"][index])
-
-    index = np.flatnonzero(ok & body)
-    if index.size:
-        index = index[np.lexsort((j[index], i[index]))]
-        groups.append(BodyPairs(i[index], j[index]))
-        starts.append(start(index))
-    index = np.flatnonzero(ok & ~body)
-    plane = -1 - j[index]
-    index = index[np.lexsort((i[index], plane))]  # by plane, then body
-    plane = -1 - j[index]
-    for part in np.split(index, np.flatnonzero(np.diff(plane)) + 1) if index.size else []:
-        groups.append(ShapePairs(int(-1 - j[part[0]]), shapes[-1 - j[part[0]]], i[part]))
-        starts.append(start(part))
-    return groups, starts
+@njit(cache=True)
+def settle_rows(entries, n_entries, stamps):
+    """The current pairs of the step's rows (valid, their bodies unchanged since tested) as
+    :func:`.resting.settle_spheres_and_planes` takes its groups: ``(i, j, resting, first)``,
+    the body pairs (one group, lexicographic) and then one group per plane (by body), as
+    :meth:`.impact_queue.ImpactQueue.current_groups` orders them."""
+    n = stamps.shape[0]
+    key = np.empty(n_entries, np.int64)
+    row = np.empty(n_entries, np.int64)
+    m = 0
+    for e in range(n_entries):
+        if _current(entries, stamps, e):
+            x = entries[e]
+            key[m] = x.i * n + x.j if x.j >= 0 else n * n + (-1 - x.j) * n + x.i
+            row[m] = e
+            m += 1
+    order = np.argsort(key[:m])  # the keys are distinct: each pair is current once
+    i, j = np.empty(m, np.int64), np.empty(m, np.int64)
+    resting = np.empty(m, np.bool_)
+    first = np.empty(m + 2, np.int64)
+    groups = 0
+    first[0] = 0
+    for p in range(m):
+        x = entries[row[order[p]]]
+        i[p], j[p] = x.i, x.j
+        resting[p] = x.in_contact and not x.speed > x.rest
+        if p > 0 and j[p] != j[p - 1] and j[p] < 0:  # a new plane's group
+            groups += 1
+            first[groups] = p
+    if m:
+        groups += 1
+        first[groups] = m
+    return i, j, resting, first[:groups + 1]
 
 
 # --- the heap: entry numbers, earliest first --------------------------------------------------
@@ -391,8 +393,13 @@ def resolve_impacts(chords, now, grid, bodies, world, split, queue, log):
                 n_entries = _append(entries, n_entries, z.i, z.j, stamps, t, h)
         n_watched = 0
         if n_entries > first:
-            n_watched = _retest_watched(chords, now, bodies, planes, split_now, entries[first:n_entries], watched,
-                                        first)
+            for e in range(first, n_entries):  # every body's state at t first, as Chords.at before the tests
+                for body in (entries[e].i, entries[e].j):
+                    if body >= 0:
+                        q, v = state_at(chords, body, t, -1.0)
+                        now[0, body, 0], now[0, body, 1], now[0, body, 2] = q
+                        now[1, body, 0], now[1, body, 1], now[1, body, 2] = v
+            n_watched = _test_rows(chords, now, bodies, planes, split_now, entries[first:n_entries], watched, first)
             heap = _room(heap, n_heap, n_entries - first)
             for e in range(first, n_entries):
                 entries[e].time = t + entries[e].s * h
@@ -404,25 +411,20 @@ def resolve_impacts(chords, now, grid, bodies, world, split, queue, log):
 
 
 @njit(cache=True)
-def _retest_watched(chords, now, bodies, planes, split, rows, watched, first):
-    """The watched pairs ``rows`` (new :data:`ENTRY` rows ``first, first + 1, ...``, bodies and stamps
-    set) tested on [t, t_end] as the NumPy path tests them (:meth:`.step.CollisionStep._test`): the
-    start state at ``t``, rest speeds only when some pair touches and approaches (else 0), an
-    impact now for a touching pair approaching faster, the swept time of impact for a pair apart.
-    Their times are written into ``rows``; the ones to watch again are written into ``watched``
-    (room for all of them) by their numbers. Returns how many."""
+def _test_rows(chords, now, bodies, planes, split, rows, watched, first):
+    """The pairs ``rows`` (new :data:`ENTRY` rows ``first, first + 1, ...``, bodies and stamps set; their
+    bodies' states at ``t`` in ``now``) tested on [t, t_end] as the NumPy path tests a group
+    (:meth:`.step.CollisionStep._test`): the start state at ``t``, rest speeds only when some pair
+    touches and approaches (else 0), an impact now for a touching pair approaching faster, the
+    swept time of impact for a pair apart. Their times are written into ``rows``; the resting
+    ones to watch are written into ``watched`` (room for all of them) by their numbers. Returns
+    how many."""
     radii, _, _, acc = bodies
     normals, offsets, _ = planes
     t, dt, slop, floor = split
     y_end = chords[1]
     k = rows.shape[0]
     n_watched = 0
-    for p in range(k):  # every body's state at t first, as Chords.at before the tests
-        for body in (rows[p].i, rows[p].j):
-            if body >= 0:
-                q, v = state_at(chords, body, t, -1.0)
-                now[0, body, 0], now[0, body, 1], now[0, body, 2] = q
-                now[1, body, 0], now[1, body, 1], now[1, body, 2] = v
     pressed = False
     for p in range(k):
         x = rows[p]
