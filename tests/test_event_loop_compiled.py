@@ -153,5 +153,7 @@ def test_the_bench_times_a_crowded_pit_beside_mujoco():
     crowded_pit(config, record)
     pit = record.data["collisions"]["crowded_pit_60"]
     assert pit["impacts"] > 0 and pit["seconds_per_impact"] > 0
+    assert set(pit["contenders"]) == {"steplab", "steplab_solver", "mujoco"}
+    assert pit["contenders"]["steplab_solver"]["settings"].startswith("steplab, contact solver")
     assert record.data["ratios"]["vs_mujoco_crowded_pit_60"] > 0
     assert set(record.data["targets"]) >= {"crowded_pit_60_us_per_impact", "vs_mujoco_crowded_pit_60"}

@@ -28,10 +28,12 @@ from steplab.physics.collision import CollisionWorld, Plane
 from steplab.physics.collision.shapes import Sphere
 
 # the modules by their full names: the package re-exports some functions under the same names
-(approach, chords, compiled_response, contact_buffer, narrow_phase, resting, response, retest, solver_step,
- sphere_contacts, step, time_of_impact) = (importlib.import_module(f"steplab.physics.collision.{name}") for name in (
-    "approach", "chords", "compiled_response", "contact_buffer", "narrow_phase", "resting", "response", "retest",
-    "solver_step", "sphere_contacts", "step", "time_of_impact"))
+(approach, chords, compiled_loop, compiled_response, contact_buffer, detectors, narrow_phase, resting, response,
+ retest, rigid_solver_step, sequential_impulses, solver_step, sphere_contacts, step, time_of_impact) = (
+    importlib.import_module(f"steplab.physics.collision.{name}") for name in (
+        "approach", "chords", "compiled_loop", "compiled_response", "contact_buffer", "detectors", "narrow_phase",
+        "resting", "response", "retest", "rigid_solver_step", "sequential_impulses", "solver_step",
+        "sphere_contacts", "step", "time_of_impact"))
 
 #: (module, the definitions it must call and may not write again)
 CALLERS = [
@@ -40,7 +42,14 @@ CALLERS = [
     (retest, ["sphere_sphere", "sphere_plane", "plane_height", "sphere_sphere_entry", "sphere_plane_entry_of",
               "rest_speed", "state_at"]),
     (compiled_response, ["sphere_sphere", "sphere_plane", "approach_speed"]),
-    (contact_buffer, ["approach_speed"]),
+    (contact_buffer, ["approach_speed", "approach_speeds"]),
+    (retest, ["approach_speed"]),
+    (compiled_loop, ["approach_speed"]),
+    (resting, ["approach_speed", "approach_speeds"]),
+    (sequential_impulses, ["approach_speed"]),
+    (step, ["approach_speeds"]),
+    (detectors, ["approach_speeds"]),
+    (rigid_solver_step, ["approach_speeds"]),
     (time_of_impact, ["first_entry_rows", "sphere_plane_entry_rows", "sphere_sphere_entry_rows"]),
     (response, ["impulse_rows", "resolve_rows"]),
     (step, ["rest_speed"]),
@@ -55,10 +64,11 @@ DEFINITIONS = {
         "sphere_plane_entry_rows", "sphere_plane_entry_of", "sphere_sphere_rows", "sphere_plane_rows",
         "sphere_sphere_entry_rows")},
     "rest_speed": resting, "impulse_rows": compiled_response, "resolve_rows": compiled_response, "state_at": chords,
-    "approach_speed": approach}
+    "approach_speed": approach, "approach_speeds": approach}
 
 
-@pytest.mark.parametrize("module, names", CALLERS, ids=[m.__name__.rsplit(".", 1)[1] for m, _ in CALLERS])
+@pytest.mark.parametrize("module, names", CALLERS,
+                         ids=[f"{m.__name__.rsplit('.', 1)[1]}-{names[-1]}" for m, names in CALLERS])
 def test_every_path_calls_the_one_definition(module, names):
     source = ast.parse(inspect.getsource(module))
     used = {node.id for node in ast.walk(source) if isinstance(node, ast.Name)}  # called or passed on
@@ -221,3 +231,40 @@ def test_the_approach_speed_is_the_relative_velocity_along_the_normal(rng):
         speed = approach.approach_speed(tuple(v_a), tuple(v_b), tuple(n))
         assert speed == (v_a[0] - v_b[0]) * n[0] + (v_a[1] - v_b[1]) * n[1] + (v_a[2] - v_b[2]) * n[2]
         assert np.isclose(speed, (v_a - v_b) @ n, rtol=1e-14, atol=1e-15)
+
+
+#: the approach speed as its copies wrote it (these patterns find every copy the code had at 976350a:
+#: retest.py, compiled_loop.py, resting.py, compiled_response.py, sequential_impulses.py, response.py,
+#: contact_buffer.py, rigid_solver_step.py): a velocity or acceleration difference dotted with the normal
+APPROACH_COPIES = {
+    "dot3 of a difference": r"dot3\(sub3\(",  # the definition's own expression
+    "dot3 of a relative velocity": r"dot3\(v_rel\b",
+    "components by hand": r"\br0 \* (n0|normal\[k, 0\])",
+    "NumPy sum along the normal": r"\* \w*normal\w*\)?, axis=-?1\)|_dot\(np\.asarray\(v_a\)",
+}
+
+
+def test_no_collision_module_but_its_definition_writes_the_approach_speed():
+    # the boxes' and capsules' narrow phases (manifold_*.py) project points on axes with the same
+    # products: geometry, not an approach speed, and not searched
+    folder = pathlib.Path(approach.__file__).parent
+    for path in sorted(folder.glob("*.py")):
+        if path.name.startswith("manifold_"):
+            continue
+        text = path.read_text()
+        found = [name for name, pattern in APPROACH_COPIES.items() if re.search(pattern, text)]
+        if path.name == "approach.py":
+            assert found == ["dot3 of a difference"]  # the pattern does find the definition
+        else:
+            assert not found, f"{path.name} writes the approach speed again ({found})"
+
+
+def test_the_numpy_approach_speeds_are_the_kernels_bit_for_bit(rng):
+    v_a, v_b, n = rng.normal(size=(40, 3)), rng.normal(size=(40, 3)), rng.normal(size=(40, 3))
+    rows = approach.approach_speeds(v_a, v_b, n)
+    assert rows.shape == (40,)
+    assert [approach.approach_speed(tuple(x), tuple(y), tuple(z)) for x, y, z in zip(v_a, v_b, n)] == rows.tolist()
+    # broadcast like NumPy: one vector against rows, a static shape at rest, and single vectors
+    assert np.array_equal(approach.approach_speeds(v_a, approach.AT_REST, n), np.sum(v_a * n, axis=1))
+    assert approach.approach_speeds(v_a[0], v_b[0], n[0]) == rows[0]
+    assert approach.approach_speeds(np.zeros((0, 3)), v_b[0], n[0]).shape == (0,)

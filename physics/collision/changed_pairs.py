@@ -25,7 +25,7 @@ from typing import NamedTuple
 import numpy as np
 from numba import njit
 
-from ..broadphase.common import append_pair, sort_pairs, spheres_overlap
+from ..broadphase.common import sort_pairs, spheres_overlap
 
 #: cell edge over the median swept reach; with :data:`LARGE_CELLS` a body of up to twice the
 #: median reach is filed in a cell (measured on the crowded 2,000-ball pit, the compiled step's
@@ -152,69 +152,98 @@ def _place(grid, links, bodies):
 
 @njit(cache=True)
 def _query(grid, inverse_masses, active, changed, is_changed):
-    """:meth:`SweptGrid.pairs`, compiled."""
+    """:meth:`SweptGrid.pairs`, compiled: :func:`query_into` a new buffer, sorted."""
+    out = np.empty((16, 2), dtype=np.int64)
+    k = query_into(grid, inverse_masses, active, changed, is_changed, out)
+    if k > out.shape[0]:  # more pairs than rows: the query again, into room for all
+        out = np.empty((k, 2), dtype=np.int64)
+        query_into(grid, inverse_masses, active, changed, is_changed, out)
+    return sorted_pairs(out, k, grid[1].shape[0])
+
+
+@njit(cache=True)
+def query_into(grid, inverse_masses, active, changed, is_changed, out):
+    """The pairs of :meth:`SweptGrid.pairs`, unsorted, written into the rows of ``out`` (k, 2) while
+    they last; returns how many there are (more than its rows: call again with room for them).
+
+    ``out`` is never replaced inside the loops: an array variable reassigned in a loop costs
+    its reference count up and down at every iteration (an atomic operation each), which was
+    most of the query's time when a full buffer was grown in place.
+    """
     h, centers, reach, head, nxt, cell, large, large_list, n_large, small_reach = grid
     n = centers.shape[0]
     mask = head.shape[0] - 1
-    out = np.empty((16, 2), dtype=np.int64)
     k = 0
-    lo = np.empty(3, np.int64)
-    hi = np.empty(3, np.int64)
     for a in changed:
         if not active[a]:
             continue
-        for d in range(3):
-            # a small partner's centre is within reach_a + reach_b <= reach_a + small_reach of a's
-            # (widened for rounding)
-            r = reach[a] + small_reach[0] + ROUNDING * (abs(centers[a, d]) + reach[a] + h)
-            lo[d] = _cell(centers[a, d] - r, h)
-            hi[d] = _cell(centers[a, d] + r, h)
+        movable = inverse_masses[a] != 0.0
+        # a small partner's centre is within reach_a + reach_b <= reach_a + small_reach of a's
+        # (widened for rounding)
+        r = reach[a] + small_reach[0] + ROUNDING * (abs(centers[a, 0]) + reach[a] + h)
+        lo0, hi0 = _cell(centers[a, 0] - r, h), _cell(centers[a, 0] + r, h)
+        r = reach[a] + small_reach[0] + ROUNDING * (abs(centers[a, 1]) + reach[a] + h)
+        lo1, hi1 = _cell(centers[a, 1] - r, h), _cell(centers[a, 1] + r, h)
+        r = reach[a] + small_reach[0] + ROUNDING * (abs(centers[a, 2]) + reach[a] + h)
+        lo2, hi2 = _cell(centers[a, 2] - r, h), _cell(centers[a, 2] + r, h)
         # candidates: the small bodies in the cells around a (all of them for a huge query), and the large ones
-        if (hi[0] - lo[0] + 1) * (hi[1] - lo[1] + 1) * (hi[2] - lo[2] + 1) > n:
+        if (hi0 - lo0 + 1) * (hi1 - lo1 + 1) * (hi2 - lo2 + 1) > n:
             for b in range(n):
                 if not large[b]:
-                    if _new_candidate(a, b, centers, reach, inverse_masses, active, is_changed):
-                        out, k = append_pair(out, k, a, b)
+                    if (_may_pair(a, b, active[b], is_changed[b], movable, inverse_masses[b])
+                            and spheres_overlap(centers, reach, a, b)):
+                        k = _put_pair(out, k, a, b)
         else:
-            for x in range(lo[0], hi[0] + 1):
-                for y in range(lo[1], hi[1] + 1):
-                    for z in range(lo[2], hi[2] + 1):
+            for x in range(lo0, hi0 + 1):
+                for y in range(lo1, hi1 + 1):
+                    for z in range(lo2, hi2 + 1):
                         b = head[_hash(x, y, z, mask)]
                         while b >= 0:
                             if cell[b, 0] == x and cell[b, 1] == y and cell[b, 2] == z:
-                                if _new_candidate(a, b, centers, reach, inverse_masses, active, is_changed):
-                                    out, k = append_pair(out, k, a, b)
+                                if (_may_pair(a, b, active[b], is_changed[b], movable, inverse_masses[b])
+                                        and spheres_overlap(centers, reach, a, b)):
+                                    k = _put_pair(out, k, a, b)
                             b = nxt[b]
         for p in range(n_large[0]):
             b = large_list[p]
             if large[b]:
-                if _new_candidate(a, b, centers, reach, inverse_masses, active, is_changed):
-                    out, k = append_pair(out, k, a, b)
-    return _sorted_few(out, k) if k <= INSERTION_SORT_PAIRS else sort_pairs(out, k, n)
-
-
-@njit(cache=True)
-def _sorted_few(pairs, k):
-    """The first ``k`` rows of ``pairs`` (distinct, each i < j) in lexicographic order, by insertion."""
-    out = pairs[:k].copy()
-    for p in range(1, k):
-        i, j = out[p, 0], out[p, 1]
-        q = p - 1
-        while q >= 0 and (out[q, 0] > i or (out[q, 0] == i and out[q, 1] > j)):
-            out[q + 1, 0], out[q + 1, 1] = out[q, 0], out[q, 1]
-            q -= 1
-        out[q + 1, 0], out[q + 1, 1] = i, j
-    return out
+                if (_may_pair(a, b, active[b], is_changed[b], movable, inverse_masses[b])
+                        and spheres_overlap(centers, reach, a, b)):
+                    k = _put_pair(out, k, a, b)
+    return k
 
 
 @njit(cache=True, inline="always")
-def _new_candidate(a, b, centers, reach, inverse_masses, active, is_changed):
-    """Whether (a, b) is a new candidate pair: b active, once per pair, movable, overlapping.
+def _put_pair(out, k, a, b):
+    """Row k of ``out`` is the pair (min, max); returns k + 1. Past the last row, the last row is written
+    over (the query is made again with room): no branch, so no reference count (:func:`_may_pair`)."""
+    row = min(k, out.shape[0] - 1)
+    out[row, 0], out[row, 1] = min(a, b), max(a, b)
+    return k + 1
 
-    It takes the two arrays it reads, not the grid: every array a call is handed costs its
-    reference count up and down, which in the query's innermost loop was most of its time."""
-    if b == a or not active[b] or (is_changed[b] and b < a):
-        return False
-    if inverse_masses[a] == 0.0 and inverse_masses[b] == 0.0:
-        return False  # two immovable bodies: nothing can respond
-    return spheres_overlap(centers, reach, a, b)
+
+@njit(cache=True)
+def sorted_pairs(pairs, k, n):
+    """The first ``k`` rows of ``pairs`` (distinct, each i < j < n) in lexicographic order: in place by
+    insertion up to :data:`INSERTION_SORT_PAIRS` (``pairs[:k]`` returned), else a radix sort's new array."""
+    if k > INSERTION_SORT_PAIRS:
+        return sort_pairs(pairs, k, n)
+    for p in range(1, k):
+        i, j = pairs[p, 0], pairs[p, 1]
+        q = p - 1
+        while q >= 0 and (pairs[q, 0] > i or (pairs[q, 0] == i and pairs[q, 1] > j)):
+            pairs[q + 1, 0], pairs[q + 1, 1] = pairs[q, 0], pairs[q, 1]
+            q -= 1
+        pairs[q + 1, 0], pairs[q + 1, 1] = i, j
+    return pairs[:k]
+
+
+@njit(cache=True, inline="always")
+def _may_pair(a, b, b_active, b_changed, a_movable, b_inverse_mass):
+    """Whether (a, b) may be a new candidate pair, its swept spheres aside: b active, the pair found once
+    (from its smaller changed body), and not two immovable bodies (nothing could respond).
+
+    It takes numbers, not the arrays they come from: an inlined function handed an array and
+    left by several returns costs that array's reference count up and down at every call (two
+    atomic operations), which in the query's innermost loop was most of its time."""
+    return b != a and b_active and not (b_changed and b < a) and (a_movable or b_inverse_mass != 0.0)

@@ -17,14 +17,16 @@ calling the same kernels (the one definition of each formula):
   keyed as :class:`.impact_queue.ImpactQueue` keys its heap: time, then body pairs before
   planes, then the pair, then the order the pairs were tested in; lazy deletion by stamps);
 - its bodies placed on their chords (:func:`.chords.state_at`), its contact and approach
-  (:func:`.compiled_response.impact_terms`), resting or impact (:func:`.resting.rest_speed`),
-  the response (:func:`.compiled_response.resolve_pair`, through ``impulse_of``);
+  (:func:`.compiled_response.contact_terms`), resting or impact (:func:`.resting.rest_speed`),
+  the response (:func:`.compiled_response.respond`, through ``impulse_of``);
 - the moved bodies' rest of the step (semi-implicit Euler under the constant field:
   v' = v + h a, q' = q + h v', the integrator's own expressions), their new chords and
   swept bounds (:func:`.chords._restart`), the grid (:func:`.changed_pairs._place`);
-- their pairs re-tested (:func:`.retest.retest_spheres_and_planes`) and the watched
-  resting contacts tested again (:meth:`.impact_queue.ImpactQueue.take_watched`, with the
-  NumPy path's rest speeds: :func:`_retest_watched`);
+- their pairs found (:func:`.changed_pairs.query_into`, :func:`.retest.planes_reached`) and
+  re-tested (:func:`.retest.test_pair`: what :func:`.retest.retest_spheres_and_planes` does
+  for the Python loop, pair by pair) and the watched resting contacts tested again
+  (:meth:`.impact_queue.ImpactQueue.take_watched`, with the NumPy path's rest speeds:
+  :func:`_test_rows`);
 - the impact appended to the log's columns (:data:`LOGGED`).
 
 The arrays it appends to (the pair rows, the heap, the watched list, the log) grow by
@@ -32,6 +34,17 @@ doubling inside the call, so no impact is ever dropped; a step that reaches the 
 returns to Python, which raises :class:`.impact_cap.ImpactCapError` as the Python loop does.
 The numbers are the Python loop's bit for bit (tests/test_event_loop_compiled.py compares
 logs and trajectories on the collision scenes and on random rooms).
+
+Why the code is shaped as it is: Numba counts references to arrays with atomic operations,
+and in three places it does so inside a loop, where they cost more than the arithmetic (on
+the crowded 2,000-ball pit, 1,160 of them per impact, half of the call's time, found by
+counting the calls to ``NRT_incref`` and ``NRT_decref`` in gdb): an array variable replaced
+inside a loop (a buffer grown in place), an inlined function handed an array and left by
+several returns, and a call handed arrays (it holds each one for the call). So buffers are
+given room before a batch of appends (:func:`_room`), never inside it, the per-impact
+kernels are inlined tuple-returning functions (``contact_terms``, ``respond``, ``test_pair``)
+and the query's candidate test takes numbers (:func:`.changed_pairs._may_pair`); the call
+went from 0.44 to 0.17 s of CPU time on that pit (7.5 to 2.8 us per impact), the same bytes.
 """
 
 from __future__ import annotations
@@ -39,13 +52,13 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-from .changed_pairs import _place
+from .approach import AT_REST, approach_speed
+from .changed_pairs import _place, query_into, sorted_pairs
 from .chords import _restart, state_at
-from .compiled_response import impact_terms, resolve_pair
+from .compiled_response import contact_terms, respond
 from .resting import rest_speed
-from .retest import retest_spheres_and_planes
+from .retest import planes_reached, test_pair
 from .sphere_contacts import (
-    dot3,
     plane_height,
     row3,
     row3_of,
@@ -96,75 +109,64 @@ def applies(world, field, planes) -> bool:
             and not world.epilogues)
 
 
-class TestedPairs:
-    """The step's first tests, collected as :data:`ENTRY` rows: the queue :meth:`.step.CollisionStep._test`
-    fills (``add`` as :meth:`.impact_queue.ImpactQueue.add`) before the compiled call."""
+@njit(cache=True)
+def first_rows(pairs, chords, now, bodies, planes, split, stamps):
+    """The step's first tests as :data:`ENTRY` rows: ``(entries, watched, n_watched)``.
 
-    #: the fields ``add`` collects, in the order of its columns
-    FIELDS = ("i", "j", "rank", "s", "lo", "t_sub", "h", "speed", "rest", "in_contact", "nx", "ny", "nz")
-
-    def __init__(self):
-        self.columns, self.watched, self.n = [], [], 0
-
-    def add(self, pairs, start, s, lo, t_sub: float, h: float, watch=None) -> None:
-        k = len(pairs)
-        if hasattr(pairs, "j"):
-            j, rank = pairs.j, np.zeros(k, np.int64)
-        else:
-            j, rank = np.full(k, -1 - pairs.index), np.full(k, 1 + pairs.index)
-        self.columns.append((pairs.i, j, rank, s, lo, np.full(k, t_sub), np.full(k, h), start.speed,
-                             np.broadcast_to(start.rest_speed, (k,)), start.in_contact, *start.normal.T))
-        if watch is not None:
-            self.watched.append(self.n + np.flatnonzero(watch))
-        self.n += k
-
-    def arrays(self):
-        """``(entries, watched, n_watched)``: the rows and the watched rows' numbers, each with room to
-        grow (their stamps are 0, as every body's at a step's start)."""
-        entries = np.zeros(2 * self.n + 64, ENTRY)
-        if self.columns:
-            rows = entries[:self.n]
-            for name, parts in zip(self.FIELDS, zip(*self.columns)):
-                rows[name] = np.concatenate(parts)
-            rows["time"] = rows["t_sub"] + rows["s"] * rows["h"]
-            rows["valid"] = True
-        watched = np.concatenate(self.watched) if self.watched else np.zeros(0, np.int64)
-        room = np.empty(2 * len(watched) + 64, np.int64)
-        room[:len(watched)] = watched
-        return entries, room, len(watched)
+    ``pairs`` = (i, j), the broadphase's candidate groups concatenated in their order (body
+    pairs, then each plane's bodies, ``j = -1 - k`` for the plane k); ``now`` the state at the
+    step's start (the chords' start). Each pair is tested as the NumPy path's
+    :meth:`.step.CollisionStep._test` tests the groups (its start state, the rest speeds when
+    some pair touches and approaches, the impact or resting state of a touching pair, the
+    swept time of impact of a pair apart, the resting contacts to watch): by
+    :func:`_test_rows`, which re-tests the watched contacts, on the whole step.
+    """
+    i, j = pairs
+    t, dt = split[0], split[1]
+    k = i.shape[0]
+    entries = np.zeros(2 * k + 64, ENTRY)
+    for p in range(k):
+        _append(entries, p, i[p], j[p], stamps, t, dt)
+    watched = np.empty(k + 64, np.int64)
+    n_watched = _test_rows(chords, now, bodies, planes, split, entries[:k], watched, 0)
+    for p in range(k):
+        entries[p].time = t + entries[p].s * dt
+    return entries, watched, n_watched
 
 
-def current_groups(rows, stamps, shapes) -> tuple[list, list]:
-    """The current pairs of ``rows`` (valid, their bodies unchanged since tested) as the full
-    re-test's groups with their start states (:meth:`.impact_queue.ImpactQueue.current_groups`):
-    one :class:`.pairs.BodyPairs` in lexicographic order, then one :class:`.pairs.ShapePairs` per
-    plane in the world's order, bodies ascending."""
-    from .detectors import StartState
-    from .pairs import BodyPairs, ShapePairs
-
-    i, j = rows["i"], rows["j"]
-    body = j >= 0
-    ok = rows["valid"] & (stamps[i] == rows["stamp_i"])
-    ok[body] &= stamps[j[body]] == rows["stamp_j"][body]
-    groups, starts = [], []
-
-    def start(index):
-        normal = np.stack([rows["nx"][index], rows["ny"][index], rows["nz"][index]], axis=1)
-        return StartState(rows["in_contact"][index], rows["speed"][index], normal, rows["rest"][index])
-
-    index = np.flatnonzero(ok & body)
-    if index.size:
-        index = index[np.lexsort((j[index], i[index]))]
-        groups.append(BodyPairs(i[index], j[index]))
-        starts.append(start(index))
-    index = np.flatnonzero(ok & ~body)
-    plane = -1 - j[index]
-    index = index[np.lexsort((i[index], plane))]  # by plane, then body
-    plane = -1 - j[index]
-    for part in np.split(index, np.flatnonzero(np.diff(plane)) + 1) if index.size else []:
-        groups.append(ShapePairs(int(-1 - j[part[0]]), shapes[-1 - j[part[0]]], i[part]))
-        starts.append(start(part))
-    return groups, starts
+@njit(cache=True)
+def settle_rows(entries, n_entries, stamps):
+    """The current pairs of the step's rows (valid, their bodies unchanged since tested) as
+    :func:`.resting.settle_spheres_and_planes` takes its groups: ``(i, j, resting, first)``,
+    the body pairs (one group, lexicographic) and then one group per plane (by body), as
+    :meth:`.impact_queue.ImpactQueue.current_groups` orders them."""
+    n = stamps.shape[0]
+    key = np.empty(n_entries, np.int64)
+    row = np.empty(n_entries, np.int64)
+    m = 0
+    for e in range(n_entries):
+        if _current(entries, stamps, e):
+            x = entries[e]
+            key[m] = x.i * n + x.j if x.j >= 0 else n * n + (-1 - x.j) * n + x.i
+            row[m] = e
+            m += 1
+    order = np.argsort(key[:m])  # the keys are distinct: each pair is current once
+    i, j = np.empty(m, np.int64), np.empty(m, np.int64)
+    resting = np.empty(m, np.bool_)
+    first = np.empty(m + 2, np.int64)
+    groups = 0
+    first[0] = 0
+    for p in range(m):
+        x = entries[row[order[p]]]
+        i[p], j[p] = x.i, x.j
+        resting[p] = x.in_contact and not x.speed > x.rest
+        if p > 0 and j[p] != j[p - 1] and j[p] < 0:  # a new plane's group
+            groups += 1
+            first[groups] = p
+    if m:
+        groups += 1
+        first[groups] = m
+    return i, j, resting, first[:groups + 1]
 
 
 # --- the heap: entry numbers, earliest first --------------------------------------------------
@@ -189,9 +191,7 @@ def _before(entries, a, b):
 
 @njit(cache=True)
 def _push(heap, n, entries, e):
-    """Push entry ``e`` onto the heap of ``n`` (grown when full); returns ``(heap, n + 1)``."""
-    if n == heap.shape[0]:
-        heap = _grown(heap, n)
+    """Push entry ``e`` onto the heap of ``n`` (room made beforehand: :func:`_room`); returns ``n + 1``."""
     k = n
     while k > 0:
         parent = (k - 1) >> 1
@@ -200,7 +200,7 @@ def _push(heap, n, entries, e):
         heap[k] = heap[parent]
         k = parent
     heap[k] = e
-    return heap, n + 1
+    return n + 1
 
 
 @njit(cache=True)
@@ -226,9 +226,15 @@ def _pop(heap, n, entries):
 
 
 @njit(cache=True)
-def _grown(a, n):
-    """``a`` with twice the room, its first ``n`` elements kept."""
-    b = np.empty(2 * a.shape[0] + 16, a.dtype)
+def _room(a, n, more):
+    """``a`` (its first ``n`` elements in use) with room for ``more``: itself, or a copy twice as long.
+
+    The arrays the loop appends to are given room before each batch of appends, never inside it:
+    an array variable replaced inside a loop costs an atomic reference count up and down at every
+    iteration, which made most of a query's time when its buffer grew in place."""
+    if n + more <= a.shape[0]:
+        return a
+    b = np.empty(max(2 * a.shape[0], n + more) + 16, a.dtype)
     b[:n] = a[:n]
     return b
 
@@ -243,16 +249,14 @@ def _current(entries, stamps, e):
 
 @njit(cache=True, inline="always")
 def _append(entries, n, a, b, stamps, t, h):
-    """A new row for the pair (a, b) tested on [t, t + h], stamped now; returns ``(entries, n + 1)``."""
-    if n == entries.shape[0]:
-        entries = _grown(entries, n)
+    """Row ``n`` (room made beforehand) is the pair (a, b) tested on [t, t + h], stamped now; returns ``n + 1``."""
     x = entries[n]
     x.i, x.j = a, b
     x.rank = 0 if b >= 0 else -b  # 1 + the plane's number
     x.stamp_i = stamps[a]
     x.stamp_j = stamps[b] if b >= 0 else 0
     x.t_sub, x.h, x.valid = t, h, True
-    return entries, n + 1
+    return n + 1
 
 
 # --- the step's impacts ---------------------------------------------------------------------
@@ -270,7 +274,7 @@ def resolve_impacts(chords, now, grid, bodies, world, split, queue, log):
     :data:`LOGGED` rows; all plain tuples. ``sizes`` (:func:`new_sizes`) is updated in place.
     Returns ``(entries, heap, watched, log)``, grown where they filled up.
     """
-    radii, inverse_masses, _, acc = bodies
+    radii, inverse_masses, active, acc = bodies
     planes, materials = world
     body_material, plane_material, restitution, friction = materials
     t, dt, slop, floor = split
@@ -280,10 +284,14 @@ def resolve_impacts(chords, now, grid, bodies, world, split, queue, log):
     entries, heap, watched, stamps, is_changed, sizes = queue
     n_entries, n_heap, n_watched, n_log = sizes[N_ENTRIES], sizes[N_HEAP], sizes[N_WATCHED], sizes[N_LOGGED]
     resolved, resting, cap = 0, sizes[RESTING], sizes[CAP]
+    heap = _room(heap, n_heap, n_entries)
     for e in range(n_entries):  # the step's first tests
         if np.isfinite(entries[e].s):
-            heap, n_heap = _push(heap, n_heap, entries, e)
+            n_heap = _push(heap, n_heap, entries, e)
     y_rest = np.empty((2, 2, 3))  # the new end states of an impact's bodies
+    pair = np.empty(2, np.int64)  # an impact's bodies
+    found = np.empty((64, 2), np.int64)  # the candidate pairs of its bodies
+    new_i, new_j = np.empty(64, np.int64), np.empty(64, np.int64)  # their pairs, in the order tested
     while True:
         h = t_end - t
         e = -1
@@ -315,7 +323,7 @@ def resolve_impacts(chords, now, grid, bodies, world, split, queue, log):
                 q, v = state_at(chords, body, t_hit, x.s if chords[2][body] == x.t_sub else -1.0)
                 now[0, body, 0], now[0, body, 1], now[0, body, 2] = q
                 now[1, body, 0], now[1, body, 1], now[1, body, 2] = v
-        normal, depth, speed, pressing = impact_terms(now, a, b, radii, acc, planes)
+        normal, depth, speed, pressing = contact_terms(now, a, b, radii, acc, planes)
         mb = body_material[b] if b >= 0 else plane_material[-1 - b]
         eps, mu = restitution[body_material[a], mb], friction[body_material[a], mb]
         settling = speed <= rest_speed(floor, pressing, dt)
@@ -324,19 +332,19 @@ def resolve_impacts(chords, now, grid, bodies, world, split, queue, log):
         t_lo = t + lo * h
         t = t + s * (t_end - t)
         # Respond
-        lam = resolve_pair(now, a, b, inverse_masses, normal, depth, eps, mu)
+        lam = respond(now, a, b, inverse_masses, normal, depth, eps, mu)
         if settling or speed <= 0:  # settling, or grazing: no collision
             resting += 1
         else:
-            if n_log == log.shape[0]:
-                log = _grown(log, n_log)
+            log = _room(log, n_log, 1)
             r = log[n_log]
             r.t, r.body, r.other, r.speed, r.t_lo, r.t_hi = t_hit, a, b, speed, t_lo, t_hit
             r.nx, r.ny, r.nz, r.lx, r.ly, r.lz = normal[0], normal[1], normal[2], lam[0], lam[1], lam[2]
             n_log += 1
         resolved += 1
         # Only what the impact changed: its bodies' rest of the step, their chords, bounds and stamps
-        moved = np.array([a, b]) if b >= 0 else np.array([a])
+        pair[0], pair[1] = a, b
+        moved = pair[:2] if b >= 0 else pair[:1]
         h = t_end - t
         for p in range(moved.shape[0]):  # semi-implicit Euler under the constant field
             m = moved[p]
@@ -347,72 +355,76 @@ def resolve_impacts(chords, now, grid, bodies, world, split, queue, log):
         _place(grid_arrays, links, moved)
         for m in moved:
             stamps[m] += 1
-        # Their pairs, re-tested on [t, t_end]
+        # Their pairs (:func:`.retest.retest_spheres_and_planes`'s, in its order), re-tested on [t, t_end]
         for m in moved:
             is_changed[m] = True
-        i_new, j_new, in_contact, speeds, normals, rests, times, watch = retest_spheres_and_planes(
-            grid_arrays, chords, bodies, planes, (t, dt, slop, floor), moved, is_changed)
+        k = query_into(grid_arrays, inverse_masses, active, moved, is_changed, found)
+        if k > found.shape[0]:
+            found = np.empty((2 * k, 2), np.int64)
+            query_into(grid_arrays, inverse_masses, active, moved, is_changed, found)
         for m in moved:
             is_changed[m] = False
-        for p in range(i_new.shape[0]):
-            entries, n_entries = _append(entries, n_entries, i_new[p], j_new[p], stamps, t, h)
+        body_pairs = sorted_pairs(found, k, radii.shape[0])
+        new_i, new_j = _room(new_i, 0, k + planes[0].shape[0] * 2), _room(new_j, 0, k + planes[0].shape[0] * 2)
+        for p in range(k):
+            new_i[p], new_j[p] = body_pairs[p, 0], body_pairs[p, 1]
+        k = planes_reached(grid_arrays, bodies, planes, moved, new_i, new_j, k)
+        entries, heap, watched = _room(entries, n_entries, k), _room(heap, n_heap, k), _room(watched, n_watched, k)
+        split_now = (t, dt, slop, floor)
+        for p in range(k):
+            n_entries = _append(entries, n_entries, new_i[p], new_j[p], stamps, t, h)
             y = entries[n_entries - 1]
-            y.s, y.lo, y.time = times[p], times[p], t + times[p] * h
-            y.speed, y.rest, y.in_contact = speeds[p], rests[p], in_contact[p]
-            y.nx, y.ny, y.nz = normals[p, 0], normals[p, 1], normals[p, 2]
-            if np.isfinite(times[p]):
-                heap, n_heap = _push(heap, n_heap, entries, n_entries - 1)
-            if watch[p]:
-                if n_watched == watched.shape[0]:
-                    watched = _grown(watched, n_watched)
+            y.in_contact, y.speed, n, y.rest, y.s, watch = test_pair(chords, bodies, planes, split_now, new_i[p],
+                                                                     new_j[p])
+            y.nx, y.ny, y.nz = n
+            y.lo, y.time = y.s, t + y.s * h
+            if np.isfinite(y.s):
+                n_heap = _push(heap, n_heap, entries, n_entries - 1)
+            if watch:
                 watched[n_watched] = n_entries - 1
                 n_watched += 1
-        # Resting contacts speeding up along their chords: tested again at every impact
-        taken = np.empty(n_watched, np.int64)
-        n_taken = 0
+        # Resting contacts speeding up along their chords: tested again at every impact, as new rows
+        first = n_entries
+        entries = _room(entries, n_entries, n_watched)
         for w in range(n_watched):
             if _current(entries, stamps, watched[w]):
-                entries[watched[w]].valid = False
-                taken[n_taken] = watched[w]
-                n_taken += 1
+                z = entries[watched[w]]
+                z.valid = False
+                n_entries = _append(entries, n_entries, z.i, z.j, stamps, t, h)
         n_watched = 0
-        if n_taken:
-            first = n_entries
-            for w in range(n_taken):
-                z = entries[taken[w]]
-                entries, n_entries = _append(entries, n_entries, z.i, z.j, stamps, t, h)
-            n_watched, watched = _retest_watched(chords, now, bodies, planes, (t, dt, slop, floor),
-                                                 entries[first:n_entries], watched, n_watched)
+        if n_entries > first:
+            for e in range(first, n_entries):  # every body's state at t first, as Chords.at before the tests
+                for body in (entries[e].i, entries[e].j):
+                    if body >= 0:
+                        q, v = state_at(chords, body, t, -1.0)
+                        now[0, body, 0], now[0, body, 1], now[0, body, 2] = q
+                        now[1, body, 0], now[1, body, 1], now[1, body, 2] = v
+            n_watched = _test_rows(chords, now, bodies, planes, split_now, entries[first:n_entries], watched, first)
+            heap = _room(heap, n_heap, n_entries - first)
             for e in range(first, n_entries):
                 entries[e].time = t + entries[e].s * h
                 if np.isfinite(entries[e].s):
-                    heap, n_heap = _push(heap, n_heap, entries, e)
-            for w in range(n_watched):
-                watched[w] += first
+                    n_heap = _push(heap, n_heap, entries, e)
     sizes[N_ENTRIES], sizes[N_HEAP], sizes[N_WATCHED], sizes[N_LOGGED] = n_entries, n_heap, n_watched, n_log
     sizes[RESOLVED], sizes[RESTING] = resolved, resting
     return entries, heap, watched, log
 
 
 @njit(cache=True)
-def _retest_watched(chords, now, bodies, planes, split, rows, watched, n_watched):
-    """The watched pairs ``rows`` (new :data:`ENTRY` rows, bodies and stamps set) tested on [t, t_end]
-    as the NumPy path tests them (:meth:`.step.CollisionStep._test`): the start state at ``t``,
-    rest speeds only when some pair touches and approaches (else 0), an impact now for a touching
-    pair approaching faster, the swept time of impact for a pair apart. Their times are written
-    into ``rows``; the ones to watch again are appended to ``watched`` as numbers into ``rows``.
-    Returns ``(n_watched, watched)``."""
+def _test_rows(chords, now, bodies, planes, split, rows, watched, first):
+    """The pairs ``rows`` (new :data:`ENTRY` rows ``first, first + 1, ...``, bodies and stamps set; their
+    bodies' states at ``t`` in ``now``) tested on [t, t_end] as the NumPy path tests a group
+    (:meth:`.step.CollisionStep._test`): the start state at ``t``, rest speeds only when some pair
+    touches and approaches (else 0), an impact now for a touching pair approaching faster, the
+    swept time of impact for a pair apart. Their times are written into ``rows``; the resting
+    ones to watch are written into ``watched`` (room for all of them) by their numbers. Returns
+    how many."""
     radii, _, _, acc = bodies
     normals, offsets, _ = planes
     t, dt, slop, floor = split
     y_end = chords[1]
     k = rows.shape[0]
-    for p in range(k):  # every body's state at t first, as Chords.at before the tests
-        for body in (rows[p].i, rows[p].j):
-            if body >= 0:
-                q, v = state_at(chords, body, t, -1.0)
-                now[0, body, 0], now[0, body, 1], now[0, body, 2] = q
-                now[1, body, 0], now[1, body, 1], now[1, body, 2] = v
+    n_watched = 0
     pressed = False
     for p in range(k):
         x = rows[p]
@@ -422,27 +434,25 @@ def _retest_watched(chords, now, bodies, planes, split, rows, watched, n_watched
             qb, vb = row3_of(now, 0, b), row3_of(now, 1, b)
             n, depth = sphere_sphere(sub3(qb, qa), radii[a] + radii[b])
         else:
-            vb = (0.0, 0.0, 0.0)
+            vb = AT_REST
             n, depth, _ = sphere_plane(qa, radii[a], row3(normals, -1 - b), offsets[-1 - b])
         x.nx, x.ny, x.nz = n
         x.in_contact = depth >= -slop
-        x.speed = dot3(sub3(va, vb), n)
+        x.speed = approach_speed(va, vb, n)
         pressed = pressed or (x.in_contact and x.speed > 0)
     for p in range(k):
         x = rows[p]
         a, b = x.i, x.j
         n = (x.nx, x.ny, x.nz)
-        acc_b = row3(acc, b) if b >= 0 else (0.0, 0.0, 0.0)
-        x.rest = rest_speed(floor, dot3(sub3(row3(acc, a), acc_b), n), dt) if pressed else 0.0
+        acc_b = row3(acc, b) if b >= 0 else AT_REST
+        x.rest = rest_speed(floor, approach_speed(row3(acc, a), acc_b, n), dt) if pressed else 0.0
         x.lo = 0.0
         if x.in_contact:
             x.s = 0.0 if x.speed > x.rest else np.inf
             if not x.speed > x.rest:  # resting: watched again when its approach ends the step faster
-                end_b = row3_of(y_end, 1, b) if b >= 0 else (0.0, 0.0, 0.0)
-                if dot3(sub3(row3_of(y_end, 1, a), end_b), n) > x.rest:
-                    if n_watched == watched.shape[0]:
-                        watched = _grown(watched, n_watched)
-                    watched[n_watched] = p
+                end_b = row3_of(y_end, 1, b) if b >= 0 else AT_REST
+                if approach_speed(row3_of(y_end, 1, a), end_b, n) > x.rest:
+                    watched[n_watched] = first + p
                     n_watched += 1
             continue
         qa = row3_of(now, 0, a)
@@ -456,4 +466,4 @@ def _retest_watched(chords, now, bodies, planes, split, rows, watched, n_watched
             h1 = plane_height(row3_of(y_end, 0, a), row3(normals, plane), offsets[plane]) - radii[a]
             x.s = sphere_plane_entry_of(h0, h1)
         x.lo = x.s
-    return n_watched, watched
+    return n_watched

@@ -25,7 +25,7 @@ def impulse_of(v_rel, inverse_sum, normal, restitution, friction):
     Lambda_s = -(1 + eps) v_n / (1/m_A + 1/m_B) while approaching (v_n > 0), then Coulomb
     friction against the sliding velocity v_t: just enough to stop it, at most mu |Lambda_s|.
     """
-    v_n = dot3(v_rel, normal)
+    v_n = approach_speed(v_rel, AT_REST, normal)
     approaching = v_n > 0 and inverse_sum > 0
     safe_sum = inverse_sum if inverse_sum > 0 else 1.0
     lambda_s = -(1 + restitution) * v_n / safe_sum if approaching else 0.0
@@ -57,6 +57,16 @@ def resolve_pair(y, i, j, inverse_masses, normal, depth, restitution, friction):
     ``y`` (2, N, 3) is changed in place; ``normal`` (3,) points from i towards j.
     Returns Lambda (3,), the impulse on body i.
     """
+    lam = np.empty(3)
+    lam[0], lam[1], lam[2] = respond(y, i, j, inverse_masses, (normal[0], normal[1], normal[2]), depth,
+                                     restitution, friction)
+    return lam
+
+
+@njit(cache=True, inline="always")
+def respond(y, i, j, inverse_masses, normal, depth, restitution, friction):
+    """:func:`resolve_pair` with the normal a 3-tuple, returning Lambda as one (no array made: the
+    event loop's compiled step calls it at every impact)."""
     inv_a = inverse_masses[i]
     inv_b = inverse_masses[j] if j >= 0 else 0.0
     inv_sum = inv_a + inv_b
@@ -64,10 +74,9 @@ def resolve_pair(y, i, j, inverse_masses, normal, depth, restitution, friction):
     push = (depth if (depth > 0 and inv_sum > 0) else 0.0) / (inv_sum if inv_sum > 0 else 1.0)
     for k in range(3):
         y[0, i, k] = y[0, i, k] - normal[k] * (push * inv_a)
-    v_b = row3_of(y, 1, j) if j >= 0 else (0.0, 0.0, 0.0)
+    v_b = row3_of(y, 1, j) if j >= 0 else AT_REST
     v_rel = sub3(row3_of(y, 1, i), v_b)
-    lam = np.empty(3)
-    lam[0], lam[1], lam[2] = impulse_of(v_rel, inv_sum, (normal[0], normal[1], normal[2]), restitution, friction)
+    lam = impulse_of(v_rel, inv_sum, normal, restitution, friction)
     for k in range(3):
         y[1, i, k] = y[1, i, k] + lam[k] * inv_a
     if j >= 0:
@@ -97,6 +106,14 @@ def impact_terms(y, i, j, radii, accelerations, planes):
     ``accelerations`` along the normal. Returns ``(normal (3,), depth, speed, pressing)``.
     """
     normal = np.empty(3)
+    n, depth, speed, pressing = contact_terms(y, i, j, radii, accelerations, planes)
+    normal[0], normal[1], normal[2] = n
+    return normal, depth, speed, pressing
+
+
+@njit(cache=True, inline="always")
+def contact_terms(y, i, j, radii, accelerations, planes):
+    """:func:`impact_terms` with the normal a 3-tuple (no array made: the event loop's compiled step)."""
     q_a, v_a, a_a = row3_of(y, 0, i), row3_of(y, 1, i), row3(accelerations, i)
     if j >= 0:
         q_b, v_b, a_b = row3_of(y, 0, j), row3_of(y, 1, j), row3(accelerations, j)
@@ -104,9 +121,6 @@ def impact_terms(y, i, j, radii, accelerations, planes):
     else:
         plane = -1 - j
         v_b = a_b = AT_REST
-        normals, offsets, _ = planes
+        normals, offsets = planes[0], planes[1]
         n, depth, _ = sphere_plane(q_a, radii[i], row3(normals, plane), offsets[plane])
-    normal[0], normal[1], normal[2] = n
-    speed = approach_speed(v_a, v_b, n)
-    pressing = approach_speed(a_a, a_b, n)
-    return normal, depth, speed, pressing
+    return n, depth, approach_speed(v_a, v_b, n), approach_speed(a_a, a_b, n)

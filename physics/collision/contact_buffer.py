@@ -24,7 +24,7 @@ from typing import NamedTuple
 import numpy as np
 from numba import njit
 
-from .approach import AT_REST, approach_speed
+from .approach import AT_REST, approach_speed, approach_speeds
 from .pairs import SweptSpheres, near_shapes
 from .shapes import DEFAULT_MATERIAL
 from .sphere_contacts import plane_height, row3, sphere_plane, sphere_sphere, sub3
@@ -143,9 +143,11 @@ def _shape_contacts(group, materials: Materials, bodies: BodyState, stride: int)
     e = materials.restitution[materials.body[i], materials.shape[group.index]]
     mu = materials.friction[materials.body[i], materials.shape[group.index]]
     normal = np.atleast_2d(contact.normal)  # the shape is static: no velocity, no acceleration, no mass
+    # the approach as the planes' compiled pass writes it, (0 - v_i) . n = -((v_i - 0) . n)
+    speed, pressing = -approach_speeds(v[i], AT_REST, normal), approach_speeds(a[i], AT_REST, normal)
     return (i, np.full(len(i), -1), np.full(len(i), group.index), i * stride + len(bodies.radii) + group.index,
-            normal, -contact.penetration_depth, np.sum(-v[i] * normal, axis=1), np.sum(a[i] * normal, axis=1),
-            1.0 / bodies.inverse_masses[i], np.broadcast_to(e, i.shape), np.broadcast_to(mu, i.shape))
+            normal, -contact.penetration_depth, speed, pressing, 1.0 / bodies.inverse_masses[i],
+            np.broadcast_to(e, i.shape), np.broadcast_to(mu, i.shape))
 
 
 @njit(cache=True, inline="always")

@@ -17,7 +17,7 @@ import numpy as np
 from steplab.core.registry import Registry, function_entry
 
 from . import overlap, swept
-from .response import normal_speed
+from .approach import approach_speeds
 
 #: detector name -> collision_times(pairs, radii, q0, q1, iterations) -> (s, bracket start), None for
 #: "none" (no collision handling); the one list of detectors: the world's validation and the scene
@@ -64,7 +64,7 @@ class StartState:
 
 def start_state(pairs, radii, y, slop: float) -> StartState:
     contact = pairs.contact(radii, y[0])
-    speed = normal_speed(y[1][pairs.i], pairs.velocity_b(y[1]), contact.normal)
+    speed = approach_speeds(y[1][pairs.i], pairs.velocity_b(y[1]), contact.normal)
     return StartState(contact.penetration_depth >= -slop, speed, contact.normal)
 
 

@@ -33,15 +33,6 @@ from .compiled_response import impulse_rows, resolve_rows
 from .shapes import DEFAULT_MATERIAL
 
 
-def _dot(x, y):
-    return (x * y).sum(axis=-1)
-
-
-def normal_speed(v_a, v_b, normal):
-    """Approach speed (V_a - V_b) . n: positive when the bodies move towards each other."""
-    return _dot(np.asarray(v_a) - v_b, normal)
-
-
 def impulse(v_a, v_b, inverse_mass_a, inverse_mass_b, normal, restitution, friction=0.0):
     """The impulse Lambda on body A (body B gets -Lambda), vectorised over pairs.
 

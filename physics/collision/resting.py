@@ -24,10 +24,11 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
+from .approach import AT_REST, approach_speed, approach_speeds
 from .compiled_response import resolve_pair
 from .pairs import BodyPairs
-from .response import normal_speed, resolve
-from .sphere_contacts import dot3, row3, row3_of, sphere_plane, sphere_sphere, sub3
+from .response import resolve
+from .sphere_contacts import row3, row3_of, sphere_plane, sphere_sphere, sub3
 
 #: an impact slower than what the forces pressing the pair together add over this many
 #: steps does not bounce (eps = 0): it ends the endless series of ever smaller bounces
@@ -67,7 +68,7 @@ def settle(world, groups, starts, y, radii, inverse_masses, slop: float, ignored
             depth = contact.penetration_depth
             pressed = depth > slop
             if start.resting.any():
-                speed = normal_speed(y[1][pairs.i], pairs.velocity_b(y[1]), contact.normal)
+                speed = approach_speeds(y[1][pairs.i], pairs.velocity_b(y[1]), contact.normal)
                 pressed |= start.resting & (depth >= -slop) & (speed > 0)
             pressed = np.flatnonzero(pressed)
             if ignored:
@@ -123,8 +124,8 @@ def settle_spheres_and_planes(y, contacts, radii, inverse_masses, planes, fricti
                     v_b = row3_of(y, 1, b)
                 else:
                     n, depth, _ = sphere_plane(row3_of(y, 0, a), radii[a], row3(normals, -1 - b), offsets[-1 - b])
-                    v_b = (0.0, 0.0, 0.0)
-                approach = dot3(sub3(row3_of(y, 1, a), v_b), n)
+                    v_b = AT_REST
+                approach = approach_speed(row3_of(y, 1, a), v_b, n)
                 pressed[p] = depth > slop or (resting[p] and depth >= -slop and approach > 0)
             # each pressed pair put back in touch, one after the other, from its contact now
             for p in range(first[g], first[g + 1]):

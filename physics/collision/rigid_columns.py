@@ -13,9 +13,10 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
+from .approach import AT_REST, approach_speed
 from .resting import rest_speed
 from .rigid_solver import previous_rows
-from .sphere_contacts import dot3
+from .sphere_contacts import dot3, row3
 
 
 @njit(cache=True, inline="always")
@@ -57,16 +58,18 @@ def gather(points, movers, materials, previous, context, out, key):
         a, b = a_[k], b_[k]
         n = (normal[k, 0], normal[k, 1], normal[k, 2])
         a_out[k], b_out[k] = a, max(b, -1)
-        pressing, rolling = dot3((accel[a, 0], accel[a, 1], accel[a, 2]), n), rolls[a]
+        rolling = rolls[a]
         for x in range(3):
             n_out[k, x] = n[x]
             ra[k, x] = point[k, x] - q[a, x]
             rb[k, x] = 0.0 if b < 0 else point[k, x] - q[b, x]
+        # the pressing acceleration: the approach speed's one definition on the accelerations
         if b < 0:
             other = shape_material[-1 - b]
+            pressing = approach_speed(row3(accel, a), AT_REST, n)
         else:
             other = body_material[b]
-            pressing -= dot3((accel[b, 0], accel[b, 1], accel[b, 2]), n)
+            pressing = approach_speed(row3(accel, a), row3(accel, b), n)
             rolling = max(rolling, rolls[b])
         friction[k] = friction_table[body_material[a], other]
         restitution[k] = restitution_table[body_material[a], other]

@@ -14,7 +14,8 @@ A contact k joins body ``ci[k]`` to body ``cj[k]`` (-1: a static shape, infinite
 the unit normal ``normal[k]`` from i to j. Its separation at the start of the step is
 ``s0[k]`` (negative: penetration); inside the step it is tracked from the bodies' moves,
 s = s0 + (dq_j - dq_i) . n, with the normal kept (it is found once per step, as in Box2D).
-Its constraint is on the relative normal velocity v_n = (v_j - v_i) . n:
+Its constraint is on the relative normal velocity v_n = (v_j - v_i) . n (:func:`.approach.approach_speed`
+of v_j - v_i against rest: < 0 approaching):
 
     v_n >= -s / h  while apart (a speculative contact: close the gap, never pass it),
     v_n >= -bias   when touching (bias from the correction, :mod:`.solver_settings`),
@@ -34,6 +35,9 @@ from typing import NamedTuple
 
 import numpy as np
 from numba import njit, prange
+
+from .approach import AT_REST, approach_speed
+from .sphere_contacts import row3
 
 
 class BodyColumns(NamedTuple):
@@ -138,7 +142,7 @@ def _sweep(bodies, contacts, c0, c1, sub, use_bias):
         wj = inverse_mass[j] if j >= 0 else 0.0
         n0, n1, n2 = normal[k, 0], normal[k, 1], normal[k, 2]
         r0, r1, r2 = _relative_velocity(v, i, j)
-        vn = r0 * n0 + r1 * n1 + r2 * n2
+        vn = approach_speed((r0, r1, r2), AT_REST, (n0, n1, n2))
         s = _separation(dq, k, i, j, normal, s0)
         scale, leak = 1.0, 0.0
         if s > 0.0:
@@ -157,7 +161,7 @@ def _sweep(bodies, contacts, c0, c1, sub, use_bias):
         mu = friction[k]
         if mu > 0.0:
             r0, r1, r2 = _relative_velocity(v, i, j)
-            vn = r0 * n0 + r1 * n1 + r2 * n2
+            vn = approach_speed((r0, r1, r2), AT_REST, (n0, n1, n2))
             t0, t1, t2 = r0 - vn * n0, r1 - vn * n1, r2 - vn * n2
             p0, p1, p2 = pt[k, 0] - mass[k] * t0, pt[k, 1] - mass[k] * t1, pt[k, 2] - mass[k] * t2
             limit = mu * pn[k]
@@ -221,7 +225,7 @@ def finish(bodies, contacts, c0, c1, sub):
     for k in range(c0, c1):
         i, j = ci[k], cj[k]
         r0, r1, r2 = _relative_velocity(v, i, j)
-        vn = r0 * normal[k, 0] + r1 * normal[k, 1] + r2 * normal[k, 2]
+        vn = approach_speed((r0, r1, r2), AT_REST, row3(normal, k))
         s = _separation(dq, k, i, j, normal, s0)
         residual = max(residual, abs(min(vn + max(s, 0.0) * inv_h, pn[k] / mass[k])))
     extra = np.zeros(c1 - c0)
@@ -232,7 +236,7 @@ def finish(bodies, contacts, c0, c1, sub):
             i, j = ci[k], cj[k]
             wj = inverse_mass[j] if j >= 0 else 0.0
             r0, r1, r2 = _relative_velocity(v, i, j)
-            vn = r0 * normal[k, 0] + r1 * normal[k, 1] + r2 * normal[k, 2]
+            vn = approach_speed((r0, r1, r2), AT_REST, row3(normal, k))
             dp = -mass[k] * (vn + restitution[k] * vn0[k])
             accumulated = max(pn[k] + extra[k - c0] + dp, 0.0)
             dp = accumulated - pn[k] - extra[k - c0]

@@ -87,6 +87,7 @@ import dataclasses
 import numpy as np
 
 from . import compiled_loop
+from .approach import approach_speeds
 from .changed_pairs import SweptGrid
 from .chords import Chords
 from .compiled_response import impact_terms, resolve_pair
@@ -96,7 +97,7 @@ from .events import Collision, CollisionLog, ImpactRows
 from .impact_cap import ImpactCapError
 from .impact_queue import ImpactQueue
 from .pairs import BodyPairs, ShapePairs, candidates, changed_candidates
-from .response import normal_speed, resolve
+from .response import resolve
 from .resting import rest_speed, settle, settle_spheres_and_planes
 from .retest import Bodies, Planes, Split, retest_spheres_and_planes
 
@@ -179,10 +180,10 @@ class CollisionStep:
         t_start, t_end = t, t + dt
         y = np.array(y)
         ignored = set(log.cancelled_pairs)  # pairs a prologue cancelled, until they separate
+        if self.compiled_loop and self.compiled_retest and not ignored and not log.removed:
+            return self._compiled(t, y, dt, carry)
         # Forces, integration, broadphase and the pairs' start states: the whole step, once
         y_end, carry_end, slop, groups, starts = self._sweep(t, y, dt, carry)
-        if self.compiled_loop and self.compiled_retest and not ignored and not log.removed:
-            return self._compiled(t, y, dt, y_end, carry_end, slop, groups, starts)
         # Narrowphase, once per pair: every candidate's time of impact, in the queue
         queue = ImpactQueue(len(radii))
         chords = Chords(y, y_end, t, t_end, radii, slop)
@@ -227,26 +228,28 @@ class CollisionStep:
                 carry_end = integrator.init(model, t_end, y_end)
         return self._finish(groups, starts, y_end, carry_end, t_end, ignored, slop)
 
-    def _compiled(self, t, y, dt, y_end, carry_end, slop, groups, starts):
-        """:meth:`_incremental` after the sweep, its impacts resolved in one compiled call
-        (:func:`.compiled_loop.resolve_impacts`): the same stages, the same numbers."""
-        from .compiled_loop import CAP_REACHED, N_ENTRIES, N_LOGGED, N_WATCHED, RESOLVED, RESTING, TestedPairs
+    def _compiled(self, t, y, dt, carry):
+        """:meth:`_incremental` in compiled calls: the first tests (:func:`.compiled_loop.first_rows`),
+        the impacts (:func:`.compiled_loop.resolve_impacts`) and the resting contacts
+        (:func:`.resting.settle_spheres_and_planes`): the same stages, the same numbers."""
+        from .compiled_loop import CAP_REACHED, N_ENTRIES, N_LOGGED, N_WATCHED, RESOLVED, RESTING
 
         log, t_end = self.log, t + dt
+        # Forces, integration and broadphase: the whole step, once
+        y_end, carry_end, slop, groups = self._broadphase(t, y, dt, carry)
         chords = Chords(y, y_end, t, t_end, self.radii, slop)
         grid = SweptGrid(chords.centers, chords.reach)
         # Narrowphase, once per pair: every candidate's time of impact, as the rows of the queue
-        tested = TestedPairs()
-        self._test(tested, (groups, starts), t, y, y_end, dt, dt, self._accelerations(t, chords))
-        entries, watched, n_watched = tested.arrays()
-        sizes = compiled_loop.new_sizes(tested.n, self.cap)
-        sizes[N_WATCHED] = n_watched
         stamps = np.zeros(len(self.radii), np.int64)
+        split = tuple(Split(t, dt, slop, self.world.rest_speed))
+        entries, watched, n_watched = compiled_loop.first_rows(
+            _group_columns(groups), chords.arrays, chords.now, self._bodies, self.planes, split, stamps)
+        sizes = compiled_loop.new_sizes(sum(len(pairs) for pairs in groups), self.cap)
+        sizes[N_WATCHED] = n_watched
         # Respond, earliest first, re-testing what each impact changed: one call
         entries, self._heap, _, self._logged = compiled_loop.resolve_impacts(
             chords.arrays, chords.now, (grid.arrays, grid.links), self._bodies, (self.planes, self._materials),
-            tuple(Split(t, dt, slop, self.world.rest_speed)),
-            (entries, self._heap, watched, stamps, self._is_changed, sizes), self._logged)
+            split, (entries, self._heap, watched, stamps, self._is_changed, sizes), self._logged)
         if sizes[N_LOGGED]:
             log.add_impacts(ImpactRows(self._logged[:sizes[N_LOGGED]].copy(), tuple(self.model.names),
                                        self.world.shapes, self.world.properties))
@@ -255,11 +258,17 @@ class CollisionStep:
         if sizes[CAP_REACHED]:
             raise ImpactCapError(t, resolved, self.cap)
         log.most_impacts_in_a_step = max(log.most_impacts_in_a_step, resolved)
-        if resolved:
-            groups, starts = compiled_loop.current_groups(entries[:sizes[N_ENTRIES]], stamps, self.world.shapes)
-            if carry_end is not None:  # the carry of the state the step ends in
-                carry_end = self.integrator.init(self.model, t_end, y_end)
-        return self._finish(groups, starts, y_end, carry_end, t_end, set(), slop)
+        if resolved and carry_end is not None:  # the carry of the state the step ends in
+            carry_end = self.integrator.init(self.model, t_end, y_end)
+        # Resting contacts: bodies pressed into a surface are put back on it
+        body_material, plane_material, _, friction = self._materials
+        corrections = settle_spheres_and_planes(
+            y_end, compiled_loop.settle_rows(entries, sizes[N_ENTRIES], stamps), self.radii, self.inverse_masses,
+            (self.planes[0], self.planes[1]), (body_material, plane_material, friction), float(slop))
+        if corrections:
+            log.resting_corrections += corrections
+            carry_end = self.integrator.init(self.model, t_end, y_end)
+        return y_end, carry_end
 
     def _retest(self, queue, chords, grid, moved, t, t_end, dt, slop):
         """The changed bodies' pairs, found and tested in one kernel (:mod:`.retest`), into the queue."""
@@ -360,10 +369,7 @@ class CollisionStep:
     def _finish(self, groups, starts, y_end, carry_end, t_end, ignored, slop):
         """Resting contacts: bodies pressed into a surface are put back on it."""
         log = self.log
-        if self.compiled_loop and self.compiled_retest and not ignored and not log.removed:
-            corrections = _settle_compiled(groups, starts, y_end, self, slop)
-        else:
-            corrections = settle(self.world, groups, starts, y_end, self.radii, self.inverse_masses, slop, ignored)
+        corrections = settle(self.world, groups, starts, y_end, self.radii, self.inverse_masses, slop, ignored)
         if corrections:
             log.resting_corrections += corrections
             carry_end = self.integrator.init(self.model, t_end, y_end)
@@ -409,13 +415,18 @@ class CollisionStep:
         pair's start state (touching, approach speed). Returns ``(y_end, carry_end, slop,
         groups, starts)``.
         """
+        y_end, carry_end, slop, groups = self._broadphase(t, y, h, carry)
+        starts = [start_state(pairs, self.radii, y, slop) for pairs in groups]
+        return y_end, carry_end, slop, groups, starts
+
+    def _broadphase(self, t, y, h, carry):
+        """Forces, integration and broadphase over the (sub-)step: ``(y_end, carry_end, slop, groups)``."""
         y_end, carry_end = self.integrator.step(self.model, t, y, h, carry)
         y_end = np.array(y_end)
         slop = contact_slop(y_end[0])
         groups = candidates(self.world.shapes, y[0], y_end[0], self.radii, self.inverse_masses,
                             self.world.broadphase, self.log.removed, slop)
-        starts = [start_state(pairs, self.radii, y, slop) for pairs in groups]
-        return y_end, carry_end, slop, groups, starts
+        return y_end, carry_end, slop, groups
 
     def _set_rest_speeds(self, groups, starts, t, y, dt, accelerations=None):
         """Each touching, approaching pair's rest speed (one force evaluation, when there is one)."""
@@ -423,7 +434,7 @@ class CollisionStep:
             return
         a = accelerations() if accelerations is not None else np.asarray(self.model.acceleration(t, y[0], y[1]))
         for pairs, start in zip(groups, starts):
-            pressing = normal_speed(a[pairs.i], pairs.velocity_b(a), start.normal)
+            pressing = approach_speeds(a[pairs.i], pairs.velocity_b(a), start.normal)
             start.rest_speed = rest_speed(self.world.rest_speed, pressing, dt)
 
     def _next_collision(self, groups, starts, t, h, dt, y, y_end, ignored):
@@ -456,9 +467,9 @@ class CollisionStep:
         else:
             other, other_name, trigger = pair.shape.name, pair.shape.name, pair.shape.trigger
             restitution, friction = world.properties(body, pair.shape)
-        speed = float(normal_speed(y_hit[1, body], pair.velocity_b(y_hit[1])[0], normal))
+        speed = float(approach_speeds(y_hit[1, body], pair.velocity_b(y_hit[1])[0], normal))
         a = accelerations() if accelerations is not None else np.asarray(model.acceleration(t_hit, y_hit[0], y_hit[1]))
-        pressing = float(normal_speed(a[body], pair.velocity_b(a)[0], normal))
+        pressing = float(approach_speeds(a[body], pair.velocity_b(a)[0], normal))
         kind = "impact"
         if speed <= rest_speed(world.rest_speed, pressing, dt):
             kind, restitution = "resting", 0.0  # a resting contact, not a bounce
@@ -541,7 +552,7 @@ def _speeding_up(pairs, start, y_end):
     if pairs.trigger or not resting.size:
         return None
     sub = pairs.subset(resting)
-    speed = normal_speed(y_end[1][sub.i], sub.velocity_b(y_end[1]), start.normal[resting])
+    speed = approach_speeds(y_end[1][sub.i], sub.velocity_b(y_end[1]), start.normal[resting])
     watch = np.zeros(len(pairs), bool)
     watch[resting] = speed > np.broadcast_to(start.rest_speed, (len(pairs),))[resting]
     return watch
@@ -601,19 +612,13 @@ class ConstantField:
         return np.stack([y[1], self.acceleration(t, y[0], y[1])])
 
 
-def _settle_compiled(groups, starts, y, step, slop) -> int:
-    """:func:`.resting.settle` through its compiled form (spheres and planes), the groups as arrays."""
+def _group_columns(groups) -> tuple:
+    """The candidate groups as two columns (i, j), in their order, ``j = -1 - k`` for the plane k."""
     if not groups:
-        return 0
-    i = np.concatenate([pairs.i for pairs in groups])
-    j = np.concatenate([pairs.j if isinstance(pairs, BodyPairs) else np.full(len(pairs), -1 - pairs.index)
-                        for pairs in groups])
-    resting = np.concatenate([start.resting for start in starts])
-    first = np.concatenate(([0], np.cumsum([len(pairs) for pairs in groups])))
-    body_material, plane_material, _, friction = step._materials
-    return settle_spheres_and_planes(y, (i, j, resting, first), step.radii, step.inverse_masses,
-                                     (step.planes[0], step.planes[1]), (body_material, plane_material, friction),
-                                     float(slop))
+        return np.zeros(0, np.int64), np.zeros(0, np.int64)
+    return (np.concatenate([pairs.i for pairs in groups]).astype(np.int64),
+            np.concatenate([pairs.j if isinstance(pairs, BodyPairs) else np.full(len(pairs), -1 - pairs.index)
+                            for pairs in groups]).astype(np.int64))
 
 
 def _material_tables(world, n_bodies, planes) -> tuple:
