@@ -87,7 +87,7 @@ class Config:
     #: steps per timed call of the large systems; the per-step cost is the marginal one,
     #: (t(2K) - t(K)) / K, which leaves out the cost of entering and leaving the loop.
     #: 32, not 4: a call of 10^6 particles costs 40 to 150 ms before its first step (a fresh
-    #: 48 MB output paged in), whose noise swamped 4 steps of 5 ms (NOTES-bench.md)
+    #: 48 MB output paged in), whose noise swamped 4 steps of 5 ms (docs/performance.md, the bench section)
     loop_steps: int = 32
     #: rounds are added after ``repeats`` until every contender's minimum settles, up to
     #: max_rounds rounds or round_budget_seconds per comparison (:mod:`.timing`)

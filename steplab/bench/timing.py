@@ -1,6 +1,6 @@
 """The bench's timing discipline: one thread per side, then rounds until the minimums settle.
 
-Why (issue 27, NOTES-bench.md has the measurements): on a shared two-core machine XLA
+Why (issue 27; docs/performance.md has the measurements): on a shared two-core machine XLA
 ran its large loops on two threads against single-threaded NumPy, Numba and scipy, so a
 ratio depended on whether the other core happened to be free; and a fixed handful of
 rounds left the minimum of a noisy side to chance. So:
