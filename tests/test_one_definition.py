@@ -29,10 +29,10 @@ from steplab.physics.collision.shapes import Sphere
 
 # the modules by their full names: the package re-exports some functions under the same names
 (approach, chords, compiled_loop, compiled_response, contact_buffer, detectors, narrow_phase, resting, response,
- retest, rigid_solver_step, sequential_impulses, solver_step, sphere_contacts, step, time_of_impact) = (
+ retest, rigid_columns, sequential_impulses, solver_step, sphere_contacts, step, time_of_impact) = (
     importlib.import_module(f"steplab.physics.collision.{name}") for name in (
         "approach", "chords", "compiled_loop", "compiled_response", "contact_buffer", "detectors", "narrow_phase",
-        "resting", "response", "retest", "rigid_solver_step", "sequential_impulses", "solver_step",
+        "resting", "response", "retest", "rigid_columns", "sequential_impulses", "solver_step",
         "sphere_contacts", "step", "time_of_impact"))
 
 #: (module, the definitions it must call and may not write again)
@@ -49,7 +49,7 @@ CALLERS = [
     (sequential_impulses, ["approach_speed"]),
     (step, ["approach_speeds"]),
     (detectors, ["approach_speeds"]),
-    (rigid_solver_step, ["approach_speeds"]),
+    (rigid_columns, ["approach_speed"]),  # the rigid contacts' pressing acceleration
     (time_of_impact, ["first_entry_rows", "sphere_plane_entry_rows", "sphere_sphere_entry_rows"]),
     (response, ["impulse_rows", "resolve_rows"]),
     (step, ["rest_speed"]),
@@ -241,6 +241,8 @@ APPROACH_COPIES = {
     "dot3 of a relative velocity": r"dot3\(v_rel\b",
     "components by hand": r"\br0 \* (n0|normal\[k, 0\])",
     "NumPy sum along the normal": r"\* \w*normal\w*\)?, axis=-?1\)|_dot\(np\.asarray\(v_a\)",
+    # two projections subtracted (the rigid columns' pressing acceleration at 18acd81)
+    "a difference of projections": r"-= dot3\(|\) - dot3\(",
 }
 
 
