@@ -569,7 +569,8 @@ def summary(record: dict) -> list[tuple[str, str]]:
          f"{1e3 * pyr['sink']:.1f} / {1e3 * pyr.get('predicted_sink_sticking', np.nan):.1f}; "
          f"{1e3 * pyr['predicted_sink']:.1f} mm"),
         ("tumbling boxes: energy lost, time to rest",
-         f"{tum['energy_lost']:.1f} J, {tum['time_to_rest'] if tum['time_to_rest'] is not None else 'not'} s"),
+         f"{tum['energy_lost']:.1f} J, "
+         + (f"{tum['time_to_rest']:.2f} s" if tum["time_to_rest"] is not None else "not at rest")),
     ]
 
 
