@@ -27,7 +27,6 @@ without rotating bodies does no rotation work at all.
 
 from __future__ import annotations
 
-import time
 from typing import NamedTuple
 
 import numpy as np
@@ -36,7 +35,7 @@ from steplab.physics import quaternion as quat
 from steplab.physics.rigid_body import RigidBodies, RotationModel
 
 from .base import Stepper
-from .loop import compiled_loop
+from .loop import compiled_loop, run_once
 from .scene_rotation import RotationTrajectory
 from .simulate import DivergenceError, Trajectory, saved_steps
 
@@ -174,23 +173,13 @@ class AttachedStep:
         state kept (and the last), ``limit`` the divergence limit of every component, the
         rotation's included. Compilation is timed apart, as :func:`.simulate` does.
         """
-        import jax.numpy as jnp
-
         packed = _Packed(self.coupling, y0.shape, y0.dtype)
         saves = saved_steps(n, save_every)
-        run = compiled_loop(None, packed, chunks=len(saves) - 1, save_every=save_every)
+        loop = compiled_loop(None, packed, chunks=len(saves) - 1, save_every=save_every)
         z0 = packed.pack(np, y0, self.q, self.omega)
-        args = (jnp.asarray(z0), jnp.asarray(t_start, y0.dtype), jnp.asarray(dt, y0.dtype), n,
-                jnp.asarray(limit, y0.dtype))
-        start = time.perf_counter()
-        compiled = run.lower(*args).compile()
-        compile_time = time.perf_counter() - start
-        start = time.perf_counter()
-        zs, bad = compiled(*args)
-        zs.block_until_ready()
-        wall = time.perf_counter() - start
-        if int(bad) >= 0:
-            raise DivergenceError(packed.name, dt, int(bad), t_start + int(bad) * dt)
+        zs, bad, compile_time, wall = run_once(loop, z0, t_start, dt, n, limit)
+        if bad >= 0:
+            raise DivergenceError(packed.name, dt, bad, t_start + bad * dt)
         ys, qs, omegas = packed.unpack(np, np.concatenate([z0[None], np.asarray(zs)]))
         self.saved = {int(k): (q, omega) for k, q, omega in zip(saves, qs, omegas)}
         self.q, self.omega = qs[-1], omegas[-1]

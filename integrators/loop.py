@@ -25,6 +25,7 @@ first bad step (or -1). See :func:`within_limit` for how.
 from __future__ import annotations
 
 import functools
+import time
 from collections.abc import Callable
 
 #: the "no bad step" value of the loop's first-bad-step counter
@@ -38,6 +39,25 @@ def compiled_loop(model, integrator, **options):
     import jax
 
     return jax.jit(fixed_step_loop(model, integrator, **options))
+
+
+def run_once(loop, y0, t_start, dt, n, limit):
+    """Compile ``loop`` (a :func:`compiled_loop`) for these arguments, then run it once.
+
+    Returns (saved states, first bad step or -1, compile seconds, run seconds): compilation is
+    timed apart from the run, and the run up to its result (``block_until_ready``).
+    """
+    import jax.numpy as jnp
+
+    args = (jnp.asarray(y0), jnp.asarray(t_start, y0.dtype), jnp.asarray(dt, y0.dtype), n,
+            jnp.asarray(limit, y0.dtype))
+    start = time.perf_counter()
+    compiled = loop.lower(*args).compile()
+    compile_time = time.perf_counter() - start
+    start = time.perf_counter()
+    ys, bad = compiled(*args)
+    ys.block_until_ready()
+    return ys, int(bad), compile_time, time.perf_counter() - start
 
 
 def within_limit(parts, limit):

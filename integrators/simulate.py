@@ -8,7 +8,7 @@ import time
 import numpy as np
 
 from .base import Solver, Stepper
-from .loop import compiled_loop
+from .loop import compiled_loop, run_once
 from .position_based import PositionBased
 
 #: default step budget of one run; a larger run must ask for it explicitly
@@ -303,20 +303,9 @@ def _progress_bar(n, enabled):
 
 def _run_jax(run: _FixedStepRun) -> Trajectory:
     """The whole run as one compiled JAX loop (:func:`.loop.compiled_loop`), compiled apart from its timing."""
-    import jax.numpy as jnp
-
     integrator, y, t_start, dt, n = run.integrator, run.y0, run.t_start, run.dt, run.n
     loop = compiled_loop(run.model, integrator, chunks=len(run.saves) - 1, save_every=run.save_every)
-    args = (jnp.asarray(y), jnp.asarray(t_start, y.dtype), jnp.asarray(dt, y.dtype), n,
-            jnp.asarray(run.limit, y.dtype))
-    start = time.perf_counter()
-    compiled = loop.lower(*args).compile()
-    compile_time = time.perf_counter() - start
-    start = time.perf_counter()
-    ys, bad = compiled(*args)
-    ys.block_until_ready()
-    wall = time.perf_counter() - start
-    bad = int(bad)
+    ys, bad, compile_time, wall = run_once(loop, y, t_start, dt, n, run.limit)
     if bad >= 0:
         raise DivergenceError(integrator.name, dt, bad, t_start + bad * dt)
     out = np.concatenate([y[None], np.asarray(ys)])
