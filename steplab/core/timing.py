@@ -222,10 +222,6 @@ class Times:
             cpu=None if self.cpu is None else self.cpu.scaled(factor),
             faults=None if self.faults is None else self.faults * factor)
 
-    @classmethod
-    def exactly(cls, seconds: float) -> Times:
-        return cls(seconds, seconds, 1, seconds)
-
 
 def interleaved_times(calls: dict[object, Callable[[], object]], repeats: int,
                       warm_up: bool = True) -> dict[object, Times]:
