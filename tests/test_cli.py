@@ -551,29 +551,3 @@ def test_integrators_lists_the_rotation_methods(capsys):
     for line in table_rows:  # aligned: each row's partner starts under the header
         name = line.split()[0]
         assert line[start:].startswith(", ".join(ROTATIONS[name].composes_with))
-
-
-def test_reproduce_keeps_jaxs_compiled_programs_in_its_folder(capsys, tmp_path):
-    # a JAX program compiled during reproduce is written to <out>/.jax-cache, where the next run finds it
-    import jax
-    import jax.numpy as jnp
-    from steplab.studies import STUDIES, runner
-
-    from steplab.cli.study import JAX_CACHE
-
-    def compute(parameters, progress=None):
-        return {"y": float(jax.jit(lambda x: jnp.sin(x) * 3.0 + 0.125)(jnp.float64(0.5)))}
-
-    toy = runner.Study("toy-jax-cache", "a toy that compiles", lambda quick: {}, compute, lambda record, out: [])
-    saved = (jax.config.jax_compilation_cache_dir, jax.config.jax_persistent_cache_min_compile_time_secs)
-    try:
-        with pytest.MonkeyPatch.context() as patch:
-            patch.setattr("steplab.studies.builtin_studies", lambda: [toy])
-            STUDIES.register(toy)
-            status, _, _ = run(capsys, "reproduce", "--quick", "--out", str(tmp_path))
-    finally:
-        del STUDIES["toy-jax-cache"]
-        jax.config.update("jax_compilation_cache_dir", saved[0])
-        jax.config.update("jax_persistent_cache_min_compile_time_secs", saved[1])
-    assert status == 0 and json.loads((tmp_path / "toy-jax-cache.json").read_text())["y"] > 0
-    assert any((tmp_path / JAX_CACHE).iterdir())

@@ -144,8 +144,7 @@ def study_arguments(p) -> None:
     """Where a study's records go, and where its tasks run."""
     p.add_argument("--quick", action="store_true", help="a short version, for CI (a study in under a minute; "
                    "reproduce about 2 minutes on 2 cores)")
-    p.add_argument("--out", type=Path, default=Path("results"), help="results folder (default: results/; reproduce "
-                   "also keeps JAX's compiled programs in its .jax-cache, so a rerun into it compiles less)")
+    p.add_argument("--out", type=Path, default=Path("results"), help="results folder (default: results/)")
     p.add_argument("--force", action="store_true", help="re-run even if the cached result is current")
     where = p.add_mutually_exclusive_group()  # on a Dask cluster (studies/distributed.py); default: this process
     where.add_argument("--workers", type=count, metavar="N", help="run the sweeps' tasks on a local Dask cluster "

@@ -55,31 +55,9 @@ def command(args) -> int:
         with connect(args.workers, args.scheduler) as client:
             records = run_studies(studies, args.out, client, quick=args.quick, force=args.force, finished=finished)
     else:
-        if args.command == "reproduce" and studies:
-            keep_compiled_programs(Path(args.out) / JAX_CACHE)
         records = [_run(study, args, finished) for study in studies]
     print_summary(records, args.out)
     return 0
-
-
-#: where ``steplab reproduce`` keeps JAX's compiled programs between runs, inside its ``--out`` folder
-JAX_CACHE = ".jax-cache"
-
-
-def keep_compiled_programs(folder: Path) -> None:
-    """Keep every program JAX compiles in ``folder`` (JAX's persistent compilation cache), so a
-    later ``reproduce`` into the same folder loads them instead of compiling again.
-
-    The studies compile hundreds of small programs, each under JAX's default threshold of 1 s
-    for caching: the threshold is lowered to 0. Measured (quick truncation study, 2 cores,
-    load 10): 14.4 s of CPU with no cache, 4.3 s with the cache filled by a previous run. The
-    cache's keys include the program, the JAX version and the machine, so a stale entry is
-    never used.
-    """
-    import jax
-
-    jax.config.update("jax_compilation_cache_dir", str(folder))
-    jax.config.update("jax_persistent_cache_min_compile_time_secs", 0.0)
 
 
 class _Finished:
