@@ -169,24 +169,45 @@ def corner_heights(q, orientations, sizes) -> tuple[np.ndarray, np.ndarray]:
 
 
 def rolling(p: dict) -> dict:
-    """The rolling ball's speed and spin against the closed form, at each dt."""
+    """The rolling ball's speed, spin and position against the closed form at each dt, in both modes:
+    the contact solver (``rows``, the scene's method) and the event loop (``event_rows``), whose
+    resting contact slides in closed form over each step (:mod:`steplab.physics.collision.resting`)."""
     scene = load_scene("rolling-sphere")
     v0, radius = float(scene.y0[1, 0, 0]), float(scene.model.radii[0])
     mu = scene.collisions.pair_properties.friction
     answer = theory.sliding_to_rolling(v0, mu, radius)
-    rows = []
-    for dt in p["rolling_dts"]:
-        r = run(scene, dt=dt)
-        v, spin = r.v[:, 0, 0], r.omega[:, 0, 1] * radius  # rolling along +x spins about +y
-        rolling_now = np.abs(v - spin) < 1e-3 * v0
-        k = int(np.argmax(rolling_now)) if rolling_now.any() else None
-        rows.append({"dt": dt, "final_speed": float(v[-1]), "final_spin_speed": float(spin[-1]),
-                     "speed_error": abs(float(v[-1]) / answer["v_roll"] - 1),
-                     "t_roll": float(r.t[k]) if k is not None else None,
-                     "t_roll_error": abs(float(r.t[k]) - answer["t_roll"]) if k is not None else None})
-        if abs(dt - scene.dt) < 1e-15:
-            series = {"t": r.t.tolist(), "speed": v.tolist(), "spin_speed": spin.tolist()}
-    return {"v0": v0, "mu": mu, "radius": radius, **answer, "rows": rows, "at_60_hz": series}
+    modes = {"rows": scene, "event_rows": dataclasses.replace(
+        scene, collisions=dataclasses.replace(scene.collisions, method="event"))}
+    out, series = {}, {}
+    for key, mode in modes.items():
+        out[key] = []
+        for dt in p["rolling_dts"]:
+            r = run(mode, dt=dt)
+            v, spin = r.v[:, 0, 0], r.omega[:, 0, 1] * radius  # rolling along +x spins about +y
+            exact_v, exact_spin = theory.rolling_speed(v0, mu, radius, r.t)
+            rolling_now = np.abs(v - spin) < 1e-3 * v0
+            k = int(np.argmax(rolling_now)) if rolling_now.any() else None
+            out[key].append({
+                "dt": dt, "final_speed": float(v[-1]), "final_spin_speed": float(spin[-1]),
+                "speed_error": abs(float(v[-1]) / answer["v_roll"] - 1),
+                "t_roll": float(r.t[k]) if k is not None else None,
+                "t_roll_error": abs(float(r.t[k]) - answer["t_roll"]) if k is not None else None,
+                # the largest distance from the closed form at the saved times: v, omega r, and x at the end
+                "max_velocity_error": float(max(np.max(np.abs(v - exact_v)), np.max(np.abs(spin - exact_spin)))),
+                "final_position_error": abs(float(r.q[-1, 0, 0]) - rolling_distance(v0, mu, float(r.t[-1])))})
+            if abs(dt - scene.dt) < 1e-15:
+                series[key] = {"t": r.t.tolist(), "speed": v.tolist(), "spin_speed": spin.tolist()}
+    return {"v0": v0, "mu": mu, "radius": radius, **answer, **out, "at_60_hz": series["rows"],
+            "event_at_60_hz": series["event_rows"]}
+
+
+def rolling_distance(v0: float, mu: float, t: float) -> float:
+    """How far the ball of :func:`.stacking_theory.sliding_to_rolling` has gone at ``t``, m:
+    v0 t - mu g t^2 / 2 while it slides, then x_roll + 5/7 v0 (t - t_roll)."""
+    answer = theory.sliding_to_rolling(v0, mu, 1.0)  # the centre's motion does not depend on the radius
+    if t <= answer["t_roll"]:
+        return v0 * t - 0.5 * mu * G * t * t
+    return answer["x_roll"] + answer["v_roll"] * (t - answer["t_roll"])
 
 
 def incline_toml(theta_deg: float, mus: list[float], t_end: float) -> str:

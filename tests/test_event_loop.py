@@ -147,7 +147,7 @@ def test_the_compiled_response_moves_apart_and_applies_equation_4(seed, eps, fri
     # resolve_pair (what the event loop calls; response.resolve runs it pair by pair) against
     # the lecture's collision step written out here: apart by depth in proportion to 1/m,
     # then Lambda = -(1 + eps) v_n / (1/m_i + 1/m_j) n with Coulomb friction on the slide
-    from steplab.physics.collision.compiled_response import resolve_pair
+    from steplab.physics.collision.compiled_response import no_spin, resolve_pair
 
     rng = np.random.default_rng(seed)
     y, inverse_masses = rng.normal(size=(2, 3, 3)), rng.uniform(0.1, 2, 3)
@@ -168,6 +168,6 @@ def test_the_compiled_response_moves_apart_and_applies_equation_4(seed, eps, fri
     if not static:
         y_expected[0, 2] += push * w_j * normal
         y_expected[1, 2] -= expected * w_j
-    lam = resolve_pair(y, 0, j, inverse_masses, normal, depth, eps, friction)
+    lam = resolve_pair(y, (0, j), inverse_masses, normal, depth, (eps, friction), no_spin())
     np.testing.assert_allclose(lam, expected, rtol=1e-12, atol=1e-14)
     np.testing.assert_allclose(y, y_expected, rtol=1e-12, atol=1e-14)

@@ -55,7 +55,7 @@ from numba import njit
 from .approach import AT_REST, approach_speed
 from .changed_pairs import _place, query_into, sorted_pairs
 from .chords import _restart, state_at
-from .compiled_response import contact_terms, respond
+from .compiled_response import contact_terms, respond, spinning, turn_to
 from .resting import rest_speed
 from .retest import planes_reached, test_pair
 from .sphere_contacts import (
@@ -269,13 +269,13 @@ def resolve_impacts(chords, now, grid, bodies, world, split, queue, log):
     ``chords`` a :class:`.chords.ChordArrays`, ``now`` the chords' state array, ``grid`` =
     (:class:`.changed_pairs.GridArrays`, links), ``bodies`` a :class:`.retest.Bodies`, ``world`` =
     (:class:`.retest.Planes`, (body material (N,), plane material (P,), restitution (M, M),
-    friction (M, M))), ``split`` a :class:`.retest.Split` at the step's start, ``queue`` =
-    (entries, heap, watched, stamps (N,), is_changed (N,), sizes) and ``log`` the
-    :data:`LOGGED` rows; all plain tuples. ``sizes`` (:func:`new_sizes`) is updated in place.
+    friction (M, M)), :class:`.compiled_response.Spin`), ``split`` a :class:`.retest.Split` at the
+    step's start, ``queue`` = (entries, heap, watched, stamps (N,), is_changed (N,), sizes) and
+    ``log`` the :data:`LOGGED` rows; all plain tuples. ``sizes`` (:func:`new_sizes`) is updated in place.
     Returns ``(entries, heap, watched, log)``, grown where they filled up.
     """
     radii, inverse_masses, active, acc = bodies
-    planes, materials = world
+    planes, materials, spin = world
     body_material, plane_material, restitution, friction = materials
     t, dt, slop, floor = split
     t_end = chords[3]
@@ -331,8 +331,11 @@ def resolve_impacts(chords, now, grid, bodies, world, split, queue, log):
             eps = 0.0  # a resting contact, not a bounce
         t_lo = t + lo * h
         t = t + s * (t_end - t)
-        # Respond
-        lam = respond(now, a, b, inverse_masses, normal, depth, eps, mu)
+        # Respond (spheres that spin: turned on to the impact first, their omega changes in it)
+        if spinning(spin):
+            turn_to(spin, a, t_hit)
+            turn_to(spin, b, t_hit)
+        lam = respond(now, (a, b), inverse_masses, normal, depth, (eps, mu), spin)
         if settling or speed <= 0:  # settling, or grazing: no collision
             resting += 1
         else:

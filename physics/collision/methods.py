@@ -45,7 +45,8 @@ class CollisionMethod:
 
 class EventLoop(CollisionMethod):
     """The lecture's event loop: each impact found at its time of impact and resolved there,
-    the step then continued from it (:mod:`.step`); the exact reference."""
+    the step then continued from it (:mod:`.step`); the exact reference. Spheres that spin, where
+    friction can turn them, carry their omega and orientation (:mod:`.spin_step`)."""
 
     name: ClassVar[str] = "event"
 
@@ -54,6 +55,11 @@ class EventLoop(CollisionMethod):
         if world.rigid is not None and world.rigid.has_corners:
             raise ValueError('the event loop steps spheres only: boxes and capsules need [collisions] method = '
                              '"solver" (the event loop has no time of impact under rotation)')
+        if world.rigid is not None:  # spheres that rotate: spin only where friction can change it
+            from .spin_step import SpinningCollisionStep, has_friction
+
+            if has_friction(world):
+                return SpinningCollisionStep(world, model, integrator)
         from .step import CollisionStep
 
         return CollisionStep(world, model, integrator)

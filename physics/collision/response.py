@@ -20,7 +20,9 @@ The kinetic energy changes by -(1 - eps^2) v_n^2 / (2 (1/m1 + 1/m2)) <= 0 for ep
 [0, 1]: unchanged at eps = 1, the most lost at eps = 0 (the bodies stick along n).
 
 Coulomb friction (optional) adds a tangential impulse against the sliding velocity v_t,
-just enough to stop the sliding but at most mu |Lambda_s|; it never adds energy.
+just enough to stop the sliding but at most mu |Lambda_s|; it never adds energy. On a sphere
+that spins, the sliding velocity is the contact point's and the impulse turns the sphere too
+(:mod:`.compiled_response`, "Spheres with spin": :func:`resolve_spinning`).
 """
 
 from __future__ import annotations
@@ -29,7 +31,7 @@ import dataclasses
 
 import numpy as np
 
-from .compiled_response import impulse_rows, resolve_rows
+from .compiled_response import impulse_rows, no_spin, resolve_rows
 from .shapes import DEFAULT_MATERIAL
 
 
@@ -103,14 +105,24 @@ def resolve(y, i, j, inverse_masses, normal, depth, restitution, friction=0.0):
         Unit normal from i towards j.
     depth : array, shape (K,)
     """
+    return resolve_spinning(y, (i, j), inverse_masses, (normal, depth), (restitution, friction), no_spin())
+
+
+def resolve_spinning(y, pairs, inverse_masses, contact, material, spin):
+    """:func:`resolve` for spheres that may spin: ``pairs`` = (i, j), ``contact`` = (normal, depth),
+    ``material`` = (restitution, friction), ``spin`` a :class:`.compiled_response.Spin` whose
+    ``omega`` the impulse's angular part changes in place (:mod:`.compiled_response`)."""
+    i, j = pairs
+    normal, depth = contact
+    restitution, friction = material
     i = np.asarray(i, dtype=np.int64)
     j = np.full(len(i), -1, np.int64) if j is None else np.asarray(j, dtype=np.int64)
 
     def rows(x):
         return np.ascontiguousarray(np.broadcast_to(x, i.shape), dtype=float)
 
-    # pair by pair with the compiled kernel (:func:`.compiled_response.resolve_pair`): the
-    # bodies are distinct, so the order does not matter
-    return resolve_rows(y, i, j, np.asarray(inverse_masses, dtype=float),
+    # pair by pair with the compiled kernel (:func:`.compiled_response.respond`): the bodies are
+    # distinct, so the order does not matter
+    return resolve_rows(y, (i, j), np.asarray(inverse_masses, dtype=float),
                         np.ascontiguousarray(np.broadcast_to(normal, i.shape + (3,)), dtype=float), rows(depth),
-                        rows(restitution), rows(friction))
+                        (rows(restitution), rows(friction)), spin)

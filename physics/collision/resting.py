@@ -17,6 +17,26 @@ away, as the floor's support force would. Removing approach speed never adds ene
 
 Bodies touching several surfaces (a ball in a corner, a stack) are settled by up to
 :data:`RESTING_PASSES` Gauss-Seidel passes, one contact after the other.
+
+Sliding and rolling (spheres with spin)
+---------------------------------------
+The normal impulse J_n a resting contact takes at the end of the step is what its support
+force N gave over the step, N = J_n / dt (m g dt for a ball on a level floor), and Coulomb's
+kinetic friction mu N acts at the contact point for as long as the contact slips. For spheres
+that spin (:class:`.compiled_response.Spin`) this has a closed form over the step: the slip u_t
+falls linearly, at mu N (1/m + R^2/I), until it is zero at tau = |J_t| / (mu N) (or the step
+ends first), and v and omega change linearly with it (a ball launched sliding on the floor rolls
+at 5/7 v0 from t = 2 v0 / (7 mu g)). The step-end impulse with its angular part
+(:func:`.compiled_response.respond`, eps = 0) is that motion's total: J_t = -mu J_n u_t / |u_t|
+while it slides, exactly the impulse that stops the slip when it stops within the step. So the
+velocities and spins at the step's end are the closed form's. The positions are too: the chord
+moved the body by its velocity at the step's start, and friction acting over [0, tau] and
+nothing after moves it by J_t / m (dt - tau / 2) less, which :func:`_slide` adds (and turns the
+orientation on by the spin's change times the same dt - tau / 2). Measured in
+tests/test_spin.py: the rolling ball's v, omega and x at every step's end are the closed form's
+to round-off at any dt. Point masses (no sphere of the scene spins) keep the friction impulse
+alone, their numbers unchanged: their velocities are exact at the step's ends as well, their
+positions first order in dt.
 """
 
 from __future__ import annotations
@@ -25,10 +45,11 @@ import numpy as np
 from numba import njit
 
 from .approach import AT_REST, approach_speed, approach_speeds
-from .compiled_response import resolve_pair
+from .compiled_response import respond, spinning
+from .manifold_geometry import cross3
 from .pairs import BodyPairs
-from .response import resolve
-from .sphere_contacts import row3, row3_of, sphere_plane, sphere_sphere, sub3
+from .rigid_solver import EXPONENTIAL, _turn
+from .sphere_contacts import dot3, row3, row3_of, sphere_plane, sphere_sphere, sub3
 
 #: an impact slower than what the forces pressing the pair together add over this many
 #: steps does not bounce (eps = 0): it ends the endless series of ever smaller bounces
@@ -53,11 +74,17 @@ def rest_speed(floor, pressing, dt):
 RESTING_PASSES = 4
 
 
-def settle(world, groups, starts, y, radii, inverse_masses, slop: float, ignored=frozenset()) -> int:
-    """Settle the resting contacts of the state ``y`` (in place); ``starts`` from the sub-step's start.
+def settle(world, contacts, y, bodies, split, ignored=frozenset()) -> int:
+    """Settle the resting contacts of the state ``y`` (in place); ``contacts`` = (groups, starts),
+    the starts from the sub-step's start; ``bodies`` = (radii, inverse masses, spin) (a
+    :class:`.compiled_response.Spin`, whose omega and orientation change in place); ``split`` =
+    (slop, dt).
 
     Returns the number of corrections made.
     """
+    groups, starts = contacts
+    radii, inverse_masses, spin = bodies
+    slop, dt = split
     corrections = 0
     for _ in range(RESTING_PASSES):
         settled: list[np.ndarray] = []
@@ -80,38 +107,96 @@ def settle(world, groups, starts, y, radii, inverse_masses, slop: float, ignored
                     one = pairs.subset([k])
                     now = one.contact(radii, y[0])
                     friction = world.properties(int(one.i[0]), int(one.j[0]))[1]
-                    resolve(y, one.i, one.j, inverse_masses, now.normal, now.penetration_depth, 0.0, friction)
+                    press_rows(y, (one.i.astype(np.int64), one.j.astype(np.int64)), inverse_masses,
+                               (np.ascontiguousarray(now.normal, dtype=float), _column(now.penetration_depth)),
+                               _column(friction), (spin, float(dt)))
                 settled += [pairs.i[pressed], pairs.j[pressed]]
-            else:  # one shape: every body at most once, so all at once
-                body = pairs.i[pressed]
+            else:  # one shape: every body at most once, so in any order
+                body = pairs.i[pressed].astype(np.int64)
                 friction = np.array([world.properties(int(i), pairs.shape)[1] for i in body])
-                resolve(y, body, None, inverse_masses, contact.normal[pressed], depth[pressed], 0.0, friction)
+                press_rows(y, (body, np.full(len(body), -1, np.int64)), inverse_masses,
+                           (np.ascontiguousarray(contact.normal[pressed], dtype=float), _column(depth[pressed])),
+                           _column(friction), (spin, float(dt)))
                 settled.append(body)
         if not settled:
             break
         corrections += sum(len(b) for b in settled)
-        bodies = np.concatenate(settled)
-        if len(np.unique(bodies)) == len(bodies):
+        touched = np.concatenate(settled)
+        if len(np.unique(touched)) == len(touched):
             break  # no body settled twice: no contact disturbed another
     return corrections
 
 
+def _column(x) -> np.ndarray:
+    return np.ascontiguousarray(np.atleast_1d(np.asarray(x, dtype=float)))
+
+
 @njit(cache=True)
-def settle_spheres_and_planes(y, contacts, radii, inverse_masses, planes, friction, slop):
+def press_rows(y, pairs, inverse_masses, contact, friction, sliding):
+    """:func:`press` for each row k: ``pairs`` = (i, j) columns (``j < 0``: a static shape),
+    ``contact`` = (normals (K, 3), depths (K,)), ``friction`` (K,), ``sliding`` = (spin, dt)."""
+    i, j = pairs
+    normals, depths = contact
+    for k in range(i.shape[0]):
+        press(y, (i[k], j[k]), inverse_masses, (row3(normals, k), depths[k]), friction[k], sliding)
+
+
+@njit(cache=True, inline="always")
+def press(y, pair, inverse_masses, contact, friction, sliding):
+    """One resting contact put back in touch, its approach removed (eps = 0) with Coulomb friction
+    limited by it, and, for spheres that spin, the slide's closed form over the step (:func:`_slide`)."""
+    spin, dt = sliding
+    normal, depth = contact
+    lam = respond(y, pair, inverse_masses, normal, depth, (0.0, friction), spin)
+    if friction > 0 and spinning(spin):
+        _slide(y, pair, inverse_masses, (normal, lam, friction), spin, dt)
+
+
+@njit(cache=True, inline="always")
+def _slide(y, pair, inverse_masses, impulse, spin, dt):
+    """Where friction acting over the step puts the pair, beside where the chord did: each body
+    moved J_t / m (dt - tau / 2) further and turned (R / I) (n x J_t) (dt - tau / 2) further, tau =
+    dt |J_t| / (mu J_n) the time the contact slid (the module's docstring)."""
+    normal, lam, friction = impulse
+    i, j = pair
+    lam_n = dot3(lam, normal)
+    j_t = (lam[0] - lam_n * normal[0], lam[1] - lam_n * normal[1], lam[2] - lam_n * normal[2])
+    size = np.sqrt(dot3(j_t, j_t))
+    if size == 0.0 or lam_n == 0.0:
+        return
+    slid = size / (friction * abs(lam_n))  # tau / dt
+    late = dt * (1.0 - 0.5 * (slid if slid < 1.0 else 1.0))  # dt - tau / 2
+    turn = cross3(normal, lam)
+    omega, inverse_inertia, radii, orientation, _ = spin
+    for body, sign in ((i, 1.0), (j, -1.0)):
+        if body < 0:
+            continue
+        move = sign * inverse_masses[body] * late
+        for k in range(3):
+            y[0, body, k] = y[0, body, k] + move * j_t[k]
+        scale = radii[body] * inverse_inertia[body]
+        if scale > 0:
+            _turn(orientation, body, (scale * turn[0], scale * turn[1], scale * turn[2]), late, EXPONENTIAL)
+
+
+@njit(cache=True)
+def settle_spheres_and_planes(y, contacts, bodies, planes, friction, split):
     """:func:`settle` compiled, for spheres and planes (no triggers, none ignored): the same passes,
     decisions and responses in the same order (the incremental event loop's compiled step calls it).
 
     ``contacts`` = (i, j, resting, first): the groups' pairs concatenated, ``j = -1 - k`` for the
     plane k, ``resting`` the start states' :attr:`.detectors.StartState.resting`, ``first`` (G + 1,)
-    where each group begins; ``planes`` = (normals, offsets); ``friction`` = (body material (N,),
-    plane material (P,), friction (M, M)). Returns the corrections made.
+    where each group begins; ``bodies`` = (radii, inverse masses, spin); ``planes`` = (normals,
+    offsets); ``friction`` = (body material (N,), plane material (P,), friction (M, M)); ``split``
+    = (slop, dt). Returns the corrections made.
     """
     i, j, resting, first = contacts
+    radii, inverse_masses, spin = bodies
+    slop, dt = split
     normals, offsets = planes
     body_material, plane_material, mu = friction
     pressed = np.zeros(i.shape[0], np.bool_)
     settled = np.zeros(radii.shape[0], np.int64)  # how often each body was settled in a pass
-    normal = np.empty(3)
     corrections = 0
     for _ in range(RESTING_PASSES):
         count, twice = 0, False
@@ -138,8 +223,7 @@ def settle_spheres_and_planes(y, contacts, radii, inverse_masses, planes, fricti
                 else:
                     n, depth, _ = sphere_plane(row3_of(y, 0, a), radii[a], row3(normals, -1 - b), offsets[-1 - b])
                     m = plane_material[-1 - b]
-                normal[0], normal[1], normal[2] = n
-                resolve_pair(y, a, b, inverse_masses, normal, depth, 0.0, mu[body_material[a], m])
+                press(y, (a, b), inverse_masses, (n, depth), mu[body_material[a], m], (spin, dt))
                 for body in (a, b):
                     if body >= 0:
                         count += 1

@@ -90,14 +90,14 @@ from . import compiled_loop
 from .approach import approach_speeds
 from .changed_pairs import SweptGrid
 from .chords import Chords
-from .compiled_response import impact_terms, resolve_pair
+from .compiled_response import impact_terms, no_spin, resolve_pair, turn_all_to, turn_to
 from .coupling import Coupling
 from .detectors import StartState, earliest_impact, pair_times, start_state
 from .events import Collision, CollisionLog, ImpactRows
 from .impact_cap import ImpactCapError
 from .impact_queue import ImpactQueue
 from .pairs import BodyPairs, ShapePairs, candidates, changed_candidates
-from .response import resolve
+from .response import resolve_spinning
 from .resting import rest_speed, settle, settle_spheres_and_planes
 from .retest import Bodies, Planes, Split, retest_spheres_and_planes
 
@@ -155,6 +155,9 @@ class CollisionStep:
             exact = self.field is not None and rest_of_step_is_unchanged(self.integrator)
             self.event_loop = "incremental" if exact else "full"
         self._active = np.ones(len(self.radii), bool)  # bodies not removed (removal is for good)
+        #: the spheres' spin (:class:`.compiled_response.Spin`): empty, the point-mass path, unless a
+        #: :class:`.spin_step.SpinningCollisionStep` sets it
+        self.spin = getattr(self, "spin", None) or no_spin()
         self._bodies = tuple(Bodies(self.radii, self.inverse_masses, self._active, self.field))
         self._is_changed = np.zeros(len(self.radii), bool)  # scratch: the bodies of one re-test
         #: the incremental loop's impacts in one compiled call per step (:mod:`.compiled_loop`; off
@@ -226,7 +229,7 @@ class CollisionStep:
             groups, starts = queue.current_groups()
             if carry_end is not None:  # the carry of the state the step ends in
                 carry_end = integrator.init(model, t_end, y_end)
-        return self._finish(groups, starts, y_end, carry_end, t_end, ignored, slop)
+        return self._finish((groups, starts), y_end, carry_end, (t_start, t_end), ignored, slop)
 
     def _compiled(self, t, y, dt, carry):
         """:meth:`_incremental` in compiled calls: the first tests (:func:`.compiled_loop.first_rows`),
@@ -248,8 +251,9 @@ class CollisionStep:
         sizes[N_WATCHED] = n_watched
         # Respond, earliest first, re-testing what each impact changed: one call
         entries, self._heap, _, self._logged = compiled_loop.resolve_impacts(
-            chords.arrays, chords.now, (grid.arrays, grid.links), self._bodies, (self.planes, self._materials),
-            split, (entries, self._heap, watched, stamps, self._is_changed, sizes), self._logged)
+            chords.arrays, chords.now, (grid.arrays, grid.links), self._bodies,
+            (self.planes, self._materials, self.spin), split,
+            (entries, self._heap, watched, stamps, self._is_changed, sizes), self._logged)
         if sizes[N_LOGGED]:
             log.add_impacts(ImpactRows(self._logged[:sizes[N_LOGGED]].copy(), tuple(self.model.names),
                                        self.world.shapes, self.world.properties))
@@ -261,10 +265,12 @@ class CollisionStep:
         if resolved and carry_end is not None:  # the carry of the state the step ends in
             carry_end = self.integrator.init(self.model, t_end, y_end)
         # Resting contacts: bodies pressed into a surface are put back on it
+        turn_all_to(self.spin, t_end)
         body_material, plane_material, _, friction = self._materials
         corrections = settle_spheres_and_planes(
-            y_end, compiled_loop.settle_rows(entries, sizes[N_ENTRIES], stamps), self.radii, self.inverse_masses,
-            (self.planes[0], self.planes[1]), (body_material, plane_material, friction), float(slop))
+            y_end, compiled_loop.settle_rows(entries, sizes[N_ENTRIES], stamps),
+            (self.radii, self.inverse_masses, self.spin), (self.planes[0], self.planes[1]),
+            (body_material, plane_material, friction), (float(slop), t_end - t))  # dt as _finish has it
         if corrections:
             log.resting_corrections += corrections
             carry_end = self.integrator.init(self.model, t_end, y_end)
@@ -366,10 +372,15 @@ class CollisionStep:
             self.log.events.append(event)
             ignored.add(impact.pairs.key(impact.k))
 
-    def _finish(self, groups, starts, y_end, carry_end, t_end, ignored, slop):
-        """Resting contacts: bodies pressed into a surface are put back on it."""
+    def _finish(self, contacts, y_end, carry_end, span, ignored, slop):
+        """Resting contacts: bodies pressed into a surface are put back on it; ``contacts`` = (groups,
+        starts), ``span`` = (t_start, t_end), the step's."""
         log = self.log
-        corrections = settle(self.world, groups, starts, y_end, self.radii, self.inverse_masses, slop, ignored)
+        groups, starts = contacts
+        t_start, t_end = span
+        turn_all_to(self.spin, t_end)
+        corrections = settle(self.world, contacts, y_end, (self.radii, self.inverse_masses, self.spin),
+                             (slop, t_end - t_start), ignored)
         if corrections:
             log.resting_corrections += corrections
             carry_end = self.integrator.init(self.model, t_end, y_end)
@@ -405,7 +416,7 @@ class CollisionStep:
             resolved += 1
             carry = integrator.init(model, t, y)
         log.most_impacts_in_a_step = max(log.most_impacts_in_a_step, resolved)
-        return self._finish(groups, starts, y_end, carry_end, t_end, ignored, slop)
+        return self._finish((groups, starts), y_end, carry_end, (t_start, t_end), ignored, slop)
 
     def _sweep(self, t, y, h, carry):
         """The stages before the narrow phase, over the (sub-)step from ``t`` to ``t + h``.
@@ -505,11 +516,15 @@ class CollisionStep:
 
         ``compiled``: through :func:`.compiled_response.resolve_pair` (the same numbers).
         """
+        material, spin = (float(event.restitution), float(event.friction)), self.spin
+        if len(spin.inverse_inertia):  # spheres that spin: turned on to the impact, where omega changes
+            for body in _bodies(impact):
+                turn_to(spin, int(body), float(event.t))
         if compiled and isinstance(contact, _PairContact):
             pairs, k = impact.pairs, impact.k
             j = int(pairs.j[k]) if isinstance(pairs, BodyPairs) else -1
-            lam = resolve_pair(y, int(pairs.i[k]), j, self.inverse_masses, contact.normal[0], contact.depth,
-                               float(event.restitution), float(event.friction))[None]
+            lam = resolve_pair(y, (int(pairs.i[k]), j), self.inverse_masses, contact.normal[0], contact.depth,
+                               material, spin)[None]
             self._record(event, lam)
             return
         pair = impact.pairs.subset([impact.k])
@@ -517,12 +532,11 @@ class CollisionStep:
         other = pair.j if isinstance(pair, BodyPairs) else None
         if compiled:
             j = -1 if other is None else int(other[0])
-            lam = resolve_pair(y, int(pair.i[0]), j, self.inverse_masses, np.ascontiguousarray(contact.normal[0]),
-                               float(contact.penetration_depth[0]), float(event.restitution),
-                               float(event.friction))[None]
+            lam = resolve_pair(y, (int(pair.i[0]), j), self.inverse_masses, np.ascontiguousarray(contact.normal[0]),
+                               float(contact.penetration_depth[0]), material, spin)[None]
         else:
-            lam = resolve(y, pair.i, other, self.inverse_masses, contact.normal, contact.penetration_depth,
-                          event.restitution, event.friction)
+            lam = resolve_spinning(y, (pair.i, other), self.inverse_masses,
+                                   (contact.normal, contact.penetration_depth), material, spin)
         self._record(event, lam)
 
     def _record(self, event, lam) -> None:
