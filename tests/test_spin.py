@@ -336,3 +336,17 @@ def test_bad_spin_input_is_one_line_with_status_2(edit, message, tmp_path, capsy
     assert main(["run", str(path)]) == 2
     err = capsys.readouterr().err.strip()
     assert len(err.splitlines()) == 1 and "Traceback" not in err
+
+
+def test_angular_velocity_on_particles_is_one_line_with_status_2(tmp_path, capsys):
+    """Particles are points: they take no spin (the key is refused by name)."""
+    from steplab.cli import main
+
+    path = tmp_path / "points.toml"
+    path.write_text('[simulation]\ndt = 0.01\nt_end = 0.1\n[[particles]]\nname = "p"\ncount = 3\nseed = 1\n'
+                    'mass = 1.0\nradius = 0.1\nbox_min = [0, 0, 0.2]\nbox_max = [1, 1, 1]\n'
+                    'angular_velocity = [0, 0, 1]\n[forces.gravity]\n[collisions]\nfriction = 0.3\n'
+                    '[[collisions.planes]]\nnormal = [0.0, 0.0, 1.0]\n')
+    assert main(["run", str(path)]) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and "unknown key 'angular_velocity'" in err

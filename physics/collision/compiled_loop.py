@@ -55,7 +55,7 @@ from numba import njit
 from .approach import AT_REST, approach_speed
 from .changed_pairs import _place, query_into, sorted_pairs
 from .chords import _restart, state_at
-from .compiled_response import contact_terms, respond, spinning, turn_to
+from .compiled_response import NO_TURN, contact_terms, respond, respond_spinning, spinning, turn_to
 from .resting import rest_speed
 from .retest import planes_reached, test_pair
 from .sphere_contacts import (
@@ -276,6 +276,7 @@ def resolve_impacts(chords, now, grid, bodies, world, split, queue, log):
     """
     radii, inverse_masses, active, acc = bodies
     planes, materials, spin = world
+    spins = spinning(spin)  # once: the spin's arrays reach the per-impact code only where some body spins
     body_material, plane_material, restitution, friction = materials
     t, dt, slop, floor = split
     t_end = chords[3]
@@ -332,10 +333,12 @@ def resolve_impacts(chords, now, grid, bodies, world, split, queue, log):
         t_lo = t + lo * h
         t = t + s * (t_end - t)
         # Respond (spheres that spin: turned on to the impact first, their omega changes in it)
-        if spinning(spin):
+        if spins:
             turn_to(spin, a, t_hit)
             turn_to(spin, b, t_hit)
-        lam = respond(now, (a, b), inverse_masses, normal, depth, (eps, mu), spin)
+            lam = respond_spinning(now, (a, b), inverse_masses, normal, depth, (eps, mu), spin)
+        else:
+            lam = respond(now, (a, b), inverse_masses, normal, depth, (eps, mu), NO_TURN)
         if settling or speed <= 0:  # settling, or grazing: no collision
             resting += 1
         else:

@@ -99,13 +99,16 @@ def turn_all_to(spin, t):
             turn_to(spin, body, t)
 
 
+#: the ``turning`` of a pair that does not turn (point masses, or no friction): :func:`impulse_of` then
+#: takes the point-mass path
+NO_TURN = (AT_REST, 0.0)
+
+
 @njit(cache=True, inline="always")
 def contact_spin(spin, i, j, normal):
     """What the spin adds to the slip of the pair (i, j) (``j < 0``: a static shape) at its contact,
-    ``(omega_i x r_i - omega_j x r_j, R_i^2 / I_i + R_j^2 / I_j)`` with r_i = R_i n, r_j = -R_j n;
-    ``(0, 0)`` without spin."""
-    if not spinning(spin):
-        return AT_REST, 0.0
+    ``(omega_i x r_i - omega_j x r_j, R_i^2 / I_i + R_j^2 / I_j)`` with r_i = R_i n, r_j = -R_j n
+    (``spin`` not empty)."""
     omega, inverse_inertia, radii, _, _ = spin
     w_i = cross3(row3(omega, i), normal)
     r_i = radii[i]
@@ -157,7 +160,7 @@ def impulse_rows(v_rel, inverse_sum, normal, restitution, friction):
     lam = np.empty_like(v_rel)
     for k in range(len(v_rel)):
         lam[k, 0], lam[k, 1], lam[k, 2] = impulse_of(row3(v_rel, k), inverse_sum[k], row3(normal, k),
-                                                     restitution[k], friction[k], (AT_REST, 0.0))
+                                                     restitution[k], friction[k], NO_TURN)
     return lam
 
 
@@ -170,15 +173,28 @@ def resolve_pair(y, pair, inverse_masses, normal, depth, material, spin):
     place; ``normal`` (3,) points from i towards j. Returns Lambda (3,), the impulse on body i.
     """
     lam = np.empty(3)
-    lam[0], lam[1], lam[2] = respond(y, pair, inverse_masses, (normal[0], normal[1], normal[2]), depth, material,
-                                     spin)
+    lam[0], lam[1], lam[2] = respond_spinning(y, pair, inverse_masses, (normal[0], normal[1], normal[2]), depth,
+                                              material, spin)
     return lam
 
 
 @njit(cache=True, inline="always")
-def respond(y, pair, inverse_masses, normal, depth, material, spin):
+def respond_spinning(y, pair, inverse_masses, normal, depth, material, spin):
+    """:func:`respond` with the spin: its part of the slip, and omega changed by the impulse's
+    angular part (:func:`spin_up`). The event loop's hot paths call :func:`respond` alone where no
+    body spins: handing the spin's arrays to an inlined function costs Numba reference counts."""
+    turning = contact_spin(spin, pair[0], pair[1], normal) if spinning(spin) and material[1] > 0 else NO_TURN
+    lam = respond(y, pair, inverse_masses, normal, depth, material, turning)
+    if turning[1] > 0:
+        spin_up(spin, pair, normal, lam)
+    return lam
+
+
+@njit(cache=True, inline="always")
+def respond(y, pair, inverse_masses, normal, depth, material, turning):
     """:func:`resolve_pair` with the normal a 3-tuple, returning Lambda as one (no array made: the
-    event loop's compiled step calls it at every impact)."""
+    event loop's compiled step calls it at every impact); ``turning`` as :func:`impulse_of` takes it
+    (:data:`NO_TURN` for point masses), omega changed by the caller (:func:`respond_spinning`)."""
     i, j = pair
     restitution, friction = material
     inv_a = inverse_masses[i]
@@ -190,7 +206,6 @@ def respond(y, pair, inverse_masses, normal, depth, material, spin):
         y[0, i, k] = y[0, i, k] - normal[k] * (push * inv_a)
     v_b = row3_of(y, 1, j) if j >= 0 else AT_REST
     v_rel = sub3(row3_of(y, 1, i), v_b)
-    turning = contact_spin(spin, i, j, normal) if friction > 0 else (AT_REST, 0.0)
     lam = impulse_of(v_rel, inv_sum, normal, restitution, friction, turning)
     for k in range(3):
         y[1, i, k] = y[1, i, k] + lam[k] * inv_a
@@ -198,20 +213,20 @@ def respond(y, pair, inverse_masses, normal, depth, material, spin):
         for k in range(3):
             y[0, j, k] = y[0, j, k] + normal[k] * (push * inv_b)
             y[1, j, k] = y[1, j, k] - lam[k] * inv_b
-    if turning[1] > 0:  # I domega = r x Lambda: R_i n x Lambda on i, and (-R_j n) x (-Lambda) on j
-        _spin_up(spin, i, cross3(normal, lam))
-        if j >= 0:
-            _spin_up(spin, j, cross3(normal, lam))
     return lam
 
 
 @njit(cache=True, inline="always")
-def _spin_up(spin, body, n_cross_lambda):
-    """omega += (R / I) n x Lambda: the angular part of an impulse Lambda at R n from the centre."""
+def spin_up(spin, pair, normal, lam):
+    """The impulse's angular part, I domega = r x Lambda: omega_i += (R_i / I_i) n x Lambda (r_i = R_i n),
+    and the same on j, whose (-R_j n) x (-Lambda) is R_j n x Lambda (0 for a body that does not turn)."""
     omega, inverse_inertia, radii, _, _ = spin
-    scale = radii[body] * inverse_inertia[body]
-    for k in range(3):
-        omega[body, k] = omega[body, k] + scale * n_cross_lambda[k]
+    turn = cross3(normal, lam)
+    for body in pair:
+        if body >= 0:
+            scale = radii[body] * inverse_inertia[body]
+            for k in range(3):
+                omega[body, k] = omega[body, k] + scale * turn[k]
 
 
 @njit(cache=True)
@@ -222,8 +237,8 @@ def resolve_rows(y, pairs, inverse_masses, normal, depth, material, spin):
     restitution, friction = material
     lam = np.empty((len(i), 3))
     for k in range(len(i)):
-        lam[k, 0], lam[k, 1], lam[k, 2] = respond(y, (i[k], j[k]), inverse_masses, row3(normal, k), depth[k],
-                                                  (restitution[k], friction[k]), spin)
+        lam[k, 0], lam[k, 1], lam[k, 2] = respond_spinning(y, (i[k], j[k]), inverse_masses, row3(normal, k),
+                                                           depth[k], (restitution[k], friction[k]), spin)
     return lam
 
 

@@ -45,7 +45,7 @@ import numpy as np
 from numba import njit
 
 from .approach import AT_REST, approach_speed, approach_speeds
-from .compiled_response import respond, spinning
+from .compiled_response import NO_TURN, respond, respond_spinning, spinning
 from .manifold_geometry import cross3
 from .pairs import BodyPairs
 from .rigid_solver import EXPONENTIAL, _turn
@@ -133,22 +133,30 @@ def _column(x) -> np.ndarray:
 
 @njit(cache=True)
 def press_rows(y, pairs, inverse_masses, contact, friction, sliding):
-    """:func:`press` for each row k: ``pairs`` = (i, j) columns (``j < 0``: a static shape),
+    """:func:`press_spinning` (without spin, :func:`.compiled_response.respond` with eps = 0) for each
+    row k: ``pairs`` = (i, j) columns (``j < 0``: a static shape),
     ``contact`` = (normals (K, 3), depths (K,)), ``friction`` (K,), ``sliding`` = (spin, dt)."""
     i, j = pairs
     normals, depths = contact
+    spin, dt = sliding
+    spins = spinning(spin)
     for k in range(i.shape[0]):
-        press(y, (i[k], j[k]), inverse_masses, (row3(normals, k), depths[k]), friction[k], sliding)
+        if spins:
+            press_spinning(y, (i[k], j[k]), inverse_masses, (row3(normals, k), depths[k]), friction[k], sliding)
+        else:
+            respond(y, (i[k], j[k]), inverse_masses, row3(normals, k), depths[k], (0.0, friction[k]), NO_TURN)
 
 
 @njit(cache=True, inline="always")
-def press(y, pair, inverse_masses, contact, friction, sliding):
-    """One resting contact put back in touch, its approach removed (eps = 0) with Coulomb friction
-    limited by it, and, for spheres that spin, the slide's closed form over the step (:func:`_slide`)."""
+def press_spinning(y, pair, inverse_masses, contact, friction, sliding):
+    """One resting contact among spheres that spin put back in touch, its approach removed (eps = 0)
+    with Coulomb friction limited by it (:func:`.compiled_response.respond_spinning`), and the slide's
+    closed form over the step (:func:`_slide`). Point masses take :func:`.compiled_response.respond`
+    alone, with eps = 0."""
     spin, dt = sliding
     normal, depth = contact
-    lam = respond(y, pair, inverse_masses, normal, depth, (0.0, friction), spin)
-    if friction > 0 and spinning(spin):
+    lam = respond_spinning(y, pair, inverse_masses, normal, depth, (0.0, friction), spin)
+    if friction > 0:
         _slide(y, pair, inverse_masses, (normal, lam, friction), spin, dt)
 
 
@@ -195,6 +203,7 @@ def settle_spheres_and_planes(y, contacts, bodies, planes, friction, split):
     slop, dt = split
     normals, offsets = planes
     body_material, plane_material, mu = friction
+    spins = spinning(spin)  # once: the spin's arrays reach the per-contact code only where some body spins
     pressed = np.zeros(i.shape[0], np.bool_)
     settled = np.zeros(radii.shape[0], np.int64)  # how often each body was settled in a pass
     corrections = 0
@@ -223,7 +232,10 @@ def settle_spheres_and_planes(y, contacts, bodies, planes, friction, split):
                 else:
                     n, depth, _ = sphere_plane(row3_of(y, 0, a), radii[a], row3(normals, -1 - b), offsets[-1 - b])
                     m = plane_material[-1 - b]
-                press(y, (a, b), inverse_masses, (n, depth), mu[body_material[a], m], (spin, dt))
+                if spins:
+                    press_spinning(y, (a, b), inverse_masses, (n, depth), mu[body_material[a], m], (spin, dt))
+                else:
+                    respond(y, (a, b), inverse_masses, n, depth, (0.0, mu[body_material[a], m]), NO_TURN)
                 for body in (a, b):
                     if body >= 0:
                         count += 1
