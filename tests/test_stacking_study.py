@@ -86,6 +86,9 @@ def test_quick_study_meets_the_laws_and_draws_from_its_record(tmp_path):
     record = json.loads((tmp_path / "stacking.json").read_text())
     roll = next(r for r in record["rolling"]["rows"] if abs(r["dt"] - 1 / 60) < 1e-12)
     assert roll["speed_error"] < 0.005  # issue 26's target at 60 Hz
+    # the event loop's spinning ball: the closed form at every step's end, at every dt (tests/test_spin.py)
+    assert all(r["max_velocity_error"] < 1e-12 and r["final_position_error"] < 1e-12
+               for r in record["rolling"]["event_rows"])
     assert record["incline"]["max_error"] < 0.01
     column = next(r for r in record["columns"]["rows"] if (r["substeps"], r["iterations"]) == (4, 1))
     assert column["sink"] == pytest.approx(column["predicted_sink"], rel=0.01)

@@ -18,7 +18,8 @@ calling the same kernels (the one definition of each formula):
   planes, then the pair, then the order the pairs were tested in; lazy deletion by stamps);
 - its bodies placed on their chords (:func:`.chords.state_at`), its contact and approach
   (:func:`.compiled_response.contact_terms`), resting or impact (:func:`.resting.rest_speed`),
-  the response (:func:`.compiled_response.respond`, through ``impulse_of``);
+  the response (:func:`.compiled_response.respond`, through ``impulse_of``; for spheres that
+  spin, :func:`_spinning_impact`: turned on to the impact, the impulse's angular part);
 - the moved bodies' rest of the step (semi-implicit Euler under the constant field:
   v' = v + h a, q' = q + h v', the integrator's own expressions), their new chords and
   swept bounds (:func:`.chords._restart`), the grid (:func:`.changed_pairs._place`);

@@ -66,6 +66,11 @@ happens) the incremental loop's impacts run in one compiled call per step
 same collision log and trajectories bit for bit (tests/test_event_loop_compiled.py).
 ``CollisionWorld(compiled_loop=False)`` keeps the Python loop, the reference of that test.
 
+Spheres that spin (where friction can turn them) run :class:`.spin_step.SpinningCollisionStep`:
+this step with their omega and orientation beside ``y`` (:class:`.compiled_response.Spin`),
+the impulse's angular part at every impact and the closed-form slide of the resting contacts
+(:mod:`.resting`), on every path; without spin the kernels take the point masses' code.
+
 At most ``max_impacts_per_step`` collisions are resolved in a step (the default scales
 with the bodies, :mod:`.impact_cap`); a step holding more raises
 :class:`.impact_cap.ImpactCapError` instead of leaving them unresolved.
@@ -265,7 +270,8 @@ class CollisionStep:
         if resolved and carry_end is not None:  # the carry of the state the step ends in
             carry_end = self.integrator.init(self.model, t_end, y_end)
         # Resting contacts: bodies pressed into a surface are put back on it
-        turn_all_to(self.spin, t_end)
+        if len(self.spin.inverse_inertia):  # spheres that spin: turned on to the step's end
+            turn_all_to(self.spin, t_end)
         body_material, plane_material, _, friction = self._materials
         corrections = settle_spheres_and_planes(
             y_end, compiled_loop.settle_rows(entries, sizes[N_ENTRIES], stamps),
@@ -378,7 +384,8 @@ class CollisionStep:
         log = self.log
         groups, starts = contacts
         t_start, t_end = span
-        turn_all_to(self.spin, t_end)
+        if len(self.spin.inverse_inertia):  # spheres that spin: turned on to the step's end
+            turn_all_to(self.spin, t_end)
         corrections = settle(self.world, contacts, y_end, (self.radii, self.inverse_masses, self.spin),
                              (slop, t_end - t_start), ignored)
         if corrections:
