@@ -27,16 +27,18 @@ that spin (:class:`.compiled_response.Spin`) this has a closed form over the ste
 falls linearly, at mu N (1/m + R^2/I), until it is zero at tau = |J_t| / (mu N) (or the step
 ends first), and v and omega change linearly with it (a ball launched sliding on the floor rolls
 at 5/7 v0 from t = 2 v0 / (7 mu g)). The step-end impulse with its angular part
-(:func:`.compiled_response.respond`, eps = 0) is that motion's total: J_t = -mu J_n u_t / |u_t|
+(:func:`.compiled_response.respond_spinning`, eps = 0) is that motion's total: J_t = -mu J_n u_t / |u_t|
 while it slides, exactly the impulse that stops the slip when it stops within the step. So the
 velocities and spins at the step's end are the closed form's. The positions are too: the chord
 moved the body by its velocity at the step's start, and friction acting over [0, tau] and
 nothing after moves it by J_t / m (dt - tau / 2) less, which :func:`_slide` adds (and turns the
 orientation on by the spin's change times the same dt - tau / 2). Measured in
 tests/test_spin.py: the rolling ball's v, omega and x at every step's end are the closed form's
-to round-off at any dt. Point masses (no sphere of the scene spins) keep the friction impulse
-alone, their numbers unchanged: their velocities are exact at the step's ends as well, their
-positions first order in dt.
+to round-off at any dt. This takes N constant over the step, as for a body resting on its
+support the whole step; in the step a body lands in, the slide it is given is that of a contact
+that began at the step's start (first order in dt there, as the resting impulse itself). Point
+masses (no sphere of the scene spins) keep the friction impulse alone, their numbers unchanged:
+their velocities are exact at the step's ends as well, their positions first order in dt.
 """
 
 from __future__ import annotations
