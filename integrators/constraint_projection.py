@@ -77,8 +77,9 @@ class Sweep(NamedTuple):
 
     ``i``, ``j`` (P,) uint32 the bodies; ``rest_length``, m; ``alpha_tilde`` = alpha / h^2;
     ``gamma`` = alpha beta / h; ``denominator`` = (1 + gamma) w + alpha_tilde, 0 for a pair of
-    pinned bodies (skipped); ``segments`` (S + 1,) int64: segment s is ``[segments[s], segments[s + 1])``,
-    constraints of one colour (:func:`wavefront`), so no two of a segment share a body.
+    pinned bodies (skipped); the :class:`Bands` fields: ``segments`` (S + 1,) int64, segment s is
+    ``[segments[s], segments[s + 1])``, constraints of one colour, so no two of a segment share a
+    body; ``ready`` and ``final`` (S,) int64, the bodies to predict and those final before segment s.
     """
 
     i: np.ndarray
@@ -88,6 +89,18 @@ class Sweep(NamedTuple):
     gamma: np.ndarray
     denominator: np.ndarray
     segments: np.ndarray
+    ready: np.ndarray
+    final: np.ndarray
+
+
+class Bands(NamedTuple):
+    """How :func:`wavefront` cuts the sweep: ``segments`` (S + 1,) int64, where each run of one colour within
+    one band starts (and the end); before segment s, bodies below ``ready[s]`` must have been predicted
+    and those below ``final[s]`` have received all their projections ((S,) int64 each, non-decreasing)."""
+
+    segments: np.ndarray
+    ready: np.ndarray
+    final: np.ndarray
 
 
 class Substeps(NamedTuple):
@@ -130,9 +143,9 @@ def ordered(constraints, n_bodies: int):
 BAND = 2048
 
 
-def wavefront(constraints, colours, band: int = BAND):
+def wavefront(constraints, colours, n_bodies: int, band: int = BAND):
     """The constraints in colour order (:func:`ordered`: ``colours`` (C + 1,) the colour starts) reordered
-    into bands that sweep the bodies once, with the same bytes: (constraints, segment starts (S + 1,) int64).
+    into bands that sweep the bodies once, with the same bytes: (constraints, :class:`Bands`).
 
     The colour-by-colour sweep passes over every body once per colour, eight times a step on a
     cloth, and on a large cloth each pass reads the bodies from the L3 cache. Only the order in
@@ -149,6 +162,11 @@ def wavefront(constraints, colours, band: int = BAND):
     sorted by its bodies. The bytes are those of the colour-by-colour sweep (tested); the bodies
     a band touches stay in the core's caches while it is swept. With bodies in no spatial order
     (reach ~ N) the bands just repeat the colours: the same sweep, without the locality.
+
+    The same bounds say when a body is first and last needed, so a step with one sweep can
+    predict and update the bodies inside it, while they are in the cache (:func:`advance`):
+    band t touches bodies below (t + 1) band (``ready``), and a body p has had all its
+    projections once the bands up to (p + C reach - 1) // band are done (``final``).
     """
     counts = np.diff(colours)
     colour = np.repeat(np.arange(len(counts)), counts)
@@ -157,29 +175,80 @@ def wavefront(constraints, colours, band: int = BAND):
     key = (np.maximum(i, j) + colour * reach) // band * len(counts) + colour
     order = np.lexsort((j, i, key))
     key = key[order]
-    segments = np.concatenate([[0], np.flatnonzero(np.diff(key)) + 1, [len(key)]]).astype(np.int64)
-    return type(constraints)(*(np.ascontiguousarray(a[order]) for a in constraints)), segments
+    starts = np.flatnonzero(np.diff(key, prepend=-1))
+    segments = np.append(starts, len(key)).astype(np.int64)
+    t = key[starts] // len(counts)  # each segment's band
+    ready = np.minimum((t + 1) * band, n_bodies).astype(np.int64)
+    final = np.clip(t * band - len(counts) * reach + 1, 0, n_bodies).astype(np.int64)
+    return type(constraints)(*(np.ascontiguousarray(a[order]) for a in constraints)), Bands(segments, ready, final)
 
 
-def sweep_columns(constraints, segments, inverse_mass, h: float) -> Sweep:
-    """The :class:`Sweep` of ``constraints`` (in sweep order, segment starts ``segments``) for substeps of ``h``:
+def sweep_columns(constraints, bands: Bands, inverse_mass, h: float) -> Sweep:
+    """The :class:`Sweep` of ``constraints`` (in sweep order, cut by ``bands``) for substeps of ``h``:
     the per-constraint factors evaluated as the projection would, the same operations in the same order."""
     w = inverse_mass[constraints.i] + inverse_mass[constraints.j]
     alpha_tilde, gamma, denominator = factors(constraints.compliance, constraints.damping, w, h)
     denominator = np.where(w == 0.0, 0.0, denominator)
     return Sweep(constraints.i.astype(np.uint32), constraints.j.astype(np.uint32), constraints.rest_length,
-                 alpha_tilde, gamma, denominator, segments)
+                 alpha_tilde, gamma, denominator, *bands)
 
 
 def workspace(n_bodies: int, n_constraints: int, segments: np.ndarray) -> Workspace:
     largest = max(int(np.diff(segments).max(initial=0)), 1)
-    return Workspace(np.zeros((n_bodies, 4)), np.zeros((n_bodies, 4)), np.empty(n_constraints),
-                     np.zeros((largest, 4)), np.empty((2, largest)))
+    return Workspace(aligned_zeros((n_bodies, 4)), aligned_zeros((n_bodies, 4)), np.empty(n_constraints),
+                     aligned_zeros((largest, 4)), np.empty((2, largest)))
+
+
+#: bytes of a cache line
+CACHE_LINE = 64
+
+
+def aligned_zeros(shape: tuple) -> np.ndarray:
+    """Zeros (float64) starting on a cache line: padded rows of 32 bytes then never straddle two lines
+    (NumPy's large arrays start 16 bytes past a page, which splits every other row's loads and stores)."""
+    size = int(np.prod(shape))
+    buffer = np.zeros(size + CACHE_LINE // 8)
+    start = (-buffer.ctypes.data % CACHE_LINE) // 8
+    return buffer[start:start + size].reshape(shape)
 
 
 def padded(a: np.ndarray) -> np.ndarray:
     """(N, 3) -> (N, 4), the rows (x, y, z, 0) the sweep moves (:class:`Workspace`)."""
     return np.concatenate([a, np.zeros((len(a), 1))], axis=1)
+
+
+@njit(inline="always", error_model="numpy")
+def _segment(lo, hi, d_, x_, inverse_mass, sweep, carried, work):
+    """One segment's projections (constraints lo to hi, no two sharing a body) on the flat padded rows
+    ``d_`` (dx) and ``x_`` (x_prev): gather, solve, scatter."""
+    d, squared_, s_ = work.d.reshape(-1), work.colour[0], work.colour[1]
+    # the segment's columns as slices indexed from 0: no negative-index wraparound in the loops
+    i, j = sweep.i[lo:hi], sweep.j[lo:hi]
+    # gather: d = x_prev_j - x_prev_i + u, u = dx_j - dx_i, |d|^2 and d . u (grad C . (x - x_prev) times l)
+    for k in range(hi - lo):
+        squared_[k], s_[k] = gather4(d, 4 * k, x_, d_, 4 * np.intp(i[k]), 4 * np.intp(j[k]))
+    # solve, vectorised: dlambda n = s d with n = d / l (:func:`projection`)
+    rest, gamma, denominator = sweep.rest_length[lo:hi], sweep.gamma[lo:hi], sweep.denominator[lo:hi]
+    if carried:
+        alpha_tilde, held = sweep.alpha_tilde[lo:hi], work.lam[lo:hi]
+        for k in range(hi - lo):
+            length = np.sqrt(squared_[k])
+            below = denominator[k] * squared_[k]
+            s = _projection(rest[k], length, s_[k], gamma[k], below, alpha_tilde[k] * held[k])
+            s = s if below != 0.0 else 0.0
+            held[k] += s * length
+            s_[k] = s
+    else:
+        for k in range(hi - lo):
+            length = np.sqrt(squared_[k])
+            below = denominator[k] * squared_[k]
+            s = _projection(rest[k], length, s_[k], gamma[k], below, 0.0)
+            s_[k] = s if below != 0.0 else 0.0
+    # scatter: x_i -= w_i s d, x_j += w_j s d (x - y is x + (-y) exactly)
+    for k in range(hi - lo):
+        a, b = np.intp(i[k]), np.intp(j[k])
+        axpy4(d_, 4 * a, d, 4 * k, -(inverse_mass[a] * s_[k]))
+        axpy4(d_, 4 * b, d, 4 * k, inverse_mass[b] * s_[k])
 
 
 @njit(cache=True, error_model="numpy")
@@ -193,40 +262,32 @@ def project(dx, x_prev, inverse_mass, sweep, iterations, carried, work):
     traffic per constraint). Coincident bodies (no direction) and pairs of pinned bodies
     (denominator 0) move nothing.
     """
-    lam, d, squared_, s_ = work.lam, work.d.reshape(-1), work.colour[0], work.colour[1]
     if carried:
-        lam[:] = 0.0
+        work.lam[:] = 0.0
     d_, x_ = dx.reshape(-1), x_prev.reshape(-1)  # flat: body a's row at 4a .. 4a + 3
     for _ in range(iterations):
         for c in range(sweep.segments.shape[0] - 1):
-            lo, hi = sweep.segments[c], sweep.segments[c + 1]
-            # the segment's columns as slices indexed from 0: no negative-index wraparound in the loops
-            i, j = sweep.i[lo:hi], sweep.j[lo:hi]
-            # gather: d = x_prev_j - x_prev_i + u, u = dx_j - dx_i, |d|^2 and d . u (grad C . (x - x_prev) times l)
-            for k in range(hi - lo):
-                squared_[k], s_[k] = gather4(d, 4 * k, x_, d_, 4 * np.intp(i[k]), 4 * np.intp(j[k]))
-            # solve, vectorised: dlambda n = s d with n = d / l (:func:`projection`)
-            rest, gamma, denominator = sweep.rest_length[lo:hi], sweep.gamma[lo:hi], sweep.denominator[lo:hi]
-            if carried:
-                alpha_tilde, held = sweep.alpha_tilde[lo:hi], lam[lo:hi]
-                for k in range(hi - lo):
-                    length = np.sqrt(squared_[k])
-                    below = denominator[k] * squared_[k]
-                    s = _projection(rest[k], length, s_[k], gamma[k], below, alpha_tilde[k] * held[k])
-                    s = s if below != 0.0 else 0.0
-                    held[k] += s * length
-                    s_[k] = s
-            else:
-                for k in range(hi - lo):
-                    length = np.sqrt(squared_[k])
-                    below = denominator[k] * squared_[k]
-                    s = _projection(rest[k], length, s_[k], gamma[k], below, 0.0)
-                    s_[k] = s if below != 0.0 else 0.0
-            # scatter: x_i -= w_i s d, x_j += w_j s d (x - y is x + (-y) exactly)
-            for k in range(hi - lo):
-                a, b = np.intp(i[k]), np.intp(j[k])
-                axpy4(d_, 4 * a, d, 4 * k, -(inverse_mass[a] * s_[k]))
-                axpy4(d_, 4 * b, d, 4 * k, inverse_mass[b] * s_[k])
+            _segment(sweep.segments[c], sweep.segments[c + 1], d_, x_, inverse_mass, sweep, carried, work)
+
+
+@njit(inline="always", error_model="numpy")
+def _predict(q, v, external, h, work, lo, hi):
+    """Bodies lo to hi: x_prev = q, dx = h (v + h a_ext) (x* = q + h v*, v* = v + h a_ext), as padded rows."""
+    dx, x_prev = work.dx, work.x_prev
+    for b in range(lo, hi):
+        for c in range(3):
+            x_prev[b, c] = q[b, c]
+            dx[b, c] = h * (v[b, c] + h * external[b, c])
+
+
+@njit(inline="always", error_model="numpy")
+def _update(q, v, h, work, lo, hi):
+    """Bodies lo to hi: q += dx, v = dx / h."""
+    dx = work.dx
+    for b in range(lo, hi):
+        for c in range(3):
+            q[b, c] += dx[b, c]
+            v[b, c] = dx[b, c] / h
 
 
 @njit(cache=True, error_model="numpy")
@@ -237,16 +298,28 @@ def advance(q, v, external, inverse_mass, sweep, steps, work):
         dx = h (v + h a_ext),  project dx (:func:`project`),  q += dx,  v = dx / h.
 
     ``external`` (N, 3), m/s^2; ``sweep`` a :class:`Sweep` for h; ``work`` a :class:`Workspace`, whose
-    padded rows carry dx and the positions at the start of the substep through the sweep.
+    padded rows carry dx and the positions at the start of the substep through the sweep. With one
+    iteration, each body is predicted just before the first segment that needs it and updated
+    just after the last one that moves it (:class:`Bands`): one pass over the bodies, each while
+    it is in the cache; the operations per body are the same, so the bytes are too.
     """
-    dx, x_prev, h = work.dx, work.x_prev, steps.h
+    n, h = q.shape[0], steps.h
     for _ in range(steps.substeps):
-        for b in range(q.shape[0]):
-            for c in range(3):
-                x_prev[b, c] = q[b, c]
-                dx[b, c] = h * (v[b, c] + h * external[b, c])  # predict: x* = q + h v*, v* = v + h a_ext
-        project(dx, x_prev, inverse_mass, sweep, steps.iterations, steps.carried, work)
-        for b in range(q.shape[0]):
-            for c in range(3):
-                q[b, c] += dx[b, c]
-                v[b, c] = dx[b, c] / h
+        if steps.iterations == 1 and not steps.carried:
+            d_, x_ = work.dx.reshape(-1), work.x_prev.reshape(-1)
+            predicted, updated = 0, 0
+            for c in range(sweep.segments.shape[0] - 1):
+                ready, final = sweep.ready[c], sweep.final[c]
+                if ready > predicted:
+                    _predict(q, v, external, h, work, predicted, ready)
+                    predicted = ready
+                if final > updated:
+                    _update(q, v, h, work, updated, final)
+                    updated = final
+                _segment(sweep.segments[c], sweep.segments[c + 1], d_, x_, inverse_mass, sweep, False, work)
+            _predict(q, v, external, h, work, predicted, n)
+            _update(q, v, h, work, updated, n)
+        else:
+            _predict(q, v, external, h, work, 0, n)
+            project(work.dx, work.x_prev, inverse_mass, sweep, steps.iterations, steps.carried, work)
+            _update(q, v, h, work, 0, n)
