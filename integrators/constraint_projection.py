@@ -26,16 +26,18 @@ compiles into the kernel and JAX evaluates on a colour's columns).
 
 The constraints are swept in the order of a greedy edge colouring (:func:`ordered`), colour
 after colour. Within a colour no two constraints share a body, so its projections are
-independent: the sweep gathers a whole colour's differences d = x_j - x_i first, then solves
-every projection of the colour in one loop that the compiler vectorises (the square roots
-and divisions, the costliest operations, four or eight at a time), then scatters the moves.
-That is the sequential Gauss-Seidel sweep exactly, the same operations in the same order per
-constraint (so the same bytes). What depends only on the constraint and the substep h
-(alpha_tilde, gamma and the denominator (1 + gamma) w + alpha_tilde) is computed once per run
-(:func:`sweep_columns`). On the 25,600-particle cloth, one sweep: 1.40 ms in the springs'
-order, 0.67-0.84 ms projection by projection in colour order, 0.53-0.57 ms gathered per colour
-(load 5-6). What is left is the gather's and the scatter's scalar loads and stores, about 28 per
-constraint: 5 to 7 ns a constraint (whole step) at every cloth size, in cache or not (docs/performance.md).
+independent: the sweep gathers a run of one colour's differences d = x_j - x_i first, then
+solves its projections in one loop that the compiler vectorises (the square roots and
+divisions, the costliest operations, eight at a time), then scatters the moves. That is the
+sequential Gauss-Seidel sweep exactly, the same operations in the same order per constraint
+(so the same bytes). What depends only on the constraint and the substep h (alpha_tilde,
+gamma and the denominator (1 + gamma) w + alpha_tilde) is computed once per run
+(:func:`sweep_columns`). Each body's displacement and start position are padded rows
+(x, y, z, 0) that one 256-bit load or store moves (:mod:`.vector4`); the colours are swept
+in bands of bodies (:func:`wavefront`), each body still receiving its projections in colour
+order (the same bytes), so that a band's bodies stay in the core's caches. On the
+25,600-particle cloth, one step: 0.59-0.62 ms gathered per colour, 0.48-0.50 ms now (warm;
+docs/performance.md has the steps between and the cold-cache times).
 """
 
 from __future__ import annotations
@@ -77,9 +79,8 @@ class Sweep(NamedTuple):
 
     ``i``, ``j`` (P,) uint32 the bodies; ``rest_length``, m; ``alpha_tilde`` = alpha / h^2;
     ``gamma`` = alpha beta / h; ``denominator`` = (1 + gamma) w + alpha_tilde, 0 for a pair of
-    pinned bodies (skipped); the :class:`Bands` fields: ``segments`` (S + 1,) int64, segment s is
-    ``[segments[s], segments[s + 1])``, constraints of one colour, so no two of a segment share a
-    body; ``ready`` and ``final`` (S,) int64, the bodies to predict and those final before segment s.
+    pinned bodies (skipped); ``segments`` (S + 1,) int64: segment s is ``[segments[s], segments[s + 1])``,
+    constraints of one colour (:func:`wavefront`), so no two of a segment share a body.
     """
 
     i: np.ndarray
@@ -89,18 +90,6 @@ class Sweep(NamedTuple):
     gamma: np.ndarray
     denominator: np.ndarray
     segments: np.ndarray
-    ready: np.ndarray
-    final: np.ndarray
-
-
-class Bands(NamedTuple):
-    """How :func:`wavefront` cuts the sweep: ``segments`` (S + 1,) int64, where each run of one colour within
-    one band starts (and the end); before segment s, bodies below ``ready[s]`` must have been predicted
-    and those below ``final[s]`` have received all their projections ((S,) int64 each, non-decreasing)."""
-
-    segments: np.ndarray
-    ready: np.ndarray
-    final: np.ndarray
 
 
 class Substeps(NamedTuple):
@@ -143,9 +132,9 @@ def ordered(constraints, n_bodies: int):
 BAND = 2048
 
 
-def wavefront(constraints, colours, n_bodies: int, band: int = BAND):
+def wavefront(constraints, colours, band: int = BAND):
     """The constraints in colour order (:func:`ordered`: ``colours`` (C + 1,) the colour starts) reordered
-    into bands that sweep the bodies once, with the same bytes: (constraints, :class:`Bands`).
+    into bands that sweep the bodies once, with the same bytes: (constraints, segment starts (S + 1,) int64).
 
     The colour-by-colour sweep passes over every body once per colour, eight times a step on a
     cloth, and on a large cloth each pass reads the bodies from the L3 cache. Only the order in
@@ -162,11 +151,6 @@ def wavefront(constraints, colours, n_bodies: int, band: int = BAND):
     sorted by its bodies. The bytes are those of the colour-by-colour sweep (tested); the bodies
     a band touches stay in the core's caches while it is swept. With bodies in no spatial order
     (reach ~ N) the bands just repeat the colours: the same sweep, without the locality.
-
-    The same bounds say when a body is first and last needed, so a step with one sweep can
-    predict and update the bodies inside it, while they are in the cache (:func:`advance`):
-    band t touches bodies below (t + 1) band (``ready``), and a body p has had all its
-    projections once the bands up to (p + C reach - 1) // band are done (``final``).
     """
     counts = np.diff(colours)
     colour = np.repeat(np.arange(len(counts)), counts)
@@ -175,22 +159,18 @@ def wavefront(constraints, colours, n_bodies: int, band: int = BAND):
     key = (np.maximum(i, j) + colour * reach) // band * len(counts) + colour
     order = np.lexsort((j, i, key))
     key = key[order]
-    starts = np.flatnonzero(np.diff(key, prepend=-1))
-    segments = np.append(starts, len(key)).astype(np.int64)
-    t = key[starts] // len(counts)  # each segment's band
-    ready = np.minimum((t + 1) * band, n_bodies).astype(np.int64)
-    final = np.clip(t * band - len(counts) * reach + 1, 0, n_bodies).astype(np.int64)
-    return type(constraints)(*(np.ascontiguousarray(a[order]) for a in constraints)), Bands(segments, ready, final)
+    segments = np.append(np.flatnonzero(np.diff(key, prepend=-1)), len(key)).astype(np.int64)
+    return type(constraints)(*(np.ascontiguousarray(a[order]) for a in constraints)), segments
 
 
-def sweep_columns(constraints, bands: Bands, inverse_mass, h: float) -> Sweep:
-    """The :class:`Sweep` of ``constraints`` (in sweep order, cut by ``bands``) for substeps of ``h``:
+def sweep_columns(constraints, segments, inverse_mass, h: float) -> Sweep:
+    """The :class:`Sweep` of ``constraints`` (in sweep order, segment starts ``segments``) for substeps of ``h``:
     the per-constraint factors evaluated as the projection would, the same operations in the same order."""
     w = inverse_mass[constraints.i] + inverse_mass[constraints.j]
     alpha_tilde, gamma, denominator = factors(constraints.compliance, constraints.damping, w, h)
     denominator = np.where(w == 0.0, 0.0, denominator)
     return Sweep(constraints.i.astype(np.uint32), constraints.j.astype(np.uint32), constraints.rest_length,
-                 alpha_tilde, gamma, denominator, *bands)
+                 alpha_tilde, gamma, denominator, segments)
 
 
 def workspace(n_bodies: int, n_constraints: int, segments: np.ndarray) -> Workspace:
@@ -270,26 +250,6 @@ def project(dx, x_prev, inverse_mass, sweep, iterations, carried, work):
             _segment(sweep.segments[c], sweep.segments[c + 1], d_, x_, inverse_mass, sweep, carried, work)
 
 
-@njit(inline="always", error_model="numpy")
-def _predict(q, v, external, h, work, lo, hi):
-    """Bodies lo to hi: x_prev = q, dx = h (v + h a_ext) (x* = q + h v*, v* = v + h a_ext), as padded rows."""
-    dx, x_prev = work.dx, work.x_prev
-    for b in range(lo, hi):
-        for c in range(3):
-            x_prev[b, c] = q[b, c]
-            dx[b, c] = h * (v[b, c] + h * external[b, c])
-
-
-@njit(inline="always", error_model="numpy")
-def _update(q, v, h, work, lo, hi):
-    """Bodies lo to hi: q += dx, v = dx / h."""
-    dx = work.dx
-    for b in range(lo, hi):
-        for c in range(3):
-            q[b, c] += dx[b, c]
-            v[b, c] = dx[b, c] / h
-
-
 @njit(cache=True, error_model="numpy")
 def advance(q, v, external, inverse_mass, sweep, steps, work):
     """``steps.substeps`` substeps of ``steps.h`` of a position-based step (a :class:`Substeps`), on q, v
@@ -298,28 +258,16 @@ def advance(q, v, external, inverse_mass, sweep, steps, work):
         dx = h (v + h a_ext),  project dx (:func:`project`),  q += dx,  v = dx / h.
 
     ``external`` (N, 3), m/s^2; ``sweep`` a :class:`Sweep` for h; ``work`` a :class:`Workspace`, whose
-    padded rows carry dx and the positions at the start of the substep through the sweep. With one
-    iteration, each body is predicted just before the first segment that needs it and updated
-    just after the last one that moves it (:class:`Bands`): one pass over the bodies, each while
-    it is in the cache; the operations per body are the same, so the bytes are too.
+    padded rows carry dx and the positions at the start of the substep through the sweep.
     """
-    n, h = q.shape[0], steps.h
+    dx, x_prev, h = work.dx, work.x_prev, steps.h
     for _ in range(steps.substeps):
-        if steps.iterations == 1 and not steps.carried:
-            d_, x_ = work.dx.reshape(-1), work.x_prev.reshape(-1)
-            predicted, updated = 0, 0
-            for c in range(sweep.segments.shape[0] - 1):
-                ready, final = sweep.ready[c], sweep.final[c]
-                if ready > predicted:
-                    _predict(q, v, external, h, work, predicted, ready)
-                    predicted = ready
-                if final > updated:
-                    _update(q, v, h, work, updated, final)
-                    updated = final
-                _segment(sweep.segments[c], sweep.segments[c + 1], d_, x_, inverse_mass, sweep, False, work)
-            _predict(q, v, external, h, work, predicted, n)
-            _update(q, v, h, work, updated, n)
-        else:
-            _predict(q, v, external, h, work, 0, n)
-            project(work.dx, work.x_prev, inverse_mass, sweep, steps.iterations, steps.carried, work)
-            _update(q, v, h, work, 0, n)
+        for b in range(q.shape[0]):
+            for c in range(3):
+                x_prev[b, c] = q[b, c]
+                dx[b, c] = h * (v[b, c] + h * external[b, c])  # predict: x* = q + h v*, v* = v + h a_ext
+        project(dx, x_prev, inverse_mass, sweep, steps.iterations, steps.carried, work)
+        for b in range(q.shape[0]):
+            for c in range(3):
+                q[b, c] += dx[b, c]
+                v[b, c] = dx[b, c] / h

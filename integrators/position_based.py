@@ -36,7 +36,7 @@ class SweepCarry(NamedTuple):
     """What a pbd or xpbd run keeps between steps: the ``constraints`` in the sweep's order
     (:func:`.constraint_projection.wavefront` of the colour order), ``external`` (N, 3), m/s^2,
     ``inverse_mass`` (N,), 1/kg, ``work`` (:class:`.constraint_projection.Workspace`), the step's
-    scratch, ``bands`` (:class:`.constraint_projection.Bands`), and ``sweep``, the columns the
+    scratch, ``segments`` (where each run of one colour starts), and ``sweep``, the columns the
     kernel reads for substeps of ``h`` (:func:`.constraint_projection.sweep_columns`; None before
     the first step, rebuilt when the step changes)."""
 
@@ -44,7 +44,7 @@ class SweepCarry(NamedTuple):
     external: np.ndarray
     inverse_mass: np.ndarray
     work: tuple
-    bands: tuple
+    segments: np.ndarray
     h: float = float("nan")
     sweep: tuple | None = None
 
@@ -54,7 +54,7 @@ class SweepCarry(NamedTuple):
 
         if h == self.h:
             return self
-        return self._replace(h=h, sweep=sweep_columns(self.constraints, self.bands, self.inverse_mass, h))
+        return self._replace(h=h, sweep=sweep_columns(self.constraints, self.segments, self.inverse_mass, h))
 
 
 @dataclasses.dataclass(frozen=True)
@@ -125,8 +125,8 @@ class PositionBased(Integrator):
             from .constraint_projection_jax import colour_table
 
             return colour_table(c, colours, inverse_mass, external, model.dtype)
-        c, bands = wavefront(c, colours, model.n_bodies)
-        return SweepCarry(c, external, inverse_mass, workspace(model.n_bodies, len(c.i), bands.segments), bands)
+        c, segments = wavefront(c, colours)
+        return SweepCarry(c, external, inverse_mass, workspace(model.n_bodies, len(c.i), segments), segments)
 
     def substeps_of(self, dt: float):
         """:class:`.constraint_projection.Substeps` of a step of ``dt``."""

@@ -259,10 +259,10 @@ def test_the_benchmark_step_is_the_integrators_step_in_place():
         assert step.y.tobytes() == expected.tobytes() and not np.array_equal(step.y, y0)
     # the state read and written; read: 2 uint32 indices and 3 coefficients (rest length, gamma, the
     # denominator) per constraint, the start of each segment (a colour within a band), 1/m and a_ext per body
-    segments = len(XPBD(1, 1).init(model, 0.0, y0).bands.segments)
+    segments = len(XPBD(1, 1).init(model, 0.0, y0).segments)
     assert greedy_edge_colouring(400, *model.distance_constraints()[:2]).max() + 1 <= segments - 1
     assert step.bytes_read_and_written == 2 * 400 * 3 * 8
-    assert step.bytes_read == springs * (2 * 4 + 3 * 8) + (3 * segments - 2) * 8 + 400 * 8 + 400 * 3 * 8
+    assert step.bytes_read == springs * (2 * 4 + 3 * 8) + segments * 8 + 400 * 8 + 400 * 3 * 8
 
 
 def sequential_sweep(dx, x_prev, inverse_mass, c, h, iterations, carried):
@@ -313,7 +313,7 @@ def test_the_sweep_by_colour_is_the_sequential_gauss_seidel_sweep(iterations):
     method = XPBD(1, iterations)
     carry = method.init(model, 0.0, None).for_substep(h)
     steps = method.substeps_of(h)
-    assert len(carry.bands.segments) > 3  # several colours: the order between them matters
+    assert len(carry.segments) > 3  # several colours: the order between them matters
     expected = h * (v + h * carry.external)
     dx = padded(expected)
     sequential_sweep(expected, q, carry.inverse_mass, carry.constraints, h, iterations, steps.carried)
@@ -342,7 +342,7 @@ def test_the_sweep_in_bands_is_the_sweep_colour_by_colour(band):
     h, method = 1 / 600, XPBD(1, 1)
     c, external, inverse_mass = method.constraints(model)
     c, colours = ordered(c, model.n_bodies)
-    banded, bands = wavefront(c, colours, model.n_bodies, band)
+    banded, segments = wavefront(c, colours, band)
     pair = lambda constraints: constraints.i.astype(np.int64) * model.n_bodies + constraints.j
     by_pair = np.argsort(pair(c))
     where = by_pair[np.searchsorted(pair(c)[by_pair], pair(banded))]  # each banded constraint's place in c
@@ -352,12 +352,10 @@ def test_the_sweep_in_bands_is_the_sweep_colour_by_colour(band):
     expected = h * (v + h * external)
     dx = padded(expected)
     sequential_sweep(expected, q, inverse_mass, c, h, 1, False)
-    sweep, work = sweep_columns(banded, bands, inverse_mass, h), workspace(model.n_bodies, len(c.i), bands.segments)
+    sweep, work = sweep_columns(banded, segments, inverse_mass, h), workspace(model.n_bodies, len(c.i), segments)
     project(dx, padded(q), inverse_mass, sweep, 1, False, work)
     assert dx[:, :3].tobytes() == expected.tobytes()
-    # the whole step, each body predicted and updated inside the sweep, band by band
-    assert bands.ready[0] < model.n_bodies and bands.final[-1] > 0  # the fused path has work in the bands
-    y = np.stack([q, v])
+    y = np.stack([q, v])  # and the whole step
     advance(y[0], y[1], external, inverse_mass, sweep, method.substeps_of(h), work)
     assert y.tobytes() == np.stack([q + expected, expected / h]).tobytes()
 
