@@ -26,16 +26,18 @@ compiles into the kernel and JAX evaluates on a colour's columns).
 
 The constraints are swept in the order of a greedy edge colouring (:func:`ordered`), colour
 after colour. Within a colour no two constraints share a body, so its projections are
-independent: the sweep gathers a whole colour's differences d = x_j - x_i first, then solves
-every projection of the colour in one loop that the compiler vectorises (the square roots
-and divisions, the costliest operations, four or eight at a time), then scatters the moves.
-That is the sequential Gauss-Seidel sweep exactly, the same operations in the same order per
-constraint (so the same bytes). What depends only on the constraint and the substep h
-(alpha_tilde, gamma and the denominator (1 + gamma) w + alpha_tilde) is computed once per run
-(:func:`sweep_columns`). On the 25,600-particle cloth, one sweep: 1.40 ms in the springs'
-order, 0.67-0.84 ms projection by projection in colour order, 0.53-0.57 ms gathered per colour
-(load 5-6). What is left is the gather's and the scatter's scalar loads and stores, about 28 per
-constraint: 5 to 7 ns a constraint (whole step) at every cloth size, in cache or not (docs/performance.md).
+independent: the sweep gathers a run of one colour's differences d = x_j - x_i first, then
+solves its projections in one loop that the compiler vectorises (the square roots and
+divisions, the costliest operations, eight at a time), then scatters the moves. That is the
+sequential Gauss-Seidel sweep exactly, the same operations in the same order per constraint
+(so the same bytes). What depends only on the constraint and the substep h (alpha_tilde,
+gamma and the denominator (1 + gamma) w + alpha_tilde) is computed once per run
+(:func:`sweep_columns`). Each body's displacement and start position are padded rows
+(x, y, z, 0) that one 256-bit load or store moves (:mod:`.vector4`); the colours are swept
+in bands of bodies (:func:`wavefront`), each body still receiving its projections in colour
+order (the same bytes), so that a band's bodies stay in the core's caches. On the
+25,600-particle cloth, one step: 0.59-0.62 ms gathered per colour, 0.48-0.50 ms now (warm;
+docs/performance.md has the steps between and the cold-cache times).
 """
 
 from __future__ import annotations
@@ -44,6 +46,8 @@ from typing import NamedTuple
 
 import numpy as np
 from numba import njit
+
+from .vector4 import axpy4, gather4
 
 
 def factors(compliance, damping, inverse_mass_sum, h):
@@ -75,7 +79,8 @@ class Sweep(NamedTuple):
 
     ``i``, ``j`` (P,) uint32 the bodies; ``rest_length``, m; ``alpha_tilde`` = alpha / h^2;
     ``gamma`` = alpha beta / h; ``denominator`` = (1 + gamma) w + alpha_tilde, 0 for a pair of
-    pinned bodies (skipped); ``colours`` (C + 1,) int64: colour c is ``[colours[c], colours[c + 1])``.
+    pinned bodies (skipped); ``segments`` (S + 1,) int64: segment s is ``[segments[s], segments[s + 1])``,
+    constraints of one colour (:func:`wavefront`), so no two of a segment share a body.
     """
 
     i: np.ndarray
@@ -84,7 +89,7 @@ class Sweep(NamedTuple):
     alpha_tilde: np.ndarray
     gamma: np.ndarray
     denominator: np.ndarray
-    colours: np.ndarray
+    segments: np.ndarray
 
 
 class Substeps(NamedTuple):
@@ -98,11 +103,15 @@ class Substeps(NamedTuple):
 
 
 class Workspace(NamedTuple):
-    """Scratch a step writes, allocated once per run: the displacement ``dx`` (N, 3), the multipliers
-    ``lam`` (P,) and ``colour`` (5, largest colour), one colour's d = x_j - x_i, |d|^2 and d . (dx_j - dx_i)."""
+    """Scratch a step writes, allocated once per run: the displacement ``dx`` and the positions at the
+    start of the substep ``x_prev``, (N, 4) each, padded rows (x, y, z, 0) (:mod:`.vector4`); the
+    multipliers ``lam`` (P,); one segment's d = x_j - x_i, ``d`` (largest segment, 4), and ``colour``
+    (2, largest segment), its |d|^2 and d . (dx_j - dx_i), then its s."""
 
     dx: np.ndarray
+    x_prev: np.ndarray
     lam: np.ndarray
+    d: np.ndarray
     colour: np.ndarray
 
 
@@ -118,77 +127,127 @@ def ordered(constraints, n_bodies: int):
     return type(constraints)(*(np.ascontiguousarray(a[order]) for a in constraints)), starts
 
 
-def sweep_columns(constraints, colours, inverse_mass, h: float) -> Sweep:
-    """The :class:`Sweep` of ``constraints`` (in sweep order, colour starts ``colours``) for substeps of ``h``:
+#: bodies per band of :func:`wavefront`: a band's window, (BAND + colours x reach) bodies of 64 bytes
+#: (position and displacement rows), is 213 kB on the bench's 160 x 160 cloth, well inside the 1 MB L2
+BAND = 2048
+
+
+def wavefront(constraints, colours, band: int = BAND):
+    """The constraints in colour order (:func:`ordered`: ``colours`` (C + 1,) the colour starts) reordered
+    into bands that sweep the bodies once, with the same bytes: (constraints, segment starts (S + 1,) int64).
+
+    The colour-by-colour sweep passes over every body once per colour, eight times a step on a
+    cloth, and on a large cloth each pass reads the bodies from the L3 cache. Only the order in
+    which each body receives its projections fixes the result, though: a projection reads its
+    two bodies as the projections of the lower colours left them (one per colour, since no two
+    of a colour share a body). So the sweep may run band by band, each band colour by colour,
+    as long as every body still sees its colours in order. With ``reach`` = max |i - j| + 1
+    (bodies apart in index along a constraint: the cloth's side + 1 in its grid order), the
+    constraint of colour c whose larger body is m goes to band t = (m + c reach) // band. A
+    constraint of a lower colour c' < c sharing one of its bodies has larger body at most
+    m + reach - 1 < m + (c - c') reach, so it lies in the same band or an earlier one (and in the
+    same band it comes first, colours in order); one of a higher colour lies in the same band
+    or a later one by the same bound. Within a band the segments are the colours in order, each
+    sorted by its bodies. The bytes are those of the colour-by-colour sweep (tested); the bodies
+    a band touches stay in the core's caches while it is swept. With bodies in no spatial order
+    (reach ~ N) the bands just repeat the colours: the same sweep, without the locality.
+    """
+    counts = np.diff(colours)
+    colour = np.repeat(np.arange(len(counts)), counts)
+    i, j = constraints.i.astype(np.int64), constraints.j.astype(np.int64)
+    reach = int(np.abs(j - i).max(initial=0)) + 1
+    key = (np.maximum(i, j) + colour * reach) // band * len(counts) + colour
+    order = np.lexsort((j, i, key))
+    key = key[order]
+    segments = np.append(np.flatnonzero(np.diff(key, prepend=-1)), len(key)).astype(np.int64)
+    return type(constraints)(*(np.ascontiguousarray(a[order]) for a in constraints)), segments
+
+
+def sweep_columns(constraints, segments, inverse_mass, h: float) -> Sweep:
+    """The :class:`Sweep` of ``constraints`` (in sweep order, segment starts ``segments``) for substeps of ``h``:
     the per-constraint factors evaluated as the projection would, the same operations in the same order."""
     w = inverse_mass[constraints.i] + inverse_mass[constraints.j]
     alpha_tilde, gamma, denominator = factors(constraints.compliance, constraints.damping, w, h)
     denominator = np.where(w == 0.0, 0.0, denominator)
     return Sweep(constraints.i.astype(np.uint32), constraints.j.astype(np.uint32), constraints.rest_length,
-                 alpha_tilde, gamma, denominator, colours)
+                 alpha_tilde, gamma, denominator, segments)
 
 
-def workspace(n_bodies: int, n_constraints: int, colours: np.ndarray) -> Workspace:
-    largest = max(int(np.diff(colours).max(initial=0)), 1)
-    return Workspace(np.empty((n_bodies, 3)), np.empty(n_constraints), np.empty((5, largest)))
+def workspace(n_bodies: int, n_constraints: int, segments: np.ndarray) -> Workspace:
+    largest = max(int(np.diff(segments).max(initial=0)), 1)
+    return Workspace(aligned_zeros((n_bodies, 4)), aligned_zeros((n_bodies, 4)), np.empty(n_constraints),
+                     aligned_zeros((largest, 4)), np.empty((2, largest)))
+
+
+#: bytes of a cache line
+CACHE_LINE = 64
+
+
+def aligned_zeros(shape: tuple) -> np.ndarray:
+    """Zeros (float64) starting on a cache line: padded rows of 32 bytes then never straddle two lines
+    (NumPy's large arrays start 16 bytes past a page, which splits every other row's loads and stores)."""
+    size = int(np.prod(shape))
+    buffer = np.zeros(size + CACHE_LINE // 8)
+    start = (-buffer.ctypes.data % CACHE_LINE) // 8
+    return buffer[start:start + size].reshape(shape)
+
+
+def padded(a: np.ndarray) -> np.ndarray:
+    """(N, 3) -> (N, 4), the rows (x, y, z, 0) the sweep moves (:class:`Workspace`)."""
+    return np.concatenate([a, np.zeros((len(a), 1))], axis=1)
+
+
+@njit(inline="always", error_model="numpy")
+def _segment(lo, hi, d_, x_, inverse_mass, sweep, carried, work):
+    """One segment's projections (constraints lo to hi, no two sharing a body) on the flat padded rows
+    ``d_`` (dx) and ``x_`` (x_prev): gather, solve, scatter."""
+    d, squared_, s_ = work.d.reshape(-1), work.colour[0], work.colour[1]
+    # the segment's columns as slices indexed from 0: no negative-index wraparound in the loops
+    i, j = sweep.i[lo:hi], sweep.j[lo:hi]
+    # gather: d = x_prev_j - x_prev_i + u, u = dx_j - dx_i, |d|^2 and d . u (grad C . (x - x_prev) times l)
+    for k in range(hi - lo):
+        squared_[k], s_[k] = gather4(d, 4 * k, x_, d_, 4 * np.intp(i[k]), 4 * np.intp(j[k]))
+    # solve, vectorised: dlambda n = s d with n = d / l (:func:`projection`)
+    rest, gamma, denominator = sweep.rest_length[lo:hi], sweep.gamma[lo:hi], sweep.denominator[lo:hi]
+    if carried:
+        alpha_tilde, held = sweep.alpha_tilde[lo:hi], work.lam[lo:hi]
+        for k in range(hi - lo):
+            length = np.sqrt(squared_[k])
+            below = denominator[k] * squared_[k]
+            s = _projection(rest[k], length, s_[k], gamma[k], below, alpha_tilde[k] * held[k])
+            s = s if below != 0.0 else 0.0
+            held[k] += s * length
+            s_[k] = s
+    else:
+        for k in range(hi - lo):
+            length = np.sqrt(squared_[k])
+            below = denominator[k] * squared_[k]
+            s = _projection(rest[k], length, s_[k], gamma[k], below, 0.0)
+            s_[k] = s if below != 0.0 else 0.0
+    # scatter: x_i -= w_i s d, x_j += w_j s d (x - y is x + (-y) exactly)
+    for k in range(hi - lo):
+        a, b = np.intp(i[k]), np.intp(j[k])
+        axpy4(d_, 4 * a, d, 4 * k, -(inverse_mass[a] * s_[k]))
+        axpy4(d_, 4 * b, d, 4 * k, inverse_mass[b] * s_[k])
 
 
 @njit(cache=True, error_model="numpy")
 def project(dx, x_prev, inverse_mass, sweep, iterations, carried, work):
-    """``iterations`` Gauss-Seidel sweeps over ``sweep`` (a :class:`Sweep`), moving ``dx`` (N, 3) in place.
+    """``iterations`` Gauss-Seidel sweeps over ``sweep`` (a :class:`Sweep`), moving ``dx`` (N, 4) in place.
 
-    ``x_prev`` (N, 3) are the positions at the start of the substep, ``dx`` the predicted
-    displacement h v* on entry and the projected one on return; the multipliers ``work.lam``
-    (P,) start at 0 in each substep and are only read and written when ``carried`` (otherwise
-    held at 0 and untouched, which saves the sweep 16 bytes of traffic per constraint).
-    Coincident bodies (no direction) and pairs of pinned bodies (denominator 0) move nothing.
+    ``x_prev`` (N, 4) are the positions at the start of the substep, ``dx`` the predicted
+    displacement h v* on entry and the projected one on return, both padded rows (x, y, z, 0);
+    the multipliers ``work.lam`` (P,) start at 0 in each substep and are only read and written
+    when ``carried`` (otherwise held at 0 and untouched, which saves the sweep 16 bytes of
+    traffic per constraint). Coincident bodies (no direction) and pairs of pinned bodies
+    (denominator 0) move nothing.
     """
-    lam, scratch = work.lam, work.colour
     if carried:
-        lam[:] = 0.0
-    d_, x_ = dx.reshape(-1), x_prev.reshape(-1)  # flat: body a's coordinates at 3a, 3a + 1, 3a + 2
-    d0_, d1_, d2_, squared_, s_ = scratch[0], scratch[1], scratch[2], scratch[3], scratch[4]
+        work.lam[:] = 0.0
+    d_, x_ = dx.reshape(-1), x_prev.reshape(-1)  # flat: body a's row at 4a .. 4a + 3
     for _ in range(iterations):
-        for c in range(sweep.colours.shape[0] - 1):
-            lo, hi = sweep.colours[c], sweep.colours[c + 1]
-            # gather: d = x_prev_j - x_prev_i + u, u = dx_j - dx_i, |d|^2 and d . u (grad C . (x - x_prev) times l)
-            for k in range(hi - lo):
-                a, b = 3 * sweep.i[lo + k], 3 * sweep.j[lo + k]
-                u0, u1, u2 = d_[b] - d_[a], d_[b + 1] - d_[a + 1], d_[b + 2] - d_[a + 2]
-                d0 = x_[b] - x_[a] + u0
-                d1 = x_[b + 1] - x_[a + 1] + u1
-                d2 = x_[b + 2] - x_[a + 2] + u2
-                d0_[k], d1_[k], d2_[k] = d0, d1, d2
-                squared_[k] = d0 * d0 + d1 * d1 + d2 * d2
-                s_[k] = d0 * u0 + d1 * u1 + d2 * u2
-            # solve, vectorised: dlambda n = s d with n = d / l (:func:`projection`)
-            rest, gamma, denominator = sweep.rest_length[lo:hi], sweep.gamma[lo:hi], sweep.denominator[lo:hi]
-            if carried:
-                alpha_tilde, held = sweep.alpha_tilde[lo:hi], lam[lo:hi]
-                for k in range(hi - lo):
-                    length = np.sqrt(squared_[k])
-                    below = denominator[k] * squared_[k]
-                    s = _projection(rest[k], length, s_[k], gamma[k], below, alpha_tilde[k] * held[k])
-                    s = s if below != 0.0 else 0.0
-                    held[k] += s * length
-                    s_[k] = s
-            else:
-                for k in range(hi - lo):
-                    length = np.sqrt(squared_[k])
-                    below = denominator[k] * squared_[k]
-                    s = _projection(rest[k], length, s_[k], gamma[k], below, 0.0)
-                    s_[k] = s if below != 0.0 else 0.0
-            # scatter: x_i -= w_i s d, x_j += w_j s d
-            for k in range(hi - lo):
-                a, b = sweep.i[lo + k], sweep.j[lo + k]
-                wa, wb = inverse_mass[a] * s_[k], inverse_mass[b] * s_[k]
-                a, b = 3 * a, 3 * b
-                d_[a] -= wa * d0_[k]
-                d_[a + 1] -= wa * d1_[k]
-                d_[a + 2] -= wa * d2_[k]
-                d_[b] += wb * d0_[k]
-                d_[b + 1] += wb * d1_[k]
-                d_[b + 2] += wb * d2_[k]
+        for c in range(sweep.segments.shape[0] - 1):
+            _segment(sweep.segments[c], sweep.segments[c + 1], d_, x_, inverse_mass, sweep, carried, work)
 
 
 @njit(cache=True, error_model="numpy")
@@ -198,15 +257,22 @@ def advance(q, v, external, inverse_mass, sweep, steps, work):
 
         dx = h (v + h a_ext),  project dx (:func:`project`),  q += dx,  v = dx / h.
 
-    ``external`` (N, 3), m/s^2; ``sweep`` a :class:`Sweep` for h; ``work`` a :class:`Workspace`.
+    ``external`` (N, 3), m/s^2; ``sweep`` a :class:`Sweep` for h; ``work`` a :class:`Workspace`, whose
+    padded rows carry dx and the positions at the start of the substep through the sweep.
     """
-    dx, h = work.dx, steps.h
-    # flat views of the (N, 3) arrays: one loop over 3N numbers, which the compiler vectorises
-    dx_, q_, v_, a_ = dx.reshape(-1), q.reshape(-1), v.reshape(-1), external.reshape(-1)
+    dx, x_prev, h = work.dx, work.x_prev, steps.h
     for _ in range(steps.substeps):
-        for k in range(dx_.shape[0]):
-            dx_[k] = h * (v_[k] + h * a_[k])  # predict: x* = q + h v*, v* = v + h a_ext
-        project(dx, q, inverse_mass, sweep, steps.iterations, steps.carried, work)
-        for k in range(dx_.shape[0]):
-            q_[k] += dx_[k]
-            v_[k] = dx_[k] / h
+        for b in range(q.shape[0]):
+            for c in range(3):
+                x_prev[b, c] = q[b, c]
+                dx[b, c] = h * (v[b, c] + h * external[b, c])  # predict: x* = q + h v*, v* = v + h a_ext
+        project(dx, x_prev, inverse_mass, sweep, steps.iterations, steps.carried, work)
+        # update: v = dx / h, divided in one contiguous loop that the compiler vectorises (into x_prev,
+        # no longer needed; scalar divisions here cost a quarter of the step), then q += dx
+        d_, x_ = dx.reshape(-1), x_prev.reshape(-1)
+        for k in range(d_.shape[0]):
+            x_[k] = d_[k] / h
+        for b in range(q.shape[0]):
+            for c in range(3):
+                q[b, c] += dx[b, c]
+                v[b, c] = x_prev[b, c]

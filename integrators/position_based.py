@@ -34,16 +34,17 @@ LINEAR_AMPLITUDE = 0.25
 
 class SweepCarry(NamedTuple):
     """What a pbd or xpbd run keeps between steps: the ``constraints`` in the sweep's order
-    (:func:`.constraint_projection.ordered`), ``external`` (N, 3), m/s^2, ``inverse_mass`` (N,),
-    1/kg, ``work`` (:class:`.constraint_projection.Workspace`), the step's scratch, and ``sweep``,
-    the columns the kernel reads for substeps of ``h`` (:func:`.constraint_projection.sweep_columns`;
-    None before the first step, rebuilt when the step changes)."""
+    (:func:`.constraint_projection.wavefront` of the colour order), ``external`` (N, 3), m/s^2,
+    ``inverse_mass`` (N,), 1/kg, ``work`` (:class:`.constraint_projection.Workspace`), the step's
+    scratch, ``segments`` (where each run of one colour starts), and ``sweep``, the columns the
+    kernel reads for substeps of ``h`` (:func:`.constraint_projection.sweep_columns`; None before
+    the first step, rebuilt when the step changes)."""
 
     constraints: tuple
     external: np.ndarray
     inverse_mass: np.ndarray
     work: tuple
-    colours: np.ndarray
+    segments: np.ndarray
     h: float = float("nan")
     sweep: tuple | None = None
 
@@ -53,7 +54,7 @@ class SweepCarry(NamedTuple):
 
         if h == self.h:
             return self
-        return self._replace(h=h, sweep=sweep_columns(self.constraints, self.colours, self.inverse_mass, h))
+        return self._replace(h=h, sweep=sweep_columns(self.constraints, self.segments, self.inverse_mass, h))
 
 
 @dataclasses.dataclass(frozen=True)
@@ -112,10 +113,11 @@ class PositionBased(Integrator):
 
     def init(self, model, t, y):
         """What :meth:`step` keeps for a run: the constraints in the sweep's colour order
-        (:func:`.constraint_projection.ordered`), the external accelerations, the inverse masses
-        and the scratch the step writes (a :class:`SweepCarry`); on the JAX backend the same
-        constraints as a padded table by colour (:class:`.constraint_projection_jax.ColourTable`)."""
-        from .constraint_projection import ordered, workspace
+        (:func:`.constraint_projection.ordered`), swept in bands (:func:`.constraint_projection.wavefront`,
+        the same bytes), the external accelerations, the inverse masses and the scratch the step
+        writes (a :class:`SweepCarry`); on the JAX backend the constraints in colour order as a
+        padded table by colour (:class:`.constraint_projection_jax.ColourTable`)."""
+        from .constraint_projection import ordered, wavefront, workspace
 
         c, external, inverse_mass = self.constraints(model)
         c, colours = ordered(c, model.n_bodies)
@@ -123,7 +125,8 @@ class PositionBased(Integrator):
             from .constraint_projection_jax import colour_table
 
             return colour_table(c, colours, inverse_mass, external, model.dtype)
-        return SweepCarry(c, external, inverse_mass, workspace(model.n_bodies, len(c.i), colours), colours)
+        c, segments = wavefront(c, colours)
+        return SweepCarry(c, external, inverse_mass, workspace(model.n_bodies, len(c.i), segments), segments)
 
     def substeps_of(self, dt: float):
         """:class:`.constraint_projection.Substeps` of a step of ``dt``."""

@@ -258,10 +258,11 @@ def test_the_benchmark_step_is_the_integrators_step_in_place():
         expected = simulate(model, method, y0, 0.0, n_steps=7, dt=5e-4).y[-1]
         assert step.y.tobytes() == expected.tobytes() and not np.array_equal(step.y, y0)
     # the state read and written; read: 2 uint32 indices and 3 coefficients (rest length, gamma, the
-    # denominator) per constraint, the start of each colour, 1/m and a_ext per body
-    colours = greedy_edge_colouring(400, *model.distance_constraints()[:2]).max() + 1
+    # denominator) per constraint, the start of each segment (a colour within a band), 1/m and a_ext per body
+    segments = len(XPBD(1, 1).init(model, 0.0, y0).segments)
+    assert greedy_edge_colouring(400, *model.distance_constraints()[:2]).max() + 1 <= segments - 1
     assert step.bytes_read_and_written == 2 * 400 * 3 * 8
-    assert step.bytes_read == springs * (2 * 4 + 3 * 8) + (colours + 1) * 8 + 400 * 8 + 400 * 3 * 8
+    assert step.bytes_read == springs * (2 * 4 + 3 * 8) + segments * 8 + 400 * 8 + 400 * 3 * 8
 
 
 def sequential_sweep(dx, x_prev, inverse_mass, c, h, iterations, carried):
@@ -305,20 +306,58 @@ def damped_cloth_net(seed):
 def test_the_sweep_by_colour_is_the_sequential_gauss_seidel_sweep(iterations):
     # the kernel gathers a colour, solves its projections together and scatters them: exact only
     # because no two constraints of a colour share a body; a plain sequential loop gives the same bytes
-    from steplab.integrators.constraint_projection import project
+    from steplab.integrators.constraint_projection import padded, project
 
     model, (q, v) = damped_cloth_net(3)
     h = 2e-3
     method = XPBD(1, iterations)
     carry = method.init(model, 0.0, None).for_substep(h)
     steps = method.substeps_of(h)
-    assert len(carry.colours) > 3  # several colours: the order between them matters
+    assert len(carry.segments) > 3  # several colours: the order between them matters
     expected = h * (v + h * carry.external)
-    dx = expected.copy()
+    dx = padded(expected)
     sequential_sweep(expected, q, carry.inverse_mass, carry.constraints, h, iterations, steps.carried)
-    project(dx, q, carry.inverse_mass, carry.sweep, iterations, steps.carried, carry.work)
-    assert dx.tobytes() == expected.tobytes()
-    assert np.abs(dx - h * (v + h * carry.external)).max() > 1e-4  # the sweep moved the bodies
+    project(dx, padded(q), carry.inverse_mass, carry.sweep, iterations, steps.carried, carry.work)
+    assert dx[:, :3].tobytes() == expected.tobytes() and not dx[:, 3].any()
+    assert np.abs(expected - h * (v + h * carry.external)).max() > 1e-4  # the sweep moved the bodies
+
+
+@pytest.mark.parametrize("band", [64, 256])
+def test_the_sweep_in_bands_is_the_sweep_colour_by_colour(band):
+    # the wavefront reorders the constraints across colours, band by band, keeping each body's
+    # projections in colour order: the bytes of the plain colour-by-colour sequential sweep
+    from steplab.integrators.constraint_projection import (
+        advance,
+        ordered,
+        padded,
+        project,
+        sweep_columns,
+        wavefront,
+        workspace,
+    )
+
+    from steplab.bench.systems import cloth_model
+
+    model, (q, v), _ = cloth_model(40)  # 1,600 bodies, 6,162 springs with dampers, reach 41, 8 colours
+    h, method = 1 / 600, XPBD(1, 1)
+    c, external, inverse_mass = method.constraints(model)
+    c, colours = ordered(c, model.n_bodies)
+    banded, segments = wavefront(c, colours, band)
+    pair = lambda constraints: constraints.i.astype(np.int64) * model.n_bodies + constraints.j
+    by_pair = np.argsort(pair(c))
+    where = by_pair[np.searchsorted(pair(c)[by_pair], pair(banded))]  # each banded constraint's place in c
+    assert np.array_equal(np.sort(where), np.arange(len(c.i)))  # the same constraints, ...
+    colour = np.repeat(np.arange(len(colours) - 1), np.diff(colours))
+    assert np.diff(colour[where]).min() < 0  # ... the colours starting over in each band
+    expected = h * (v + h * external)
+    dx = padded(expected)
+    sequential_sweep(expected, q, inverse_mass, c, h, 1, False)
+    sweep, work = sweep_columns(banded, segments, inverse_mass, h), workspace(model.n_bodies, len(c.i), segments)
+    project(dx, padded(q), inverse_mass, sweep, 1, False, work)
+    assert dx[:, :3].tobytes() == expected.tobytes()
+    y = np.stack([q, v])  # and the whole step
+    advance(y[0], y[1], external, inverse_mass, sweep, method.substeps_of(h), work)
+    assert y.tobytes() == np.stack([q + expected, expected / h]).tobytes()
 
 
 @pytest.mark.parametrize("method", [XPBD(1, 1), XPBD(3, 3), PBD(1, 4)], ids=["xpbd-1x1", "xpbd-3x3", "pbd-1x4"])

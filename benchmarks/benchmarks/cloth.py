@@ -3,8 +3,9 @@
 ``time_step`` times one step (one substep, one iteration, dt = 1/600 s) of the bench's cloth
 (:func:`steplab.bench.systems.cloth_model`) by each contender; Newton's is skipped without the
 extra ``steplab[newton]``. ``track_ratio`` is ``steplab bench``'s ratios on the 160 x 160 cloth
-(25,600 particles, 101,442 springs): the marginal step over the memory-traffic bound (target
-1.5), over the Numba loop, and over Newton's SolverXPBD (target 0.5), in the same rounds.
+(25,600 particles, 101,442 springs): one step over one pass of the memory-traffic bound, both
+from cold caches (target 1.5; ``steplab.bench.cold``), and the marginal step over the Numba
+loop's and over Newton's SolverXPBD's (target 0.5), in the same rounds.
 """
 
 from __future__ import annotations
