@@ -61,7 +61,7 @@ def box_box(box_a, box_b, margin, out):
 
     Each box is (centre, frame, half); ``margin`` m is the speculative distance; the normal points
     from a to b. (Boxes whose bounding spheres are ``margin`` apart never come here:
-    :func:`.manifolds.manifold_rows` passes them over.)
+    :func:`.manifolds.manifold_slots` passes them over.)
     """
     ca, fa, ha = box_a
     cb, fb, hb = box_b

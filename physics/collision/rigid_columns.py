@@ -15,7 +15,6 @@ from numba import njit
 
 from .approach import AT_REST, approach_speed
 from .resting import rest_speed
-from .rigid_solver import previous_rows
 from .sphere_contacts import dot3, row3
 
 
@@ -33,27 +32,24 @@ def tangent_basis(n):
 
 
 @njit(cache=True)
-def gather(points, movers, materials, previous, context, out, key):
-    """Fill ``out`` (a :class:`.rigid_solver.RigidContactColumns` of C rows) and ``key`` ((C, 3):
-    a, b, feature) from ``points`` (:class:`.manifolds.ManifoldPoints`); returns each point's row
-    in the last step's points, or -1.
+def gather(points, movers, materials, previous, context, out):
+    """Fill ``out`` (a :class:`.rigid_solver.RigidContactColumns` of C rows) from ``points``
+    (:class:`.manifolds.ManifoldPoints`), row for row.
 
     ``movers`` = (q, accel, rolling) of the bodies: centres at the start of the step, the forces'
     accelerations, and each body's rolling resistance (coefficient times rounding radius, m);
-    ``materials`` a :class:`.contact_buffer.Materials`; ``previous`` = (key, pn, pt, pr) of the
-    last step's points (pt a world vector); ``context`` = (the world's rest speed, dt).
+    ``materials`` a :class:`.contact_buffer.Materials`; ``previous`` = (rows, pn, pt, pr): each
+    point's row among the last step's points, or -1 (:func:`.rigid_solver.previous_rows`), and
+    their impulses (pt a world vector); ``context`` = (the world's rest speed, dt).
     """
     q, accel, rolls = movers
-    old_key, old_pn, old_pt, old_pr = previous
+    rows, old_pn, old_pt, old_pr = previous
     floor, dt = context
     body_material, shape_material, restitution_table, friction_table = materials
-    a_, b_, normal, point, separation, feature = points
+    a_, b_, normal, point, separation, _ = points
     # the columns out of the NamedTuple before the loops (a field read in a loop costs a reference count)
     (a_out, b_out, n_out, ra, rb, tangent, s0, vn0, hit, _, friction, restitution, threshold, rolling_out, pn, pt,
      pr, total, most, _, _, _) = out
-    for k in range(len(a_)):
-        key[k, 0], key[k, 1], key[k, 2] = a_[k], b_[k], feature[k]
-    rows = previous_rows(old_key, key)
     for k in range(len(a_)):
         a, b = a_[k], b_[k]
         n = (normal[k, 0], normal[k, 1], normal[k, 2])
@@ -90,4 +86,3 @@ def gather(points, movers, materials, previous, context, out, key):
             pn[k], pt[k, 0], pt[k, 1] = 0.0, 0.0, 0.0
             for x in range(3):
                 pr[k, x] = 0.0
-    return rows

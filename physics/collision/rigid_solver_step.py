@@ -30,11 +30,13 @@ from __future__ import annotations
 import dataclasses
 import importlib
 
+import numba
 import numpy as np
 
 from .. import quaternion as quat
 from . import rigid_solver as rs
 from .contact_buffer import MARGIN_OF_RADIUS, Materials
+from .contact_colouring import colour_contacts
 from .events import CollisionLog, ImpactBlock, cancel_triggers
 from .manifolds import BOX, CAPSULE, SPHERE, check_shapes
 from .pairs import SweptSpheres
@@ -98,9 +100,10 @@ def rotation_codes(rotation: str) -> tuple[int, int]:
 
 
 def world_inverse_inertia(orientation, inverse_principal) -> np.ndarray:
-    """R diag(1/I1, 1/I2, 1/I3) R^T for each body, (N, 3, 3); zeros for a body that does not rotate."""
-    r = quat.to_matrix(np, orientation)
-    return np.einsum("nij,nj,nkj->nik", r, inverse_principal, r)
+    """R diag(1/I1, 1/I2, 1/I3) R^T for each body, (N, 3, 3); zeros for a body that does not rotate
+    (compiled: :func:`.rigid_solver.world_inverse_inertia`)."""
+    return rs.world_inverse_inertia(np.ascontiguousarray(orientation, dtype=float),
+                                    np.ascontiguousarray(inverse_principal, dtype=float))
 
 
 def _sorted(a, b, feature) -> bool:
@@ -189,18 +192,18 @@ class RigidSolverStep:
         q0, v0 = np.array(y[0], dtype=float), np.array(y[1], dtype=float)
         a = self.field if self.field is not None else np.asarray(self.model.acceleration(t, q0, v0), dtype=float)
         points = self.contact_points(t, y, dt, a)
-        bodies, contacts, sub = self.columns(q0, v0, a, points, dt)
+        bodies, contacts, sub, colours = self.columns(q0, v0, a, points, dt)
         s = self.world.solver
         if self.field is not None:  # constant forces: the whole step in one compiled call
-            residual = rs.step(bodies, contacts, sub, s.substeps)
+            residual = rs.step(bodies, contacts, sub, s.substeps, colours)
         else:
             for k in range(s.substeps):
                 if k:
                     bodies = bodies._replace(accel=np.ascontiguousarray(
                         self.model.acceleration(t + k * sub.h, bodies.q, bodies.v), dtype=float))
-                rs.substep(bodies, contacts, sub)
+                rs.substep(bodies, contacts, sub, colours)
             residual = rs.finish(bodies, contacts, sub)
-        self._conclude(t, dt, points, contacts, residual)
+        self._conclude(t, dt, contacts, residual)
         if not (np.all(np.isfinite(bodies.q)) and np.all(np.isfinite(bodies.v))
                 and np.all(np.isfinite(bodies.omega))):
             raise FloatingPointError(f"the contact solver's state became non-finite in the step from t = {t:g} s "
@@ -232,7 +235,8 @@ class RigidSolverStep:
         return type(points)(*(np.ascontiguousarray(column)[order] for column in points))
 
     def columns(self, q0, v0, a, points, dt):
-        """The kernels' bodies, contacts (warm-started, effective masses) and step context."""
+        """The kernels' bodies, contacts (warm-started, effective masses, laid out colour by colour:
+        :mod:`.contact_colouring`), step context and colours."""
         s = self.world.solver
         h = dt / s.substeps
         n = len(q0)
@@ -247,19 +251,27 @@ class RigidSolverStep:
             np.empty((count, 2, 3)), *(np.empty(count) for _ in range(3)), np.zeros((count, 3)),
             *(np.empty(count) for _ in range(4)), np.empty(count), np.empty((count, 2)), np.empty((count, 3)),
             np.empty(count), np.empty(count), np.zeros(count), np.zeros((count, 3)), np.zeros((count, 3)))
-        key = np.empty((count, 3), np.int64)
+        # the points arrive sorted by (a, b, feature), the order the last step's are matched in; the
+        # solver takes them colour by colour
+        key = np.column_stack([points.a, points.b, points.feature]).astype(np.int64)
         old = self._previous
-        rows = gather(points, (q0, np.ascontiguousarray(a, dtype=float), self.rolling), self.materials,
-                      (old.key, old.pn, old.pt, old.pr), (float(self.world.rest_speed), float(dt)), contacts, key)
-        rs.prepare(bodies, contacts)
+        rows = rs.previous_rows(old.key, key)
+        order, colours = colour_contacts(points.a, points.b, n, numba.get_num_threads())
+        self._sorted_key, self._order = key, order
+        points = type(points)(*(column[order] for column in points))
+        self._points_b = points.b
+        rows = rows[order]
+        gather(points, (q0, np.ascontiguousarray(a, dtype=float), self.rolling), self.materials,
+               (rows, old.pn, old.pt, old.pr), (float(self.world.rest_speed), float(dt)), contacts)
+        rs.prepare(bodies, contacts, colours)
         bias_rate, mass_scale, impulse_scale = s.softness(h)
         sub = rs.RigidSubstep(h, s.iterations, bias_rate, mass_scale, impulse_scale, s.push_speed, s.slop,
                               *self.codes)
-        self._key, self._rows = key, rows
-        return bodies, contacts, sub
+        self._key, self._rows = key[order], rows
+        return bodies, contacts, sub, colours
 
-    def _conclude(self, t, dt, points, contacts, residual):
-        """The log (impacts, residual) and what the next step warm-starts from."""
+    def _conclude(self, t, dt, contacts, residual):
+        """The log (impacts, residual) and what the next step warm-starts from (in the sorted order)."""
         c = contacts
         pt = c.pt[:, 0, None] * c.tangent[:, 0] + c.pt[:, 1, None] * c.tangent[:, 1]
         rows = self._rows
@@ -269,12 +281,14 @@ class RigidSolverStep:
         # one impact per pair: its first point newly hit
         first = new[np.unique(self._key[new, :2], axis=0, return_index=True)[1]] if len(new) else new
         self.log.add_impacts(ImpactBlock(
-            np.full(len(first), float(t)), c.a[first], np.asarray(points.b, np.int64)[first], c.normal[first],
+            np.full(len(first), float(t)), c.a[first], np.asarray(self._points_b, np.int64)[first], c.normal[first],
             -c.hit[first], c.restitution[first], c.friction[first], c.total[first], (float(t), float(t + dt)),
             self.model.names, self.world.shapes))
         self.log.most_impacts_in_a_step = max(self.log.most_impacts_in_a_step, len(first))
         self.log.largest_residual = max(self.log.largest_residual, float(residual))
-        self._previous = Solved(self._key, c.normal, c.pn.copy(), pt, c.pr.copy(), c.total.copy())
+        back = np.empty_like(self._order)  # the colour order's row of each sorted row
+        back[self._order] = np.arange(len(self._order))
+        self._previous = Solved(self._sorted_key, c.normal[back], c.pn[back], pt[back], c.pr[back], c.total[back])
 
     def rotation_at(self, steps: np.ndarray):
         """(orientations (K, N, 4), angular velocities (K, N, 3)) after each of ``steps`` steps (recorded ones)."""
