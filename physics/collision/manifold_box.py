@@ -210,7 +210,7 @@ def clip(source, count, cut, target):
     return kept
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def support_edge(box, axis, normal, sense):
     """The edge of a box (centre, frame, half) along ``axis`` farthest along sense * normal: (its start, its
     direction, its id 0..11)."""
@@ -224,7 +224,7 @@ def support_edge(box, axis, normal, sense):
     return madd3(middle, -half[axis], frame[axis]), scale3(frame[axis], 2.0 * half[axis]), axis * 4 + bits
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def edge_contact(edge_a, edge_b, separation, margin, out):
     """Edge a_i of box a against edge b_j of box b, ``edge_a`` = (box a, i) and ``edge_b`` = (box b, j):
     the closest points of the two support edges, one point.

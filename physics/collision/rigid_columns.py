@@ -32,33 +32,36 @@ def tangent_basis(n):
 
 
 @njit(cache=True)
-def gather(points, movers, materials, previous, context, out):
-    """Fill ``out`` (a :class:`.rigid_solver.RigidContactColumns` of C rows) from ``points``
-    (:class:`.manifolds.ManifoldPoints`), row for row.
+def gather(source, movers, materials, previous, context, out):
+    """Fill ``out`` (a :class:`.rigid_solver.RigidContactColumns` of C rows) from ``source`` =
+    (points, order): row k from point ``order[k]`` of ``points`` (:class:`.manifolds.ManifoldPoints`),
+    so the points are taken in the solver's order without a permuted copy of them.
 
     ``movers`` = (q, accel, rolling) of the bodies: centres at the start of the step, the forces'
     accelerations, and each body's rolling resistance (coefficient times rounding radius, m);
     ``materials`` a :class:`.contact_buffer.Materials`; ``previous`` = (rows, pn, pt, pr): each
-    point's row among the last step's points, or -1 (:func:`.rigid_solver.previous_rows`), and
+    row's point among the last step's points, or -1 (:func:`.rigid_solver.previous_rows`), and
     their impulses (pt a world vector); ``context`` = (the world's rest speed, dt).
     """
     q, accel, rolls = movers
     rows, old_pn, old_pt, old_pr = previous
     floor, dt = context
     body_material, shape_material, restitution_table, friction_table = materials
+    points, order = source
     a_, b_, normal, point, separation, _ = points
     # the columns out of the NamedTuple before the loops (a field read in a loop costs a reference count)
     (a_out, b_out, n_out, ra, rb, tangent, s0, vn0, hit, _, friction, restitution, threshold, rolling_out, pn, pt,
      pr, total, most, _, _, _) = out
-    for k in range(len(a_)):
-        a, b = a_[k], b_[k]
-        n = (normal[k, 0], normal[k, 1], normal[k, 2])
+    for k in range(len(order)):
+        i = order[k]
+        a, b = a_[i], b_[i]
+        n = (normal[i, 0], normal[i, 1], normal[i, 2])
         a_out[k], b_out[k] = a, max(b, -1)
         rolling = rolls[a]
         for x in range(3):
             n_out[k, x] = n[x]
-            ra[k, x] = point[k, x] - q[a, x]
-            rb[k, x] = 0.0 if b < 0 else point[k, x] - q[b, x]
+            ra[k, x] = point[i, x] - q[a, x]
+            rb[k, x] = 0.0 if b < 0 else point[i, x] - q[b, x]
         # the pressing acceleration: the approach speed's one definition on the accelerations
         if b < 0:
             other = shape_material[-1 - b]
@@ -74,7 +77,7 @@ def gather(points, movers, materials, previous, context, out):
         t1, t2 = tangent_basis(n)
         for x in range(3):
             tangent[k, 0, x], tangent[k, 1, x] = t1[x], t2[x]
-        s0[k], vn0[k], hit[k] = separation[k], 0.0, np.inf
+        s0[k], vn0[k], hit[k] = separation[i], 0.0, np.inf
         total[k], most[k] = 0.0, 0.0
         row = rows[k]
         if row >= 0:

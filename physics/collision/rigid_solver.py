@@ -307,14 +307,23 @@ def _apply_angular(state, a, b, m):
 
 # --- the stages -----------------------------------------------------------------------------
 
-@njit(cache=True)
+@njit(cache=True, parallel=True)
 def prepare(bodies, contacts, colours):
     """Each contact's effective masses along n, t1, t2 (into ``contacts.mass``), v_n at the start,
-    and its separation and levers (:func:`update_geometry`)."""
+    and its separation and levers (:func:`update_geometry`); each contact's own, in parallel."""
+    threads = colours.threads
+    for part in prange(threads):
+        _prepare_rows(bodies, contacts, span(0, len(contacts.a), part, threads))
+    update_geometry(bodies, contacts, colours)
+
+
+@njit(cache=True)
+def _prepare_rows(bodies, contacts, rows):
+    """:func:`prepare`'s masses and v_n of the contacts ``rows`` = (first, end)."""
     a_, b_, ra, rb, normal = contacts.a, contacts.b, contacts.ra, contacts.rb, contacts.normal
     tangent, mass, vn0 = contacts.tangent, contacts.mass, contacts.vn0
     v, omega, inverse_mass, inverse_inertia = _state(bodies)
-    for k in range(len(a_)):
+    for k in range(rows[0], rows[1]):
         a, b = a_[k], b_[k]
         for d in range(3):
             axis = _row(normal, k) if d == 0 else (tangent[k, d - 1, 0], tangent[k, d - 1, 1], tangent[k, d - 1, 2])
@@ -325,7 +334,6 @@ def prepare(bodies, contacts, colours):
                 inverse += inverse_mass[b] + dot3(cb, _matrix_times(inverse_inertia, b, cb))
             mass[k, d] = 1.0 / inverse if inverse > 0.0 else 0.0
         vn0[k] = dot3(_relative_velocity(v, omega, a, b, _row(ra, k), _row(rb, k)), _row(normal, k))
-    update_geometry(bodies, contacts, colours)
 
 
 @njit(cache=True, inline="always")
@@ -364,13 +372,21 @@ def _gyroscopic(spin, body, h, kind):
     return rotate(orientation, body, w1)
 
 
+@njit(cache=True, parallel=True)
+def integrate_velocities(bodies, sub, threads):
+    """v += h a for every movable body; the gyroscopic term for every rotating one (each body its
+    own: ``threads`` parts in parallel)."""
+    for part in prange(threads):
+        _velocities_of(bodies, sub, span(0, len(bodies.v), part, threads))
+
+
 @njit(cache=True)
-def integrate_velocities(bodies, sub):
-    """v += h a for every movable body; the gyroscopic term for every rotating one."""
+def _velocities_of(bodies, sub, span_):
+    """:func:`integrate_velocities` of the bodies ``span_`` = (first, end)."""
     v, omega, inverse_mass, accel, h = bodies.v, bodies.omega, bodies.inverse_mass, bodies.accel, sub.h
     inverse_principal, kind = bodies.inverse_principal, sub.gyroscopic
     spin = (omega, bodies.orientation, inverse_principal)
-    for body in range(len(inverse_mass)):
+    for body in range(span_[0], span_[1]):
         if inverse_mass[body] > 0.0:
             for x in range(3):
                 v[body, x] += h * accel[body, x]
@@ -379,12 +395,20 @@ def integrate_velocities(bodies, sub):
             omega[body, 0], omega[body, 1], omega[body, 2] = w
 
 
+@njit(cache=True, parallel=True)
+def integrate_positions(bodies, sub, threads):
+    """q += h v and the orientation turned by h omega; the move and the turn since the step's start
+    kept (each body its own: ``threads`` parts in parallel)."""
+    for part in prange(threads):
+        _positions_of(bodies, sub, span(0, len(bodies.q), part, threads))
+
+
 @njit(cache=True)
-def integrate_positions(bodies, sub):
-    """q += h v and the orientation turned by h omega; the move and the turn since the step's start kept."""
+def _positions_of(bodies, sub, span_):
+    """:func:`integrate_positions` of the bodies ``span_`` = (first, end)."""
     q, v, dq, omega, h, update = bodies.q, bodies.v, bodies.dq, bodies.omega, sub.h, sub.update
     orientation, turn, inverse_principal = bodies.orientation, bodies.turn, bodies.inverse_principal
-    for body in range(len(q)):
+    for body in range(span_[0], span_[1]):
         for x in range(3):
             q[body, x] += h * v[body, x]
             dq[body, x] += h * v[body, x]
@@ -461,8 +485,8 @@ def _sweep(bodies, contacts, sub, use_bias, colours):
     """One Gauss-Seidel sweep over the contacts, colour by colour (:mod:`.contact_colouring`): each
     contact's normal impulse, then friction and rolling. A colour's manifolds share no body: they are
     solved on all threads at once, the same bytes as on one."""
-    threads = colours.threads
-    for group in range(len(colours.colour_start) - 1):
+    threads, groups = colours.threads, len(colours.colour_start) - 1
+    for group in range(groups):
         first, end = colours.colour_start[group], colours.colour_start[group + 1]
         parts = threads if group < colours.parallel else 1  # the overflow: on one thread
         for part in prange(parts):
@@ -503,8 +527,8 @@ def _sweep_blocks(bodies, contacts, how, colours, blocks):
 def warm_start(bodies, contacts, colours):
     """Each contact's impulses of the last substep applied again: a good first guess. By colour, as
     :func:`_sweep`: a body's impulses are added in the one order, whatever the threads."""
-    threads = colours.threads
-    for group in range(len(colours.colour_start) - 1):
+    threads, groups = colours.threads, len(colours.colour_start) - 1
+    for group in range(groups):
         first, end = colours.colour_start[group], colours.colour_start[group + 1]
         parts = threads if group < colours.parallel else 1
         for part in prange(parts):
@@ -530,11 +554,11 @@ def _warm_blocks(bodies, contacts, colours, blocks):
 def substep(bodies, contacts, sub, colours):
     """One substep of ``sub.h``: velocities, warm start, solve, positions, relax; the contacts in
     the order of ``colours`` (:func:`.contact_colouring.colour_contacts`)."""
-    integrate_velocities(bodies, sub)
+    integrate_velocities(bodies, sub, colours.threads)
     warm_start(bodies, contacts, colours)
     for _ in range(sub.iterations):
         _sweep(bodies, contacts, sub, True, colours)
-    integrate_positions(bodies, sub)
+    integrate_positions(bodies, sub, colours.threads)
     update_geometry(bodies, contacts, colours)
     for _ in range(sub.iterations):
         _sweep(bodies, contacts, sub, False, colours)

@@ -58,6 +58,10 @@ DEFAULT_ROTATION = "exponential-map"
 KINDS = {"sphere": SPHERE, "box": BOX, "capsule": CAPSULE}
 #: the most a rotation moves a point of a body: its diameter, 2 R (a half turn)
 MAX_ROTATION_REACH = 2.0
+#: fewer contact points than this are solved on one thread (the same bytes as on many): a step makes
+#: about 12 parallel regions per colour, which cost more than a small scene's sweep, and on a loaded
+#: machine each waits for its slowest thread's time slice
+PARALLEL_CONTACTS = 4096
 
 
 @dataclasses.dataclass(frozen=True)
@@ -256,12 +260,12 @@ class RigidSolverStep:
         key = np.column_stack([points.a, points.b, points.feature]).astype(np.int64)
         old = self._previous
         rows = rs.previous_rows(old.key, key)
-        order, colours = colour_contacts(points.a, points.b, n, numba.get_num_threads())
+        threads = numba.get_num_threads() if count >= PARALLEL_CONTACTS else 1
+        order, colours = colour_contacts(points.a, points.b, n, threads)
         self._sorted_key, self._order = key, order
-        points = type(points)(*(column[order] for column in points))
-        self._points_b = points.b
+        self._points_b = points.b[order]
         rows = rows[order]
-        gather(points, (q0, np.ascontiguousarray(a, dtype=float), self.rolling), self.materials,
+        gather((points, order), (q0, np.ascontiguousarray(a, dtype=float), self.rolling), self.materials,
                (rows, old.pn, old.pt, old.pr), (float(self.world.rest_speed), float(dt)), contacts)
         rs.prepare(bodies, contacts, colours)
         bias_rate, mass_scale, impulse_scale = s.softness(h)
@@ -278,8 +282,11 @@ class RigidSolverStep:
         was_hit = np.zeros(len(rows), bool)
         was_hit[rows >= 0] = self._previous.total[rows[rows >= 0]] > 0
         new = np.flatnonzero((c.total > 0) & ~was_hit)
-        # one impact per pair: its first point newly hit
-        first = new[np.unique(self._key[new, :2], axis=0, return_index=True)[1]] if len(new) else new
+        # one impact per pair: its first point newly hit (the pairs as one code, increasing in (a, b):
+        # NumPy's unique of rows sorts structured rows, many times slower than of numbers)
+        statics = len(self.world.shapes)
+        code = self._key[new, 0] * (len(self.inverse_masses) + statics) + (self._key[new, 1] + statics)
+        first = new[np.unique(code, return_index=True)[1]] if len(new) else new
         self.log.add_impacts(ImpactBlock(
             np.full(len(first), float(t)), c.a[first], np.asarray(self._points_b, np.int64)[first], c.normal[first],
             -c.hit[first], c.restitution[first], c.friction[first], c.total[first], (float(t), float(t + dt)),
