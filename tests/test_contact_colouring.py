@@ -82,7 +82,7 @@ def box_pile(n, seed):
 def test_the_parallel_sweep_gives_the_bytes_of_one_thread(monkeypatch, parts):
     """A pile of 40 boxes, 40 steps, every stage parallel (the size thresholds set to 0): the same bytes
     with each colour cut into ``parts`` parts on Numba's threads as on one thread."""
-    monkeypatch.setattr(rigid_solver_step, "PARALLEL_CONTACTS", 0)
+    monkeypatch.setattr(rigid_solver_step, "COLOURED_BODIES", 0)
     monkeypatch.setattr(manifolds, "PARALLEL_PAIRS", 0)
     runs = []
     for threads in (1, parts):

@@ -16,8 +16,14 @@ edge colouring of :func:`steplab.integrators.colouring.greedy_edge_colouring`, h
 for it runs every step). A manifold that finds all :data:`COLOURS` colours taken goes to the
 *overflow*, swept last on one thread, as Box2D's overflow constraints are.
 
-The coloured order is the solver's one order, serial or parallel: it depends on the contacts
-alone, never on the number of threads, so a run gives the same bytes on one thread or many.
+Which order a scene is swept in depends on the scene alone (:data:`.rigid_solver_step.COLOURED_BODIES`
+bodies or more: coloured), never on the number of threads, and the coloured order gives the same
+bytes on one thread or many. Smaller scenes keep the sorted order (a, b) (:func:`in_sorted_order`),
+for two reasons. It is the order their results were always computed in, byte for byte. And it is
+the better order for a stack: bodies numbered from the bottom up are swept from the bottom up, so
+one sweep carries the support up the stack; the coloured order interleaves the rows, and the
+20-row pyramid's top box, which moves 7.2 mm from 1 s to 10 s in the sorted order, moved 15.6 mm
+(9.0 mm with the colours visited in reverse), against the 1 cm that "stands" allows.
 """
 
 from __future__ import annotations
@@ -102,6 +108,23 @@ def colour_contacts(a, b, n, threads):
         for k in range(rows[m + 1] - rows[m]):
             order[laid[place[m]] + k] = rows[m] + k
     return order, Colours(laid, colour_start[:groups + 1], parallel, max(threads, 1))
+
+
+@njit(cache=True)
+def in_sorted_order(a, b):
+    """(order, :class:`Colours`) that sweep contacts sorted by (a, b, ...) in that order, on one
+    thread: the identity order, all manifolds in one serial group."""
+    count = len(a)
+    rows = np.empty(count + 1, np.int64)
+    blocks = 0
+    for k in range(count):
+        if k == 0 or a[k] != a[k - 1] or b[k] != b[k - 1]:
+            rows[blocks] = k
+            blocks += 1
+    rows[blocks] = count
+    colour_start = np.zeros(2 if blocks else 1, np.int64)
+    colour_start[-1] = blocks
+    return np.arange(count), Colours(rows[:blocks + 1], colour_start, 0, 1)
 
 
 @njit(cache=True, inline="always")

@@ -36,7 +36,7 @@ import numpy as np
 from .. import quaternion as quat
 from . import rigid_solver as rs
 from .contact_buffer import MARGIN_OF_RADIUS, Materials
-from .contact_colouring import colour_contacts
+from .contact_colouring import colour_contacts, in_sorted_order
 from .events import CollisionLog, ImpactBlock, cancel_triggers
 from .manifolds import BOX, CAPSULE, SPHERE, check_shapes
 from .pairs import SweptSpheres
@@ -58,10 +58,11 @@ DEFAULT_ROTATION = "exponential-map"
 KINDS = {"sphere": SPHERE, "box": BOX, "capsule": CAPSULE}
 #: the most a rotation moves a point of a body: its diameter, 2 R (a half turn)
 MAX_ROTATION_REACH = 2.0
-#: fewer contact points than this are solved on one thread (the same bytes as on many): a step makes
-#: about 12 parallel regions per colour, which cost more than a small scene's sweep, and on a loaded
-#: machine each waits for its slowest thread's time slice
-PARALLEL_CONTACTS = 4096
+#: scenes of this many bodies or more are swept colour by colour on Numba's threads
+#: (:mod:`.contact_colouring`, which says why smaller ones keep the sorted order on one thread): a step
+#: makes about 12 parallel regions per colour, which cost more than a small scene's sweep, and on a
+#: loaded machine each waits for its slowest thread's time slice
+COLOURED_BODIES = 2048
 
 
 @dataclasses.dataclass(frozen=True)
@@ -260,8 +261,10 @@ class RigidSolverStep:
         key = np.column_stack([points.a, points.b, points.feature]).astype(np.int64)
         old = self._previous
         rows = rs.previous_rows(old.key, key)
-        threads = numba.get_num_threads() if count >= PARALLEL_CONTACTS else 1
-        order, colours = colour_contacts(points.a, points.b, n, threads)
+        if n >= COLOURED_BODIES:  # coloured, on Numba's threads (the same bytes on any number of them)
+            order, colours = colour_contacts(points.a, points.b, n, numba.get_num_threads())
+        else:
+            order, colours = in_sorted_order(points.a, points.b)
         self._sorted_key, self._order = key, order
         self._points_b = points.b[order]
         rows = rows[order]
