@@ -173,7 +173,7 @@ def face_contact(box1, axis, box2, reference, margin, out):
     return kept
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def clip(source, count, cut, target):
     """Sutherland–Hodgman: the part of the polygon ``source`` = (vertices, labels) with
     sense * x_along <= limit, ``cut`` = (along, sense, limit, the plane's line id), written into

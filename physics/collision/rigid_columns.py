@@ -89,3 +89,22 @@ def gather(source, movers, materials, previous, context, out):
             pn[k], pt[k, 0], pt[k, 1] = 0.0, 0.0, 0.0
             for x in range(3):
                 pr[k, x] = 0.0
+
+
+@njit(cache=True)
+def in_sorted_rows(contacts, order):
+    """(normal, pn, pt, pr, total) of the step's contacts back in the sorted order of their points
+    (row ``order[k]`` from the contacts' row k), pt as a world vector: what the next step warm-starts
+    from (:func:`.rigid_solver.previous_rows` matches sorted keys)."""
+    count = len(order)
+    normal, pt, pr = np.empty((count, 3)), np.empty((count, 3)), np.empty((count, 3))
+    pn, total = np.empty(count), np.empty(count)
+    c_normal, c_pn, c_pt, c_pr, c_total, tangent = (contacts.normal, contacts.pn, contacts.pt, contacts.pr,
+                                                    contacts.total, contacts.tangent)
+    for k in range(count):
+        i = order[k]
+        pn[i], total[i] = c_pn[k], c_total[k]
+        for x in range(3):
+            normal[i, x], pr[i, x] = c_normal[k, x], c_pr[k, x]
+            pt[i, x] = c_pt[k, 0] * tangent[k, 0, x] + c_pt[k, 1] * tangent[k, 1, x]
+    return normal, pn, pt, pr, total

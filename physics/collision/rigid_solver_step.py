@@ -40,7 +40,7 @@ from .contact_colouring import colour_contacts, in_sorted_order
 from .events import CollisionLog, ImpactBlock, cancel_triggers
 from .manifolds import BOX, CAPSULE, SPHERE, check_shapes
 from .pairs import SweptSpheres
-from .rigid_columns import gather
+from .rigid_columns import gather, in_sorted_rows
 from .solver_step import INTEGRATOR
 from .step import ConstantField
 
@@ -280,7 +280,6 @@ class RigidSolverStep:
     def _conclude(self, t, dt, contacts, residual):
         """The log (impacts, residual) and what the next step warm-starts from (in the sorted order)."""
         c = contacts
-        pt = c.pt[:, 0, None] * c.tangent[:, 0] + c.pt[:, 1, None] * c.tangent[:, 1]
         rows = self._rows
         was_hit = np.zeros(len(rows), bool)
         was_hit[rows >= 0] = self._previous.total[rows[rows >= 0]] > 0
@@ -296,9 +295,7 @@ class RigidSolverStep:
             self.model.names, self.world.shapes))
         self.log.most_impacts_in_a_step = max(self.log.most_impacts_in_a_step, len(first))
         self.log.largest_residual = max(self.log.largest_residual, float(residual))
-        back = np.empty_like(self._order)  # the colour order's row of each sorted row
-        back[self._order] = np.arange(len(self._order))
-        self._previous = Solved(self._sorted_key, c.normal[back], c.pn[back], pt[back], c.pr[back], c.total[back])
+        self._previous = Solved(self._sorted_key, *in_sorted_rows(c, self._order))
 
     def rotation_at(self, steps: np.ndarray):
         """(orientations (K, N, 4), angular velocities (K, N, 3)) after each of ``steps`` steps (recorded ones)."""
