@@ -1,8 +1,8 @@
 """One physics step of the contact solver on rigid bodies that rotate, read as its stages.
 
-    forces -> bounds (speed and rotation) -> broadphase -> manifolds -> warm start by feature
-           -> substeps (velocities and the gyroscopic term, solve, positions and orientations,
-              relax) -> restitution -> impacts
+    forces -> bounds (speed and rotation) -> broadphase -> manifolds -> sweep order (sorted, or
+           colours) -> warm start by feature -> substeps (velocities and the gyroscopic term,
+              solve, positions and orientations, relax) -> restitution -> impacts
 
 ``[collisions] method = "solver"`` on a scene with boxes, capsules or spinning spheres runs this
 step (:class:`RigidSolverStep`); a scene of spheres that do not rotate keeps the sphere solver
@@ -240,8 +240,9 @@ class RigidSolverStep:
         return type(points)(*(np.ascontiguousarray(column)[order] for column in points))
 
     def columns(self, q0, v0, a, points, dt):
-        """The kernels' bodies, contacts (warm-started, effective masses, laid out colour by colour:
-        :mod:`.contact_colouring`), step context and colours."""
+        """The kernels' bodies, contacts (warm-started, effective masses, laid out in the sweep order:
+        sorted, or colour by colour from :data:`COLOURED_BODIES` bodies, :mod:`.contact_colouring`),
+        step context and that order's :class:`.contact_colouring.Colours`."""
         s = self.world.solver
         h = dt / s.substeps
         n = len(q0)
@@ -257,7 +258,7 @@ class RigidSolverStep:
             *(np.empty(count) for _ in range(4)), np.empty(count), np.empty((count, 2)), np.empty((count, 3)),
             np.empty(count), np.empty(count), np.zeros(count), np.zeros((count, 3)), np.zeros((count, 3)))
         # the points arrive sorted by (a, b, feature), the order the last step's are matched in; the
-        # solver takes them colour by colour
+        # solver takes them in its sweep order
         key = np.column_stack([points.a, points.b, points.feature]).astype(np.int64)
         old = self._previous
         rows = rs.previous_rows(old.key, key)
