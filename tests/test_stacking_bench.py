@@ -2,6 +2,7 @@
 
 import dataclasses
 import itertools
+import os
 
 import numpy as np
 import pytest
@@ -53,3 +54,11 @@ def test_tiny_stacking_section_records_the_pyramid_and_the_pit(monkeypatch):
             s = record.data["seconds"][name]
             assert s["group"] == "stacking" and 0 < s["steplab_spread"]["min"] <= s["steplab_spread"]["max"]
     assert "vs_mujoco_pgs_pyramid_3" not in record.data["targets"]
+
+
+def test_the_box_pit_on_two_cores_runs_in_a_child_with_two_threads():
+    """The 2-core timing (issue 26's "on 2 cores") comes from a child process given 2 cores and 2 Numba
+    threads, whatever the bench process runs on; it says so in its record."""
+    child = stacking.on_cores(20, 2, 1, 2)
+    assert child["numba_threads"] == 2 and child["cores"] == min(2, len(os.sched_getaffinity(0)))
+    assert child["seconds_per_step"]["median"] > 0 and child["threading_layer"] in ("omp", "tbb", "workqueue")

@@ -4,8 +4,10 @@
 first call, in ``setup``, compiles every kernel) for steplab and, where installed, MuJoCo
 (PGS, and its default Newton solver) and pybullet, the settings of ``steplab bench``
 (:mod:`steplab.bench.stacking`). ``BoxPit`` times the first steps of 10^3 and 10^4 boxes
-falling into a box. ``StackingRatios`` tracks ``steplab bench``'s ratios, each measured with
-its spread in one run of the section (``setup_cache``).
+falling into a box, on one thread; ``BoxPitOnCores`` the real-time factor of 10^4 boxes on 2
+cores with 2 Numba threads (issue 26's target), timed in a child process. ``StackingRatios``
+tracks ``steplab bench``'s ratios, each measured with its spread in one run of the section
+(``setup_cache``).
 """
 
 from __future__ import annotations
@@ -98,3 +100,23 @@ class StackingRatios:
 
     def track_pyramid_vs_pybullet(self, ratios):
         return ratios.get("vs_pybullet_pyramid_20", float("nan"))
+
+
+class BoxPitOnCores:
+    """Real time per wall time of the first 10 steps of 10^4 boxes falling into a box, on 2 cores with 2 Numba
+    threads (:func:`steplab.bench.stacking.on_cores`: a child process, this one being pinned to one thread)."""
+
+    unit = "x real time"
+    timeout = 900
+
+    def setup_cache(self):
+        try:
+            from steplab.bench.stacking import on_cores
+        except ImportError:
+            raise NotImplementedError("steplab.bench.stacking.on_cores is not available") from None
+        return on_cores(10_000, STEPS, 3, 2)
+
+    def track_box_pit_10k_real_time_on_2_cores(self, child):
+        if "seconds_per_step" not in child:
+            raise NotImplementedError(child.get("error", "no timing"))
+        return (1 / 60) / child["seconds_per_step"]["median"]

@@ -61,7 +61,7 @@ def box_box(box_a, box_b, margin, out):
 
     Each box is (centre, frame, half); ``margin`` m is the speculative distance; the normal points
     from a to b. (Boxes whose bounding spheres are ``margin`` apart never come here:
-    :func:`.manifolds.manifold_rows` passes them over.)
+    :func:`.manifolds.manifold_slots` passes them over.)
     """
     ca, fa, ha = box_a
     cb, fb, hb = box_b
@@ -173,7 +173,7 @@ def face_contact(box1, axis, box2, reference, margin, out):
     return kept
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def clip(source, count, cut, target):
     """Sutherland–Hodgman: the part of the polygon ``source`` = (vertices, labels) with
     sense * x_along <= limit, ``cut`` = (along, sense, limit, the plane's line id), written into
@@ -210,7 +210,7 @@ def clip(source, count, cut, target):
     return kept
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def support_edge(box, axis, normal, sense):
     """The edge of a box (centre, frame, half) along ``axis`` farthest along sense * normal: (its start, its
     direction, its id 0..11)."""
@@ -224,7 +224,7 @@ def support_edge(box, axis, normal, sense):
     return madd3(middle, -half[axis], frame[axis]), scale3(frame[axis], 2.0 * half[axis]), axis * 4 + bits
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def edge_contact(edge_a, edge_b, separation, margin, out):
     """Edge a_i of box a against edge b_j of box b, ``edge_a`` = (box a, i) and ``edge_b`` = (box b, j):
     the closest points of the two support edges, one point.

@@ -36,7 +36,7 @@ from __future__ import annotations
 from typing import NamedTuple
 
 import numpy as np
-from numba import njit
+from numba import njit, prange
 
 from .. import quaternion as quat
 from .manifold_box import box_box, box_plane
@@ -274,27 +274,53 @@ def static_candidates(bodies, statics, reach):
     return found[:count]
 
 
-@njit(cache=True)
-def manifold_rows(bodies, statics, pairs, static_pairs, margins, out, scratch):
-    """Every pair's manifold into the rows of ``out`` (a ManifoldPoints of capacity 4 per pair): the rows written.
+#: the narrow phase's pairs are cut into this many chunks, each run by one thread with its own
+#: scratch: enough to share out over the threads, few enough that the scratch is allocated rarely
+#: (the result does not depend on it: every pair writes its own rows)
+CHUNKS = 64
+#: fewer pairs than this are run on the calling thread: waking the others costs more than they save,
+#: and on a loaded machine a parallel region waits for its slowest thread's time slice
+PARALLEL_PAIRS = 2048
+
+
+@njit(cache=True, parallel=True)
+def manifold_slots(bodies, statics, pairs, static_pairs, margins, slots, counts):
+    """Every pair's manifold into its own 4 rows of ``slots`` (a ManifoldPoints of 4 rows per pair, the
+    body pairs first, then the static pairs), its count into ``counts``; the pairs in parallel.
 
     ``margins`` = (margin, extent), (N,) each: a body's speculative margin and its bounding radius
-    plus that margin. Two bodies whose centres are farther apart than their extents can have no
-    point, and are passed over before their shapes are read (one distance instead of the 15 axes;
-    a broadphase on swept and widened bounds hands over such pairs, though the 10^4 box pit's
-    separated pairs lie within their extents: the margins are wide)."""
+    plus that margin. Each pair writes only its own rows, so the pairs are independent
+    (embarrassingly parallel): the same bytes on any number of threads."""
+    total = len(pairs) + len(static_pairs)
+    for chunk in prange(CHUNKS):
+        _slots_of_chunk((bodies, statics), (pairs, static_pairs), margins, slots, counts,
+                        (chunk * total // CHUNKS, (chunk + 1) * total // CHUNKS))
+
+
+@njit(cache=True)
+def _slots_of_chunk(solids_, pairs_, margins, slots, counts, span):
+    """:func:`manifold_slots` for the pairs ``span`` = (first, end), with a scratch of its own.
+
+    Two bodies whose centres are farther apart than their extents can have no point, and are
+    passed over before their shapes are read (one distance instead of the 15 axes; a broadphase
+    on swept and widened bounds hands over such pairs, though the 10^4 box pit's separated pairs
+    lie within their extents: the margins are wide). (A kernel of its own, not the body of the
+    parallel loop: Numba's parallel pass cannot analyse the inlined pair table.)"""
+    bodies, statics = solids_
+    pairs, static_pairs = pairs_
     margin, extent = margins
     centre = bodies.centre
-    rows = 0
     # the columns out of the NamedTuples before the loop (a field read in a loop costs a reference count)
-    a_out, b_out, normal, point, separation, feature = out
+    a_out, b_out, normal, point, separation, feature = slots
+    scratch = make_scratch()
     found_normal, found_point, found_separation, found_feature = (scratch.normal, scratch.point, scratch.separation,
                                                                   scratch.feature)
-    for p in range(len(pairs) + len(static_pairs)):
+    for p in range(span[0], span[1]):
         if p < len(pairs):
             i, j = pairs[p, 0], pairs[p, 1]
             d = (centre[j, 0] - centre[i, 0], centre[j, 1] - centre[i, 1], centre[j, 2] - centre[i, 2])
             if dot3(d, d) >= (extent[i] + extent[j]) ** 2:
+                counts[p] = 0
                 continue
             count = collide(solid(bodies, i), solid(bodies, j), margin[i] + margin[j], scratch)
             b = j
@@ -302,13 +328,76 @@ def manifold_rows(bodies, statics, pairs, static_pairs, margins, out, scratch):
             i, s = static_pairs[p - len(pairs), 0], static_pairs[p - len(pairs), 1]
             count = collide(solid(bodies, i), solid(statics, s), margin[i], scratch)
             b = -1 - s
+        counts[p] = count
         for k in range(count):  # element by element: a row slice would be a view made and freed per point
-            a_out[rows], b_out[rows] = i, b
+            row = MAX_POINTS * p + k
+            a_out[row], b_out[row] = i, b
             for m in range(3):
-                normal[rows, m], point[rows, m] = found_normal[k, m], found_point[k, m]
-            separation[rows], feature[rows] = found_separation[k], found_feature[k]
-            rows += 1
+                normal[row, m], point[row, m] = found_normal[k, m], found_point[k, m]
+            separation[row], feature[row] = found_separation[k], found_feature[k]
+
+
+@njit(cache=True)
+def sorted_rows(pairs, static_pairs, counts, n):
+    """The rows of :func:`manifold_slots`'s points in the order (a, b, feature): an index into ``slots``.
+
+    For each body a in turn: its static shapes (b = -1 - s, so s descending), then its partners
+    j > a ascending (``pairs`` and ``static_pairs`` are sorted); within a pair its points by
+    feature, equal features kept in the order found (as a stable sort of all the points would
+    put them, without sorting them all)."""
+    order = np.empty(MAX_POINTS * (len(pairs) + len(static_pairs)), np.int64)
+    rows, p, s = 0, 0, 0
+    for a in range(n):
+        first = s
+        while s < len(static_pairs) and static_pairs[s, 0] == a:
+            s += 1
+        for q in range(s - 1, first - 1, -1):
+            rows = _append_pair(order, rows, len(pairs) + q, counts)
+        while p < len(pairs) and pairs[p, 0] == a:
+            rows = _append_pair(order, rows, p, counts)
+            p += 1
+    return order[:rows]
+
+
+@njit(cache=True)
+def take_rows(points, order, out):
+    """``out`` row k = ``points`` row ``order[k]``, every column (one pass: NumPy's fancy indexing of
+    the six columns took a millisecond on 10^4 boxes' points)."""
+    a, b, normal, point, separation, feature = points
+    a_out, b_out, normal_out, point_out, separation_out, feature_out = out
+    for k in range(len(order)):
+        i = order[k]
+        a_out[k], b_out[k], separation_out[k], feature_out[k] = a[i], b[i], separation[i], feature[i]
+        for m in range(3):
+            normal_out[k, m], point_out[k, m] = normal[i, m], point[i, m]
+
+
+@njit(cache=True, inline="always")
+def _append_pair(order, rows, pair, counts):
+    """Pair ``pair``'s rows appended to ``order`` (the row numbers alone; sorted by feature at the end
+    of :func:`manifolds`); the new length."""
+    for k in range(counts[pair]):
+        order[rows] = MAX_POINTS * pair + k
+        rows += 1
     return rows
+
+
+@njit(cache=True)
+def sort_by_feature(order, a, b, feature):
+    """Within each run of one (a, b) in ``order``, the rows sorted by feature (insertion sort: a
+    run has at most 4 rows; stable)."""
+    start = 0
+    for k in range(1, len(order) + 1):
+        if k < len(order) and a[order[k]] == a[order[start]] and b[order[k]] == b[order[start]]:
+            continue
+        for m in range(start + 1, k):
+            x = order[m]
+            j = m
+            while j > start and feature[order[j - 1]] > feature[x]:
+                order[j] = order[j - 1]
+                j -= 1
+            order[j] = x
+        start = k
 
 
 def manifolds(shapes: RigidShapes, poses: Poses, pairs, statics=(), margin=0.0) -> ManifoldPoints:
@@ -348,9 +437,18 @@ def manifolds(shapes: RigidShapes, poses: Poses, pairs, statics=(), margin=0.0) 
     extent = np.ascontiguousarray(reach(shapes) + margin)
     static_pairs = static_candidates(bodies, static, extent)
     capacity = MAX_POINTS * (len(pairs) + len(static_pairs))
-    out = ManifoldPoints(np.empty(capacity, np.int64), np.empty(capacity, np.int64), np.empty((capacity, 3)),
-                         np.empty((capacity, 3)), np.empty(capacity), np.empty(capacity, np.int64))
-    rows = manifold_rows(bodies, static, pairs, static_pairs, (np.ascontiguousarray(margin), extent), out,
-                         make_scratch())
-    order = np.lexsort((out.feature[:rows], out.b[:rows], out.a[:rows]))
-    return ManifoldPoints(*(column[:rows][order] for column in out))
+    slots = ManifoldPoints(np.empty(capacity, np.int64), np.empty(capacity, np.int64), np.empty((capacity, 3)),
+                           np.empty((capacity, 3)), np.empty(capacity), np.empty(capacity, np.int64))
+    counts = np.empty(len(pairs) + len(static_pairs), np.int64)
+    margins = (np.ascontiguousarray(margin), extent)
+    if len(counts) >= PARALLEL_PAIRS:
+        manifold_slots(bodies, static, pairs, static_pairs, margins, slots, counts)
+    else:  # the same rows on this thread alone (a parallel region costs more than a few pairs)
+        _slots_of_chunk((bodies, static), (pairs, static_pairs), margins, slots, counts, (0, len(counts)))
+    order = sorted_rows(pairs, static_pairs, counts, n)
+    sort_by_feature(order, slots.a, slots.b, slots.feature)
+    rows = len(order)
+    out = ManifoldPoints(np.empty(rows, np.int64), np.empty(rows, np.int64), np.empty((rows, 3)), np.empty((rows, 3)),
+                         np.empty(rows), np.empty(rows, np.int64))
+    take_rows(slots, order, out)
+    return out

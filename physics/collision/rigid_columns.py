@@ -15,7 +15,6 @@ from numba import njit
 
 from .approach import AT_REST, approach_speed
 from .resting import rest_speed
-from .rigid_solver import previous_rows
 from .sphere_contacts import dot3, row3
 
 
@@ -33,36 +32,36 @@ def tangent_basis(n):
 
 
 @njit(cache=True)
-def gather(points, movers, materials, previous, context, out, key):
-    """Fill ``out`` (a :class:`.rigid_solver.RigidContactColumns` of C rows) and ``key`` ((C, 3):
-    a, b, feature) from ``points`` (:class:`.manifolds.ManifoldPoints`); returns each point's row
-    in the last step's points, or -1.
+def gather(source, movers, materials, previous, context, out):
+    """Fill ``out`` (a :class:`.rigid_solver.RigidContactColumns` of C rows) from ``source`` =
+    (points, order): row k from point ``order[k]`` of ``points`` (:class:`.manifolds.ManifoldPoints`),
+    so the points are taken in the solver's order without a permuted copy of them.
 
     ``movers`` = (q, accel, rolling) of the bodies: centres at the start of the step, the forces'
     accelerations, and each body's rolling resistance (coefficient times rounding radius, m);
-    ``materials`` a :class:`.contact_buffer.Materials`; ``previous`` = (key, pn, pt, pr) of the
-    last step's points (pt a world vector); ``context`` = (the world's rest speed, dt).
+    ``materials`` a :class:`.contact_buffer.Materials`; ``previous`` = (rows, pn, pt, pr): each
+    row's point among the last step's points, or -1 (:func:`.rigid_solver.previous_rows`), and
+    their impulses (pt a world vector); ``context`` = (the world's rest speed, dt).
     """
     q, accel, rolls = movers
-    old_key, old_pn, old_pt, old_pr = previous
+    rows, old_pn, old_pt, old_pr = previous
     floor, dt = context
     body_material, shape_material, restitution_table, friction_table = materials
-    a_, b_, normal, point, separation, feature = points
+    points, order = source
+    a_, b_, normal, point, separation, _ = points
     # the columns out of the NamedTuple before the loops (a field read in a loop costs a reference count)
     (a_out, b_out, n_out, ra, rb, tangent, s0, vn0, hit, _, friction, restitution, threshold, rolling_out, pn, pt,
      pr, total, most, _, _, _) = out
-    for k in range(len(a_)):
-        key[k, 0], key[k, 1], key[k, 2] = a_[k], b_[k], feature[k]
-    rows = previous_rows(old_key, key)
-    for k in range(len(a_)):
-        a, b = a_[k], b_[k]
-        n = (normal[k, 0], normal[k, 1], normal[k, 2])
+    for k in range(len(order)):
+        i = order[k]
+        a, b = a_[i], b_[i]
+        n = (normal[i, 0], normal[i, 1], normal[i, 2])
         a_out[k], b_out[k] = a, max(b, -1)
         rolling = rolls[a]
         for x in range(3):
             n_out[k, x] = n[x]
-            ra[k, x] = point[k, x] - q[a, x]
-            rb[k, x] = 0.0 if b < 0 else point[k, x] - q[b, x]
+            ra[k, x] = point[i, x] - q[a, x]
+            rb[k, x] = 0.0 if b < 0 else point[i, x] - q[b, x]
         # the pressing acceleration: the approach speed's one definition on the accelerations
         if b < 0:
             other = shape_material[-1 - b]
@@ -78,7 +77,7 @@ def gather(points, movers, materials, previous, context, out, key):
         t1, t2 = tangent_basis(n)
         for x in range(3):
             tangent[k, 0, x], tangent[k, 1, x] = t1[x], t2[x]
-        s0[k], vn0[k], hit[k] = separation[k], 0.0, np.inf
+        s0[k], vn0[k], hit[k] = separation[i], 0.0, np.inf
         total[k], most[k] = 0.0, 0.0
         row = rows[k]
         if row >= 0:
@@ -90,4 +89,22 @@ def gather(points, movers, materials, previous, context, out, key):
             pn[k], pt[k, 0], pt[k, 1] = 0.0, 0.0, 0.0
             for x in range(3):
                 pr[k, x] = 0.0
-    return rows
+
+
+@njit(cache=True)
+def in_sorted_rows(contacts, order):
+    """(normal, pn, pt, pr, total) of the step's contacts back in the sorted order of their points
+    (row ``order[k]`` from the contacts' row k), pt as a world vector: what the next step warm-starts
+    from (:func:`.rigid_solver.previous_rows` matches sorted keys)."""
+    count = len(order)
+    normal, pt, pr = np.empty((count, 3)), np.empty((count, 3)), np.empty((count, 3))
+    pn, total = np.empty(count), np.empty(count)
+    c_normal, c_pn, c_pt, c_pr, c_total, tangent = (contacts.normal, contacts.pn, contacts.pt, contacts.pr,
+                                                    contacts.total, contacts.tangent)
+    for k in range(count):
+        i = order[k]
+        pn[i], total[i] = c_pn[k], c_total[k]
+        for x in range(3):
+            normal[i, x], pr[i, x] = c_normal[k, x], c_pr[k, x]
+            pt[i, x] = c_pt[k, 0] * tangent[k, 0, x] + c_pt[k, 1] * tangent[k, 1, x]
+    return normal, pn, pt, pr, total

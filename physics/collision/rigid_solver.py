@@ -48,8 +48,9 @@ from __future__ import annotations
 from typing import NamedTuple
 
 import numpy as np
-from numba import njit
+from numba import njit, prange
 
+from .contact_colouring import span
 from .manifold_geometry import cross3
 from .sphere_contacts import dot3
 
@@ -179,6 +180,22 @@ def _turn(q, k, w, h, update):
     q[k, 0], q[k, 1], q[k, 2], q[k, 3] = r0 / size, r1 / size, r2 / size, r3 / size
 
 
+@njit(cache=True)
+def world_inverse_inertia(orientation, inverse_principal):
+    """(N, 3, 3): R diag(1/I1, 1/I2, 1/I3) R^T of each body, R's columns its axes, the unit vectors
+    turned by its quaternion (one pass; NumPy's three-operand einsum took 2-4 ms for 10^4 bodies)."""
+    out = np.empty((len(orientation), 3, 3))
+    for body in range(len(orientation)):
+        r0 = rotate(orientation, body, (1.0, 0.0, 0.0))
+        r1 = rotate(orientation, body, (0.0, 1.0, 0.0))
+        r2 = rotate(orientation, body, (0.0, 0.0, 1.0))
+        d0, d1, d2 = inverse_principal[body, 0], inverse_principal[body, 1], inverse_principal[body, 2]
+        for i in range(3):
+            for k in range(3):
+                out[body, i, k] = r0[i] * d0 * r0[k] + r1[i] * d1 * r1[k] + r2[i] * d2 * r2[k]
+    return out
+
+
 # --- the contact's kinematics ---------------------------------------------------------------
 #
 # Every kernel below takes the columns it needs out of the NamedTuples once, before its loop, and
@@ -220,18 +237,28 @@ def _geometry(moves, a, b, n, ra, rb, s0):
     return s, la, (la[0] - d[0], la[1] - d[1], la[2] - d[2])
 
 
-@njit(cache=True)
-def update_geometry(bodies, contacts):
+@njit(cache=True, parallel=True)
+def update_geometry(bodies, contacts, colours):
     """Each contact's separation and levers now (:func:`_geometry`) into ``s``, ``la``, ``lb``.
 
     They depend on the bodies' moves alone, which change only in the position stage: computed
     once after it, they serve the relax sweeps of that substep, the warm start and the biased
     sweeps of the next, and the end of the step (the numbers of computing them in every sweep).
+    Each contact's own: the rows in parallel (``colours.threads`` parts), the same bytes on any
+    number of threads.
     """
+    threads = colours.threads
+    for part in prange(threads):
+        _geometry_rows(bodies, contacts, span(0, len(contacts.a), part, threads))
+
+
+@njit(cache=True)
+def _geometry_rows(bodies, contacts, rows):
+    """:func:`update_geometry` of the contacts ``rows`` = (first, end)."""
     moves = (bodies.q, bodies.dq, bodies.turn, bodies.rounding)
     a_, b_, normal, ra, rb, s0 = contacts.a, contacts.b, contacts.normal, contacts.ra, contacts.rb, contacts.s0
     separation, lever_a, lever_b = contacts.s, contacts.la, contacts.lb
-    for k in range(len(a_)):
+    for k in range(rows[0], rows[1]):
         separation[k], la, lb = _geometry(moves, a_[k], b_[k], _row(normal, k), _row(ra, k), _row(rb, k), s0[k])
         for x in range(3):
             lever_a[k, x], lever_b[k, x] = la[x], lb[x]
@@ -280,14 +307,23 @@ def _apply_angular(state, a, b, m):
 
 # --- the stages -----------------------------------------------------------------------------
 
-@njit(cache=True)
-def prepare(bodies, contacts):
+@njit(cache=True, parallel=True)
+def prepare(bodies, contacts, colours):
     """Each contact's effective masses along n, t1, t2 (into ``contacts.mass``), v_n at the start,
-    and its separation and levers (:func:`update_geometry`)."""
+    and its separation and levers (:func:`update_geometry`); each contact's own, in parallel."""
+    threads = colours.threads
+    for part in prange(threads):
+        _prepare_rows(bodies, contacts, span(0, len(contacts.a), part, threads))
+    update_geometry(bodies, contacts, colours)
+
+
+@njit(cache=True)
+def _prepare_rows(bodies, contacts, rows):
+    """:func:`prepare`'s masses and v_n of the contacts ``rows`` = (first, end)."""
     a_, b_, ra, rb, normal = contacts.a, contacts.b, contacts.ra, contacts.rb, contacts.normal
     tangent, mass, vn0 = contacts.tangent, contacts.mass, contacts.vn0
     v, omega, inverse_mass, inverse_inertia = _state(bodies)
-    for k in range(len(a_)):
+    for k in range(rows[0], rows[1]):
         a, b = a_[k], b_[k]
         for d in range(3):
             axis = _row(normal, k) if d == 0 else (tangent[k, d - 1, 0], tangent[k, d - 1, 1], tangent[k, d - 1, 2])
@@ -298,7 +334,6 @@ def prepare(bodies, contacts):
                 inverse += inverse_mass[b] + dot3(cb, _matrix_times(inverse_inertia, b, cb))
             mass[k, d] = 1.0 / inverse if inverse > 0.0 else 0.0
         vn0[k] = dot3(_relative_velocity(v, omega, a, b, _row(ra, k), _row(rb, k)), _row(normal, k))
-    update_geometry(bodies, contacts)
 
 
 @njit(cache=True, inline="always")
@@ -337,13 +372,21 @@ def _gyroscopic(spin, body, h, kind):
     return rotate(orientation, body, w1)
 
 
+@njit(cache=True, parallel=True)
+def integrate_velocities(bodies, sub, threads):
+    """v += h a for every movable body; the gyroscopic term for every rotating one (each body its
+    own: ``threads`` parts in parallel)."""
+    for part in prange(threads):
+        _velocities_of(bodies, sub, span(0, len(bodies.v), part, threads))
+
+
 @njit(cache=True)
-def integrate_velocities(bodies, sub):
-    """v += h a for every movable body; the gyroscopic term for every rotating one."""
+def _velocities_of(bodies, sub, span_):
+    """:func:`integrate_velocities` of the bodies ``span_`` = (first, end)."""
     v, omega, inverse_mass, accel, h = bodies.v, bodies.omega, bodies.inverse_mass, bodies.accel, sub.h
     inverse_principal, kind = bodies.inverse_principal, sub.gyroscopic
     spin = (omega, bodies.orientation, inverse_principal)
-    for body in range(len(inverse_mass)):
+    for body in range(span_[0], span_[1]):
         if inverse_mass[body] > 0.0:
             for x in range(3):
                 v[body, x] += h * accel[body, x]
@@ -352,12 +395,20 @@ def integrate_velocities(bodies, sub):
             omega[body, 0], omega[body, 1], omega[body, 2] = w
 
 
+@njit(cache=True, parallel=True)
+def integrate_positions(bodies, sub, threads):
+    """q += h v and the orientation turned by h omega; the move and the turn since the step's start
+    kept (each body its own: ``threads`` parts in parallel)."""
+    for part in prange(threads):
+        _positions_of(bodies, sub, span(0, len(bodies.q), part, threads))
+
+
 @njit(cache=True)
-def integrate_positions(bodies, sub):
-    """q += h v and the orientation turned by h omega; the move and the turn since the step's start kept."""
+def _positions_of(bodies, sub, span_):
+    """:func:`integrate_positions` of the bodies ``span_`` = (first, end)."""
     q, v, dq, omega, h, update = bodies.q, bodies.v, bodies.dq, bodies.omega, sub.h, sub.update
     orientation, turn, inverse_principal = bodies.orientation, bodies.turn, bodies.inverse_principal
-    for body in range(len(q)):
+    for body in range(span_[0], span_[1]):
         for x in range(3):
             q[body, x] += h * v[body, x]
             dq[body, x] += h * v[body, x]
@@ -429,9 +480,24 @@ def _solve_rolling(state, rolls, k, a, b, n):
     _apply_angular(state, a, b, d)
 
 
+@njit(cache=True, parallel=True)
+def _sweep(bodies, contacts, sub, use_bias, colours):
+    """One Gauss-Seidel sweep over the contacts, colour by colour (:mod:`.contact_colouring`): each
+    contact's normal impulse, then friction and rolling. A colour's manifolds share no body: they are
+    solved on all threads at once, the same bytes as on one."""
+    threads, groups = colours.threads, len(colours.colour_start) - 1
+    for group in range(groups):
+        first, end = colours.colour_start[group], colours.colour_start[group + 1]
+        parts = threads if group < colours.parallel else 1  # the overflow: on one thread
+        for part in prange(parts):
+            _sweep_blocks(bodies, contacts, (sub, use_bias), colours, span(first, end, part, parts))
+
+
 @njit(cache=True)
-def _sweep(bodies, contacts, sub, use_bias):
-    """One Gauss-Seidel sweep over the contacts: the normal impulse, then friction and rolling."""
+def _sweep_blocks(bodies, contacts, how, colours, blocks):
+    """:func:`_sweep` over the manifolds ``blocks`` = (first, end) (their rows are consecutive);
+    ``how`` = (the substep, whether the bias pushes)."""
+    sub, use_bias = how
     state = _state(bodies)
     v, omega = bodies.v, bodies.omega
     a_, b_, normal, separation = contacts.a, contacts.b, contacts.normal, contacts.s
@@ -439,7 +505,7 @@ def _sweep(bodies, contacts, sub, use_bias):
     friction, rolling = contacts.friction, contacts.rolling
     tangential = (contacts.tangent, contacts.pt, mass, friction, pn)
     rolls = (contacts.pr, rolling, pn)
-    for k in range(len(a_)):
+    for k in range(colours.rows[blocks[0]], colours.rows[blocks[1]]):
         a, b, n = a_[k], b_[k], _row(normal, k)
         la, lb = _row(lever_a, k), _row(lever_b, k)
         vn = dot3(_relative_velocity(v, omega, a, b, la, lb), n)
@@ -457,13 +523,25 @@ def _sweep(bodies, contacts, sub, use_bias):
             _solve_rolling(state, rolls, k, a, b, n)
 
 
+@njit(cache=True, parallel=True)
+def warm_start(bodies, contacts, colours):
+    """Each contact's impulses of the last substep applied again: a good first guess. By colour, as
+    :func:`_sweep`: a body's impulses are added in the one order, whatever the threads."""
+    threads, groups = colours.threads, len(colours.colour_start) - 1
+    for group in range(groups):
+        first, end = colours.colour_start[group], colours.colour_start[group + 1]
+        parts = threads if group < colours.parallel else 1
+        for part in prange(parts):
+            _warm_blocks(bodies, contacts, colours, span(first, end, part, parts))
+
+
 @njit(cache=True)
-def warm_start(bodies, contacts):
-    """Each contact's impulses of the last substep applied again: a good first guess."""
+def _warm_blocks(bodies, contacts, colours, blocks):
+    """:func:`warm_start` of the manifolds ``blocks`` = (first, end) (their rows are consecutive)."""
     state = _state(bodies)
     a_, b_, n, t, lever_a, lever_b = contacts.a, contacts.b, contacts.normal, contacts.tangent, contacts.la, contacts.lb
     pn_, pt, pr, rolling = contacts.pn, contacts.pt, contacts.pr, contacts.rolling
-    for k in range(len(a_)):
+    for k in range(colours.rows[blocks[0]], colours.rows[blocks[1]]):
         pn, p1, p2 = pn_[k], pt[k, 0], pt[k, 1]
         p = (pn * n[k, 0] + p1 * t[k, 0, 0] + p2 * t[k, 1, 0], pn * n[k, 1] + p1 * t[k, 0, 1] + p2 * t[k, 1, 1],
              pn * n[k, 2] + p1 * t[k, 0, 2] + p2 * t[k, 1, 2])
@@ -473,16 +551,17 @@ def warm_start(bodies, contacts):
 
 
 @njit(cache=True)
-def substep(bodies, contacts, sub):
-    """One substep of ``sub.h``: velocities, warm start, solve, positions, relax."""
-    integrate_velocities(bodies, sub)
-    warm_start(bodies, contacts)
+def substep(bodies, contacts, sub, colours):
+    """One substep of ``sub.h``: velocities, warm start, solve, positions, relax; the contacts in
+    the order of ``colours`` (:func:`.contact_colouring.colour_contacts`)."""
+    integrate_velocities(bodies, sub, colours.threads)
+    warm_start(bodies, contacts, colours)
     for _ in range(sub.iterations):
-        _sweep(bodies, contacts, sub, True)
-    integrate_positions(bodies, sub)
-    update_geometry(bodies, contacts)
+        _sweep(bodies, contacts, sub, True, colours)
+    integrate_positions(bodies, sub, colours.threads)
+    update_geometry(bodies, contacts, colours)
     for _ in range(sub.iterations):
-        _sweep(bodies, contacts, sub, False)
+        _sweep(bodies, contacts, sub, False, colours)
     pn, total, most = contacts.pn, contacts.total, contacts.most
     for k in range(len(pn)):
         total[k] += pn[k]
@@ -649,10 +728,10 @@ def finish(bodies, contacts, sub):
 
 
 @njit(cache=True)
-def step(bodies, contacts, sub, substeps):
+def step(bodies, contacts, sub, substeps, colours):
     """A whole step under constant accelerations: ``substeps`` substeps, then :func:`finish`."""
     for _ in range(substeps):
-        substep(bodies, contacts, sub)
+        substep(bodies, contacts, sub, colours)
     return finish(bodies, contacts, sub)
 
 

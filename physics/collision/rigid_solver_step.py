@@ -1,8 +1,8 @@
 """One physics step of the contact solver on rigid bodies that rotate, read as its stages.
 
-    forces -> bounds (speed and rotation) -> broadphase -> manifolds -> warm start by feature
-           -> substeps (velocities and the gyroscopic term, solve, positions and orientations,
-              relax) -> restitution -> impacts
+    forces -> bounds (speed and rotation) -> broadphase -> manifolds -> sweep order (sorted, or
+           colours) -> warm start by feature -> substeps (velocities and the gyroscopic term,
+              solve, positions and orientations, relax) -> restitution -> impacts
 
 ``[collisions] method = "solver"`` on a scene with boxes, capsules or spinning spheres runs this
 step (:class:`RigidSolverStep`); a scene of spheres that do not rotate keeps the sphere solver
@@ -30,15 +30,17 @@ from __future__ import annotations
 import dataclasses
 import importlib
 
+import numba
 import numpy as np
 
 from .. import quaternion as quat
 from . import rigid_solver as rs
 from .contact_buffer import MARGIN_OF_RADIUS, Materials
+from .contact_colouring import colour_contacts, in_sorted_order
 from .events import CollisionLog, ImpactBlock, cancel_triggers
 from .manifolds import BOX, CAPSULE, SPHERE, check_shapes
 from .pairs import SweptSpheres
-from .rigid_columns import gather
+from .rigid_columns import gather, in_sorted_rows
 from .solver_step import INTEGRATOR
 from .step import ConstantField
 
@@ -56,6 +58,11 @@ DEFAULT_ROTATION = "exponential-map"
 KINDS = {"sphere": SPHERE, "box": BOX, "capsule": CAPSULE}
 #: the most a rotation moves a point of a body: its diameter, 2 R (a half turn)
 MAX_ROTATION_REACH = 2.0
+#: scenes of this many bodies or more are swept colour by colour on Numba's threads
+#: (:mod:`.contact_colouring`, which says why smaller ones keep the sorted order on one thread): a step
+#: makes about 12 parallel regions per colour, which cost more than a small scene's sweep, and on a
+#: loaded machine each waits for its slowest thread's time slice
+COLOURED_BODIES = 2048
 
 
 @dataclasses.dataclass(frozen=True)
@@ -98,9 +105,10 @@ def rotation_codes(rotation: str) -> tuple[int, int]:
 
 
 def world_inverse_inertia(orientation, inverse_principal) -> np.ndarray:
-    """R diag(1/I1, 1/I2, 1/I3) R^T for each body, (N, 3, 3); zeros for a body that does not rotate."""
-    r = quat.to_matrix(np, orientation)
-    return np.einsum("nij,nj,nkj->nik", r, inverse_principal, r)
+    """R diag(1/I1, 1/I2, 1/I3) R^T for each body, (N, 3, 3); zeros for a body that does not rotate
+    (compiled: :func:`.rigid_solver.world_inverse_inertia`)."""
+    return rs.world_inverse_inertia(np.ascontiguousarray(orientation, dtype=float),
+                                    np.ascontiguousarray(inverse_principal, dtype=float))
 
 
 def _sorted(a, b, feature) -> bool:
@@ -189,18 +197,18 @@ class RigidSolverStep:
         q0, v0 = np.array(y[0], dtype=float), np.array(y[1], dtype=float)
         a = self.field if self.field is not None else np.asarray(self.model.acceleration(t, q0, v0), dtype=float)
         points = self.contact_points(t, y, dt, a)
-        bodies, contacts, sub = self.columns(q0, v0, a, points, dt)
+        bodies, contacts, sub, colours = self.columns(q0, v0, a, points, dt)
         s = self.world.solver
         if self.field is not None:  # constant forces: the whole step in one compiled call
-            residual = rs.step(bodies, contacts, sub, s.substeps)
+            residual = rs.step(bodies, contacts, sub, s.substeps, colours)
         else:
             for k in range(s.substeps):
                 if k:
                     bodies = bodies._replace(accel=np.ascontiguousarray(
                         self.model.acceleration(t + k * sub.h, bodies.q, bodies.v), dtype=float))
-                rs.substep(bodies, contacts, sub)
+                rs.substep(bodies, contacts, sub, colours)
             residual = rs.finish(bodies, contacts, sub)
-        self._conclude(t, dt, points, contacts, residual)
+        self._conclude(t, dt, contacts, residual)
         if not (np.all(np.isfinite(bodies.q)) and np.all(np.isfinite(bodies.v))
                 and np.all(np.isfinite(bodies.omega))):
             raise FloatingPointError(f"the contact solver's state became non-finite in the step from t = {t:g} s "
@@ -232,7 +240,9 @@ class RigidSolverStep:
         return type(points)(*(np.ascontiguousarray(column)[order] for column in points))
 
     def columns(self, q0, v0, a, points, dt):
-        """The kernels' bodies, contacts (warm-started, effective masses) and step context."""
+        """The kernels' bodies, contacts (warm-started, effective masses, laid out in the sweep order:
+        sorted, or colour by colour from :data:`COLOURED_BODIES` bodies, :mod:`.contact_colouring`),
+        step context and that order's :class:`.contact_colouring.Colours`."""
         s = self.world.solver
         h = dt / s.substeps
         n = len(q0)
@@ -247,34 +257,46 @@ class RigidSolverStep:
             np.empty((count, 2, 3)), *(np.empty(count) for _ in range(3)), np.zeros((count, 3)),
             *(np.empty(count) for _ in range(4)), np.empty(count), np.empty((count, 2)), np.empty((count, 3)),
             np.empty(count), np.empty(count), np.zeros(count), np.zeros((count, 3)), np.zeros((count, 3)))
-        key = np.empty((count, 3), np.int64)
+        # the points arrive sorted by (a, b, feature), the order the last step's are matched in; the
+        # solver takes them in its sweep order
+        key = np.column_stack([points.a, points.b, points.feature]).astype(np.int64)
         old = self._previous
-        rows = gather(points, (q0, np.ascontiguousarray(a, dtype=float), self.rolling), self.materials,
-                      (old.key, old.pn, old.pt, old.pr), (float(self.world.rest_speed), float(dt)), contacts, key)
-        rs.prepare(bodies, contacts)
+        rows = rs.previous_rows(old.key, key)
+        if n >= COLOURED_BODIES:  # coloured, on Numba's threads (the same bytes on any number of them)
+            order, colours = colour_contacts(points.a, points.b, n, numba.get_num_threads())
+        else:
+            order, colours = in_sorted_order(points.a, points.b)
+        self._sorted_key, self._order = key, order
+        self._points_b = points.b[order]
+        rows = rows[order]
+        gather((points, order), (q0, np.ascontiguousarray(a, dtype=float), self.rolling), self.materials,
+               (rows, old.pn, old.pt, old.pr), (float(self.world.rest_speed), float(dt)), contacts)
+        rs.prepare(bodies, contacts, colours)
         bias_rate, mass_scale, impulse_scale = s.softness(h)
         sub = rs.RigidSubstep(h, s.iterations, bias_rate, mass_scale, impulse_scale, s.push_speed, s.slop,
                               *self.codes)
-        self._key, self._rows = key, rows
-        return bodies, contacts, sub
+        self._key, self._rows = key[order], rows
+        return bodies, contacts, sub, colours
 
-    def _conclude(self, t, dt, points, contacts, residual):
-        """The log (impacts, residual) and what the next step warm-starts from."""
+    def _conclude(self, t, dt, contacts, residual):
+        """The log (impacts, residual) and what the next step warm-starts from (in the sorted order)."""
         c = contacts
-        pt = c.pt[:, 0, None] * c.tangent[:, 0] + c.pt[:, 1, None] * c.tangent[:, 1]
         rows = self._rows
         was_hit = np.zeros(len(rows), bool)
         was_hit[rows >= 0] = self._previous.total[rows[rows >= 0]] > 0
         new = np.flatnonzero((c.total > 0) & ~was_hit)
-        # one impact per pair: its first point newly hit
-        first = new[np.unique(self._key[new, :2], axis=0, return_index=True)[1]] if len(new) else new
+        # one impact per pair: its first point newly hit (the pairs as one code, increasing in (a, b):
+        # NumPy's unique of rows sorts structured rows, many times slower than of numbers)
+        statics = len(self.world.shapes)
+        code = self._key[new, 0] * (len(self.inverse_masses) + statics) + (self._key[new, 1] + statics)
+        first = new[np.unique(code, return_index=True)[1]] if len(new) else new
         self.log.add_impacts(ImpactBlock(
-            np.full(len(first), float(t)), c.a[first], np.asarray(points.b, np.int64)[first], c.normal[first],
+            np.full(len(first), float(t)), c.a[first], np.asarray(self._points_b, np.int64)[first], c.normal[first],
             -c.hit[first], c.restitution[first], c.friction[first], c.total[first], (float(t), float(t + dt)),
             self.model.names, self.world.shapes))
         self.log.most_impacts_in_a_step = max(self.log.most_impacts_in_a_step, len(first))
         self.log.largest_residual = max(self.log.largest_residual, float(residual))
-        self._previous = Solved(self._key, c.normal, c.pn.copy(), pt, c.pr.copy(), c.total.copy())
+        self._previous = Solved(self._sorted_key, *in_sorted_rows(c, self._order))
 
     def rotation_at(self, steps: np.ndarray):
         """(orientations (K, N, 4), angular velocities (K, N, 3)) after each of ``steps`` steps (recorded ones)."""

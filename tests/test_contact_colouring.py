@@ -1,0 +1,96 @@
+"""The contact solver's coloured sweep order (issue 26): a proper colouring, and the same bytes on any threads.
+
+The colouring is checked against its definition (no two manifolds of a colour share a dynamic
+body; every point once; a manifold's points together and in their order), and the parallel
+sweep against itself on one thread: the coloured order is the one order, so a pile of boxes
+stepped on 1, 2 or 3 parts of each colour must give the same bytes.
+"""
+
+from __future__ import annotations
+
+import importlib
+
+import numba
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+from steplab.integrators import get_integrator
+from steplab.physics import Gravity, Model
+from steplab.physics import quaternion as quat
+from steplab.physics.collision import CollisionWorld, PairProperties, Plane, rigid_solver_step
+from steplab.physics.collision.contact_colouring import COLOURS, colour_contacts
+from steplab.physics.collision.rigid_solver_step import RigidScene, RigidSolverStep
+from steplab.physics.rigid_body import RigidBodies, principal_inertia
+
+#: the rigid narrow phase's module (the package's name ``manifolds`` is its function)
+manifolds = importlib.import_module("steplab.physics.collision.manifolds")
+
+
+@settings(max_examples=60, deadline=None)
+@given(st.lists(st.tuples(st.integers(0, 11), st.integers(-3, 11), st.integers(1, 4)), min_size=0, max_size=60),
+       st.integers(1, 4))
+def test_the_colours_are_a_proper_colouring_of_the_manifolds(manifolds_, threads):
+    """Random manifolds (a, b, points) among 12 bodies and 3 static shapes: each colour's manifolds share
+    no body (statics excepted), every row is listed once, each manifold's rows together and in order."""
+    pairs = sorted({(a, b): p for a, b, p in manifolds_ if a != b}.items())
+    a = np.array([x for (i, _), p in pairs for x in [i] * p], np.int64)
+    b = np.array([x for (_, j), p in pairs for x in [j] * p], np.int64)
+    order, colours = colour_contacts(a, b, 12, threads)
+    assert sorted(order.tolist()) == list(range(len(a)))
+    assert colours.threads == threads and colours.rows[-1] == len(a)
+    groups = len(colours.colour_start) - 1
+    assert colours.parallel == groups  # 12 bodies: never the overflow
+    for g in range(groups):
+        bodies = []
+        for m in range(colours.colour_start[g], colours.colour_start[g + 1]):
+            rows = order[colours.rows[m]:colours.rows[m + 1]]
+            assert len(set(zip(a[rows].tolist(), b[rows].tolist()))) == 1  # one manifold
+            assert np.all(np.diff(rows) == 1)  # its points in their order
+            bodies += [a[rows[0]]] + ([b[rows[0]]] if b[rows[0]] >= 0 else [])
+        assert len(bodies) == len(set(bodies))  # a colour's manifolds share no body
+
+
+def test_a_body_in_more_manifolds_than_colours_goes_to_the_overflow():
+    """Body 0 touching COLOURS + 2 others: the last two manifolds find every colour taken."""
+    a = np.zeros(COLOURS + 2, np.int64)
+    b = np.arange(1, COLOURS + 3, dtype=np.int64)
+    order, colours = colour_contacts(a, b, COLOURS + 3, 2)
+    assert colours.parallel == COLOURS and len(colours.colour_start) - 1 == COLOURS + 1
+    assert colours.colour_start[-1] - colours.colour_start[-2] == 2
+    assert order[-2:].tolist() == [COLOURS, COLOURS + 1]
+
+
+def box_pile(n, seed):
+    """n boxes (0.1-0.2 m) in a seeded jumble above a floor, turned and spinning: (step, y0)."""
+    rng = np.random.default_rng(seed)
+    half, masses = rng.uniform(0.05, 0.1, (n, 3)), rng.uniform(0.5, 2.0, n)
+    inertia = np.array([principal_inertia("box", m, 0.0, 2 * h) for m, h in zip(masses, half)])
+    bodies = RigidBodies(np.arange(n), inertia, quat.normalize(np, rng.normal(size=(n, 4))),
+                         2 * rng.normal(size=(n, 3)), ("box",) * n)
+    world = CollisionWorld(shapes=(Plane(np.array([0.0, 0.0, 1.0])),), method="solver",
+                           pair_properties=PairProperties(0.2, 0.5),
+                           rigid=RigidScene(np.full(n, manifolds.BOX, np.int8), np.zeros(n), half, bodies))
+    k = np.arange(n)
+    side = int(np.ceil(np.sqrt(n / 3)))
+    position = np.stack([k % side * 0.3, k // side % side * 0.3, 0.2 + k // side**2 * 0.3], axis=1)
+    step = RigidSolverStep(world, Model(masses, np.full(n, 0.1), [Gravity()]), get_integrator("semi-implicit-euler"))
+    return step, np.stack([position + rng.uniform(-0.03, 0.03, (n, 3)), rng.normal(size=(n, 3))])
+
+
+@pytest.mark.parametrize("parts", [2, 3])
+def test_the_parallel_sweep_gives_the_bytes_of_one_thread(monkeypatch, parts):
+    """A pile of 40 boxes, 40 steps, every stage parallel (the size thresholds set to 0): the same bytes
+    with each colour cut into ``parts`` parts on Numba's threads as on one thread."""
+    monkeypatch.setattr(rigid_solver_step, "COLOURED_BODIES", 0)
+    monkeypatch.setattr(manifolds, "PARALLEL_PAIRS", 0)
+    runs = []
+    for threads in (1, parts):
+        # the parts each colour is cut into (Numba runs them on the threads it has)
+        monkeypatch.setattr(numba, "get_num_threads", lambda threads=threads: threads)
+        step, y = box_pile(40, seed=3)
+        for k in range(40):
+            y, _ = step(k / 60, y, 1 / 60, None)
+        runs.append((y.tobytes(), step.orientation.tobytes(), step.omega.tobytes(), len(step._previous.pn)))
+    assert runs[0][3] > 40  # the boxes came to touch: many manifolds, several colours
+    assert runs[0] == runs[1]
