@@ -47,7 +47,7 @@ from typing import NamedTuple
 import numpy as np
 from numba import njit
 
-from .vector4 import axpy4, gather4
+from .vector4 import axpy4, gather4, prefetch
 
 
 def factors(compliance, damping, inverse_mass_sum, h):
@@ -197,6 +197,12 @@ def padded(a: np.ndarray) -> np.ndarray:
     return np.concatenate([a, np.zeros((len(a), 1))], axis=1)
 
 
+#: constraints ahead of the gather whose columns the sweep prefetches (:func:`_segment`): far enough to
+#: cover a read from memory (~100 ns, ~3 ns a constraint), near enough to stay in L1 (128 x 32 bytes);
+#: 96 to 192 measured alike, from cold caches on the bench's cloth (docs/performance.md)
+PREFETCH_AHEAD = 128
+
+
 @njit(inline="always", error_model="numpy")
 def _segment(lo, hi, d_, x_, inverse_mass, sweep, carried, work):
     """One segment's projections (constraints lo to hi, no two sharing a body) on the flat padded rows
@@ -204,8 +210,17 @@ def _segment(lo, hi, d_, x_, inverse_mass, sweep, carried, work):
     d, squared_, s_ = work.d.reshape(-1), work.colour[0], work.colour[1]
     # the segment's columns as slices indexed from 0: no negative-index wraparound in the loops
     i, j = sweep.i[lo:hi], sweep.j[lo:hi]
-    # gather: d = x_prev_j - x_prev_i + u, u = dx_j - dx_i, |d|^2 and d . u (grad C . (x - x_prev) times l)
+    # gather: d = x_prev_j - x_prev_i + u, u = dx_j - dx_i, |d|^2 and d . u (grad C . (x - x_prev) times l);
+    # meanwhile, ask for the columns PREFETCH_AHEAD constraints on (this segment's solve, the next
+    # segment's gather): the columns are read once a step, from memory when the caches are cold, and the
+    # hardware prefetcher alone leaves those reads mostly unoverlapped with the sweep's work
     for k in range(hi - lo):
+        ahead = lo + k + PREFETCH_AHEAD  # past the last constraint at the end: harmless for a prefetch
+        prefetch(sweep.i, ahead)
+        prefetch(sweep.j, ahead)
+        prefetch(sweep.rest_length, ahead)
+        prefetch(sweep.gamma, ahead)
+        prefetch(sweep.denominator, ahead)
         squared_[k], s_[k] = gather4(d, 4 * k, x_, d_, 4 * np.intp(i[k]), 4 * np.intp(j[k]))
     # solve, vectorised: dlambda n = s d with n = d / l (:func:`projection`)
     rest, gamma, denominator = sweep.rest_length[lo:hi], sweep.gamma[lo:hi], sweep.denominator[lo:hi]
