@@ -201,6 +201,9 @@ def padded(a: np.ndarray) -> np.ndarray:
 #: cover a read from memory (~100 ns, ~3 ns a constraint), near enough to stay in L1 (128 x 32 bytes);
 #: 96 to 192 measured alike, from cold caches on the bench's cloth (docs/performance.md)
 PREFETCH_AHEAD = 128
+#: the sweep prefetches at every PREFETCH_EVERY-th constraint: a cache line of a float64 column (two
+#: prefetches per line of a uint32 one); prefetching at every constraint cost the warm step 3 to 4 %
+PREFETCH_EVERY = CACHE_LINE // 8
 
 
 @njit(inline="always", error_model="numpy")
@@ -215,12 +218,13 @@ def _segment(lo, hi, d_, x_, inverse_mass, sweep, carried, work):
     # segment's gather): the columns are read once a step, from memory when the caches are cold, and the
     # hardware prefetcher alone leaves those reads mostly unoverlapped with the sweep's work
     for k in range(hi - lo):
-        ahead = lo + k + PREFETCH_AHEAD  # past the last constraint at the end: harmless for a prefetch
-        prefetch(sweep.i, ahead)
-        prefetch(sweep.j, ahead)
-        prefetch(sweep.rest_length, ahead)
-        prefetch(sweep.gamma, ahead)
-        prefetch(sweep.denominator, ahead)
+        if k % PREFETCH_EVERY == 0:
+            ahead = lo + k + PREFETCH_AHEAD  # past the last constraint at the end: harmless for a prefetch
+            prefetch(sweep.i, ahead)
+            prefetch(sweep.j, ahead)
+            prefetch(sweep.rest_length, ahead)
+            prefetch(sweep.gamma, ahead)
+            prefetch(sweep.denominator, ahead)
         squared_[k], s_[k] = gather4(d, 4 * k, x_, d_, 4 * np.intp(i[k]), 4 * np.intp(j[k]))
     # solve, vectorised: dlambda n = s d with n = d / l (:func:`projection`)
     rest, gamma, denominator = sweep.rest_length[lo:hi], sweep.gamma[lo:hi], sweep.denominator[lo:hi]
