@@ -204,7 +204,7 @@ def padded(a: np.ndarray) -> np.ndarray:
 #: 96 to 192 measured alike, from cold caches on the bench's cloth (docs/performance.md)
 PREFETCH_AHEAD = 128
 #: the sweep prefetches at every PREFETCH_EVERY-th constraint: a cache line of a float64 column (two
-#: prefetches per line of a uint32 one); prefetching at every constraint cost the warm step 3 to 4 %
+#: prefetches per line of a uint32 one); prefetching at every constraint cost the warm step about 3 %
 PREFETCH_EVERY = CACHE_LINE // 8
 
 
