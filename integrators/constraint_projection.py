@@ -35,7 +35,9 @@ gamma and the denominator (1 + gamma) w + alpha_tilde) is computed once per run
 (:func:`sweep_columns`). Each body's displacement and start position are padded rows
 (x, y, z, 0) that one 256-bit load or store moves (:mod:`.vector4`); the colours are swept
 in bands of bodies (:func:`wavefront`), each body still receiving its projections in colour
-order (the same bytes), so that a band's bodies stay in the core's caches. On the
+order (the same bytes), so that a band's bodies stay in the core's caches; the gather prefetches
+the columns :data:`PREFETCH_AHEAD` constraints ahead (their reads from memory then overlap the
+sweep when the caches are cold). On the
 25,600-particle cloth, one step: 0.59-0.62 ms gathered per colour, 0.48-0.50 ms now (warm;
 docs/performance.md has the steps between and the cold-cache times).
 """
@@ -47,7 +49,7 @@ from typing import NamedTuple
 import numpy as np
 from numba import njit
 
-from .vector4 import axpy4, gather4
+from .vector4 import axpy4, gather4, prefetch
 
 
 def factors(compliance, damping, inverse_mass_sum, h):
@@ -197,6 +199,15 @@ def padded(a: np.ndarray) -> np.ndarray:
     return np.concatenate([a, np.zeros((len(a), 1))], axis=1)
 
 
+#: constraints ahead of the gather whose columns the sweep prefetches (:func:`_segment`): far enough to
+#: cover a read from memory (~100 ns, ~3 ns a constraint), near enough to stay in L1 (128 x 32 bytes);
+#: 96 to 192 measured alike, from cold caches on the bench's cloth (docs/performance.md)
+PREFETCH_AHEAD = 128
+#: the sweep prefetches at every PREFETCH_EVERY-th constraint: a cache line of a float64 column (two
+#: prefetches per line of a uint32 one); prefetching at every constraint cost the warm step about 3 %
+PREFETCH_EVERY = CACHE_LINE // 8
+
+
 @njit(inline="always", error_model="numpy")
 def _segment(lo, hi, d_, x_, inverse_mass, sweep, carried, work):
     """One segment's projections (constraints lo to hi, no two sharing a body) on the flat padded rows
@@ -204,8 +215,18 @@ def _segment(lo, hi, d_, x_, inverse_mass, sweep, carried, work):
     d, squared_, s_ = work.d.reshape(-1), work.colour[0], work.colour[1]
     # the segment's columns as slices indexed from 0: no negative-index wraparound in the loops
     i, j = sweep.i[lo:hi], sweep.j[lo:hi]
-    # gather: d = x_prev_j - x_prev_i + u, u = dx_j - dx_i, |d|^2 and d . u (grad C . (x - x_prev) times l)
+    # gather: d = x_prev_j - x_prev_i + u, u = dx_j - dx_i, |d|^2 and d . u (grad C . (x - x_prev) times l);
+    # meanwhile, ask for the columns PREFETCH_AHEAD constraints on (this segment's solve, the next
+    # segment's gather): the columns are read once a step, from memory when the caches are cold, and the
+    # hardware prefetcher alone leaves those reads mostly unoverlapped with the sweep's work
     for k in range(hi - lo):
+        if k % PREFETCH_EVERY == 0:
+            ahead = lo + k + PREFETCH_AHEAD  # past the last constraint at the end: harmless for a prefetch
+            prefetch(sweep.i, ahead)
+            prefetch(sweep.j, ahead)
+            prefetch(sweep.rest_length, ahead)
+            prefetch(sweep.gamma, ahead)
+            prefetch(sweep.denominator, ahead)
         squared_[k], s_[k] = gather4(d, 4 * k, x_, d_, 4 * np.intp(i[k]), 4 * np.intp(j[k]))
     # solve, vectorised: dlambda n = s d with n = d / l (:func:`projection`)
     rest, gamma, denominator = sweep.rest_length[lo:hi], sweep.gamma[lo:hi], sweep.denominator[lo:hi]

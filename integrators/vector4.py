@@ -11,12 +11,15 @@ here as LLVM vector operations:
 - :func:`gather4` ``(out, k, x, d, a, b)``: ``out[k:k+4] = (x[b:b+4] - x[a:a+4]) + (d[b:b+4] - d[a:a+4])``
   and returns ``(e0 e0 + e1 e1 + e2 e2, e0 u0 + e1 u1 + e2 u2)`` with e that difference and
   u = d[b:b+4] - d[a:a+4], summed left to right;
-- :func:`axpy4` ``(y, i, x, j, w)``: ``y[i:i+4] += w x[j:j+4]``.
+- :func:`axpy4` ``(y, i, x, j, w)``: ``y[i:i+4] += w x[j:j+4]``;
+- :func:`prefetch` ``(a, k)``: a software prefetch of the cache line holding ``a.flat[k]``
+  (LLVM's ``llvm.prefetch``, x86 ``prefetcht0``), which moves nothing the program sees.
 
 Each lane is the scalar operation it replaces (IEEE add, subtract and multiply, no fused
 multiply-add, the sums in the scalar order), so the bytes are those of the scalar code; the
 plain Python functions here are that scalar code, which ``py_func`` runs and the tests
-compare against. Indices are element offsets (4 * body); nothing is bounds-checked.
+compare against (``prefetch``'s is a no-op). Indices are element offsets (4 * body); nothing is
+bounds-checked (a prefetch past an array's end is harmless: it never faults).
 """
 
 from __future__ import annotations
@@ -41,6 +44,10 @@ def gather4(out, k, x, d, a, b):
 def axpy4(y, i, x, j, w):
     """y[i:i+4] += w x[j:j+4]."""
     y[i:i + 4] += w * x[j:j + 4]
+
+
+def prefetch(a, k):
+    """Ask for the cache line holding element ``k`` of ``a`` (flat), ahead of its use; in Python, nothing."""
 
 
 def _pointer(context, builder, array_type, array, index):
@@ -105,6 +112,29 @@ def _axpy4(typingctx, y, i, x, j, w):
     return types.void(y, i, x, j, w), codegen
 
 
+#: llvm.prefetch's arguments: a read (0, not a write), kept in every cache level (locality 3: prefetcht0), data (1)
+_READ, _LOCALITY, _DATA = 0, 3, 1
+
+
+@intrinsic
+def _prefetch(typingctx, a, k):
+    if not (isinstance(a, types.Array) and a.layout == "C" and isinstance(k, types.Integer)):
+        return None
+
+    def codegen(context, builder, signature, args):
+        a_, k_ = args
+        data = context.make_array(signature.args[0])(context, builder, a_).data
+        # no `inbounds`: k may lie past the end, which a prefetch (an x86 hint) allows
+        address = builder.bitcast(builder.gep(data, [k_]), ir.IntType(8).as_pointer())
+        i32 = ir.IntType(32)
+        function = cgutils.get_or_insert_function(
+            builder.module, ir.FunctionType(ir.VoidType(), [address.type, i32, i32, i32]), "llvm.prefetch.p0")
+        builder.call(function, [address] + [ir.Constant(i32, n) for n in (_READ, _LOCALITY, _DATA)])
+        return context.get_dummy_value()
+
+    return types.void(a, k), codegen
+
+
 @overload(gather4, inline="always")
 def _gather4_compiled(out, k, x, d, a, b):
     return lambda out, k, x, d, a, b: _gather4(out, k, x, d, a, b)
@@ -113,3 +143,8 @@ def _gather4_compiled(out, k, x, d, a, b):
 @overload(axpy4, inline="always")
 def _axpy4_compiled(y, i, x, j, w):
     return lambda y, i, x, j, w: _axpy4(y, i, x, j, w)
+
+
+@overload(prefetch, inline="always")
+def _prefetch_compiled(a, k):
+    return lambda a, k: _prefetch(a, k)

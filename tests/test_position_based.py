@@ -388,3 +388,31 @@ def test_both_sweeps_evaluate_the_one_projection():
     assert inspect.getsource(constraint_projection).count("* length - gamma") == 1
     assert "* length - gamma" not in inspect.getsource(constraint_projection_jax)
     assert constraint_projection._projection.py_func is constraint_projection.projection
+
+
+def test_the_sweeps_prefetch_compiles_to_a_prefetch_that_changes_nothing():
+    # the sweep's software prefetch (integrators/vector4.py): compiled, it is the CPU's prefetch
+    # instruction (its plain-Python twin, a no-op, would pass every byte test), and a prefetch past the
+    # end of an array, as the sweep's last constraints make, neither faults nor changes a result
+    import platform
+
+    from numba import njit
+    from steplab.integrators.constraint_projection import PREFETCH_AHEAD
+    from steplab.integrators.vector4 import prefetch
+
+    @njit
+    def summed_with_prefetch(a, ahead):
+        total = 0.0
+        for k in range(a.shape[0]):
+            prefetch(a, k + ahead)
+            total += a[k]
+        return total
+
+    a = np.arange(1000.0)
+    for ahead in (PREFETCH_AHEAD, 2**22):  # 2**22 elements: 32 MB past the end
+        assert summed_with_prefetch(a, ahead) == 499500.0
+    assert prefetch(a, 10) is None
+    instruction = {"x86_64": "prefetcht0", "AMD64": "prefetcht0", "aarch64": "prfm", "arm64": "prfm"}.get(
+        platform.machine())
+    if instruction is not None:
+        assert instruction in summed_with_prefetch.inspect_asm(summed_with_prefetch.signatures[0])
