@@ -472,6 +472,27 @@ def test_interrupted_run_prints_one_line_and_writes_no_file(tmp_path):
     assert not list(tmp_path.iterdir())
 
 
+def test_a_ctrl_c_that_lands_in_a_garbage_collection_callback_is_not_lost(tmp_path):
+    """Python drops a KeyboardInterrupt raised inside a gc callback ("Exception ignored"); JAX runs
+    one at every collection, so a Ctrl-C landing there used to let the run go on to status 0.
+    Here a callback holds the first collection for 2 s and the Ctrl-C lands in it, every time."""
+    out = tmp_path / "t.csv"
+    argv = ["run", "projectile", "--dt", "1e-6", "--save-every", "1000", "--out", str(out)]
+    code = ("import gc, os, sys, time\nfrom steplab.cli import main\nheld = []\n"
+            "def hold(phase, info):\n"
+            "    if phase == 'start' and not held:\n"
+            "        held.append(1)\n        print('ready', flush=True)\n        time.sleep(2.0)\n"
+            "gc.callbacks.append(hold)\ngc.collect()\nheld.clear()\nsys.stdout.write('')\n"
+            f"status = main({argv!r})\nsys.stderr.flush()\nos._exit(status)\n")
+    process = subprocess.Popen([sys.executable, "-c", code], stdout=subprocess.PIPE, stderr=subprocess.PIPE, cwd=ROOT)
+    assert process.stdout.readline() == b"ready\n"  # the collection before main: let it pass
+    assert process.stdout.readline() == b"ready\n"  # a collection inside main, held
+    process.send_signal(signal.SIGINT)
+    assert process.wait(timeout=600) == 130
+    assert process.stderr.read() == b"steplab run: error: interrupted\n"  # the dropped one is not printed
+    assert not out.exists()
+
+
 def test_temporary_files_of_a_killed_run_are_removed_when_the_next_run_starts(tmp_path):
     def compute(params, progress=None):
         return {"value": 1}

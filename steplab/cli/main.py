@@ -11,6 +11,7 @@ from pathlib import Path
 
 from .args import Parser
 from .errors import BAD_INPUT, EXIT_BAD_INPUT, EXIT_DIVERGED, EXIT_INTERRUPTED, FAILED_RUN, fail, raised
+from .interrupt import sticky_interrupt, stop_repeating
 
 #: each command's module in this package, in the order ``steplab --help`` lists them; each has
 #: ``add_parser(sub)`` (which imports nothing heavy) and ``command(args) -> status``
@@ -36,6 +37,16 @@ def build_parser() -> Parser:
 
 
 def main(argv=None) -> int:
+    try:
+        with sticky_interrupt():  # Ctrl-C anywhere from here on: one line and status 130, never lost
+            return _main(argv)
+    finally:
+        if argv is None:  # the command itself, not a call from Python: the work is done, so a Ctrl-C
+            # now (during the interpreter's shutdown) would only print a traceback after the result
+            signal.signal(signal.SIGINT, signal.SIG_IGN)
+
+
+def _main(argv) -> int:
     # a name that is not UTF-8 (a surrogate escape from argv) prints escaped, never crashes
     if callable(getattr(sys.stdout, "reconfigure", None)):
         sys.stdout.reconfigure(errors="backslashreplace")
@@ -54,11 +65,8 @@ def main(argv=None) -> int:
             warnings.simplefilter("default", PluginWarning)
             return _run_command(args)
     except KeyboardInterrupt:
+        stop_repeating()
         return fail(command, "interrupted", EXIT_INTERRUPTED)
-    finally:
-        if argv is None:  # the command itself, not a call from Python: the work is done, so a Ctrl-C
-            # now (during the interpreter's shutdown) would only print a traceback after the result
-            signal.signal(signal.SIGINT, signal.SIG_IGN)
 
 
 def _run_command(args) -> int:
