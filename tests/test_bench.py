@@ -28,7 +28,7 @@ TINY = bench.Config(small_steps=300, particles=500, cloth_side=6, broadphase_n=2
                     max_log2_steps=14, batch=3, batch_steps=50, repeats=1, python_repeats=1, python_steps=50,
                     loop_steps=2, compile_scenes=("projectile",), collision_runs=((30, 3),), max_rounds=4,
                     round_budget_seconds=1.0, stack_pyramid_rows=3, stack_steps=1,
-                    box_pit_runs=((30, 2),))
+                    box_pit_runs=((30, 2),), crowded_pit=(30, 1.0, 2))
 #: final states of the same method, dt and steps agree to this (m, m/s): round-off only
 ROUND_OFF = 1e-12
 
@@ -325,6 +325,8 @@ def test_tiny_bench_run_measures_the_ball_pit(tiny_record):
     target = tiny_record["targets"]["real_time_ball_pit_30"]
     assert target["target"] == 4.0 and target["seconds"] == pytest.approx(1 / target["real_time_factor"])
     assert "ball_pit_30" in bench.format_table(tiny_record) and "`ball_pit_30`" in bench.format_markdown(tiny_record)
+    # the crowded pit times its contenders only (no balls inside, no impacts): its rows print all the same
+    assert "`crowded_pit_30`" in bench.format_markdown(tiny_record) and "crowded_pit_30" in bench.format_table(tiny_record)
 
 
 def test_ball_pit_scene_files_are_the_generators():

@@ -37,8 +37,9 @@ def collision_rows(record: dict) -> list[dict]:
             mine = name in targets
             out.append({"pit": label, "balls": pit["balls"], "steps": pit["steps"], "contender": c["settings"],
                         "per_step": c["per_step_seconds"], "real_time_factor": c["real_time_factor"],
-                        "target": targets.get(name), "balls_inside": c["balls_inside"],
-                        "impacts": f"{c['impacts']:,}" if mine else ""})
+                        # the crowded pit times its contenders only: no count of balls or impacts
+                        "target": targets.get(name), "balls_inside": c.get("balls_inside"),
+                        "impacts": f"{c['impacts']:,}" if mine and "impacts" in c else ""})
         for note in pit["not_compared"].values():
             out.append({"pit": label, "balls": pit["balls"], "steps": pit["steps"], "contender": note,
                         "per_step": None, "real_time_factor": None, "target": None, "balls_inside": None,
