@@ -51,13 +51,9 @@ class Colours(NamedTuple):
 
 
 @njit(cache=True)
-def colour_contacts(a, b, n, threads):
-    """(order, :class:`Colours`) of contacts sorted by (a, b, ...) between ``n`` bodies (b < 0: a
-    static shape), to be swept on ``threads`` threads.
-
-    ``order`` (C,) lists the rows colour by colour, the manifolds of one colour in their sorted
-    order and the points of one manifold together, in theirs; the colours' rows and manifolds are
-    those of the contacts taken in that order, which the sweep streams through."""
+def manifold_rows(a, b):
+    """Where each manifold's points start among contacts sorted by (a, b, ...), and their count
+    last: (manifolds + 1,), the points of manifold m at rows[m]:rows[m + 1]."""
     count = len(a)
     rows = np.empty(count + 1, np.int64)
     blocks = 0
@@ -66,6 +62,20 @@ def colour_contacts(a, b, n, threads):
             rows[blocks] = k
             blocks += 1
     rows[blocks] = count
+    return rows[:blocks + 1]
+
+
+@njit(cache=True)
+def colour_contacts(a, b, n, threads):
+    """(order, :class:`Colours`) of contacts sorted by (a, b, ...) between ``n`` bodies (b < 0: a
+    static shape), to be swept on ``threads`` threads.
+
+    ``order`` (C,) lists the rows colour by colour, the manifolds of one colour in their sorted
+    order and the points of one manifold together, in theirs; the colours' rows and manifolds are
+    those of the contacts taken in that order, which the sweep streams through."""
+    count = len(a)
+    rows = manifold_rows(a, b)
+    blocks = len(rows) - 1
     used = np.zeros(n, np.uint64)  # the colours each body has, as bits
     colour = np.empty(blocks, np.int64)
     sizes = np.zeros(COLOURS + 1, np.int64)
@@ -114,17 +124,11 @@ def colour_contacts(a, b, n, threads):
 def in_sorted_order(a, b):
     """(order, :class:`Colours`) that sweep contacts sorted by (a, b, ...) in that order, on one
     thread: the identity order, all manifolds in one serial group."""
-    count = len(a)
-    rows = np.empty(count + 1, np.int64)
-    blocks = 0
-    for k in range(count):
-        if k == 0 or a[k] != a[k - 1] or b[k] != b[k - 1]:
-            rows[blocks] = k
-            blocks += 1
-    rows[blocks] = count
+    rows = manifold_rows(a, b)
+    blocks = len(rows) - 1
     colour_start = np.zeros(2 if blocks else 1, np.int64)
     colour_start[-1] = blocks
-    return np.arange(count), Colours(rows[:blocks + 1], colour_start, 0, 1)
+    return np.arange(len(a)), Colours(rows, colour_start, 0, 1)
 
 
 @njit(cache=True, inline="always")
