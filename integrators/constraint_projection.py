@@ -105,13 +105,13 @@ class Substeps(NamedTuple):
 
 
 class Workspace(NamedTuple):
-    """Scratch a step writes, allocated once per run: the displacement ``dx`` and the positions at the
-    start of the substep ``x_prev``, (N, 4) each, padded rows (x, y, z, 0) (:mod:`.vector4`); the
-    multipliers ``lam`` (P,); one segment's d = x_j - x_i, ``d`` (largest segment, 4), and ``colour``
-    (2, largest segment), its |d|^2 and d . (dx_j - dx_i), then its s."""
+    """Scratch a step writes, allocated once per run: the ``state`` q, v (2, N, 4) as padded rows (x, y, z, 0)
+    (:mod:`.vector4`), which the step moves in place (during a substep v's rows carry the displacement dx,
+    q's the positions at the start of the substep); the multipliers ``lam`` (P,); one segment's
+    d = x_j - x_i, ``d`` (largest segment, 4), and ``colour`` (2, largest segment), its |d|^2 and
+    d . (dx_j - dx_i), then its s."""
 
-    dx: np.ndarray
-    x_prev: np.ndarray
+    state: np.ndarray
     lam: np.ndarray
     d: np.ndarray
     colour: np.ndarray
@@ -177,8 +177,8 @@ def sweep_columns(constraints, segments, inverse_mass, h: float) -> Sweep:
 
 def workspace(n_bodies: int, n_constraints: int, segments: np.ndarray) -> Workspace:
     largest = max(int(np.diff(segments).max(initial=0)), 1)
-    return Workspace(aligned_zeros((n_bodies, 4)), aligned_zeros((n_bodies, 4)), np.empty(n_constraints),
-                     aligned_zeros((largest, 4)), np.empty((2, largest)))
+    return Workspace(aligned_zeros((2, n_bodies, 4)), np.empty(n_constraints), aligned_zeros((largest, 4)),
+                     np.empty((2, largest)))
 
 
 #: bytes of a cache line
@@ -274,26 +274,24 @@ def project(dx, x_prev, inverse_mass, sweep, iterations, carried, work):
 @njit(cache=True, error_model="numpy")
 def advance(q, v, external, inverse_mass, sweep, steps, work):
     """``steps.substeps`` substeps of ``steps.h`` of a position-based step (a :class:`Substeps`), on q, v
-    (N, 3) in place, allocating nothing:
+    (N, 4), padded rows (x, y, z, 0), in place, allocating nothing:
 
-        dx = h (v + h a_ext),  project dx (:func:`project`),  q += dx,  v = dx / h.
+        v <- dx = h (v + h a_ext),  project dx (:func:`project`, from x_prev = q),  q += dx,  v = dx / h.
 
-    ``external`` (N, 3), m/s^2; ``sweep`` a :class:`Sweep` for h; ``work`` a :class:`Workspace`, whose
-    padded rows carry dx and the positions at the start of the substep through the sweep.
+    ``external`` (N, 3), m/s^2; ``sweep`` a :class:`Sweep` for h; ``work`` a :class:`Workspace`. The
+    displacement lives in v's rows and the start positions are q's own: no copy of the state is
+    written, so a step from cold caches reads q and v once and writes them in place (a separate dx
+    and x_prev, written first, cost their reads for ownership from memory, 1.6 MB on the bench's cloth).
     """
-    dx, x_prev, h = work.dx, work.x_prev, steps.h
+    h = steps.h
+    q_, v_ = q.reshape(-1), v.reshape(-1)
     for _ in range(steps.substeps):
         for b in range(q.shape[0]):
             for c in range(3):
-                x_prev[b, c] = q[b, c]
-                dx[b, c] = h * (v[b, c] + h * external[b, c])  # predict: x* = q + h v*, v* = v + h a_ext
-        project(dx, x_prev, inverse_mass, sweep, steps.iterations, steps.carried, work)
-        # update: v = dx / h, divided in one contiguous loop that the compiler vectorises (into x_prev,
-        # no longer needed; scalar divisions here cost a quarter of the step), then q += dx
-        d_, x_ = dx.reshape(-1), x_prev.reshape(-1)
-        for k in range(d_.shape[0]):
-            x_[k] = d_[k] / h
-        for b in range(q.shape[0]):
-            for c in range(3):
-                q[b, c] += dx[b, c]
-                v[b, c] = x_prev[b, c]
+                v[b, c] = h * (v[b, c] + h * external[b, c])  # predict: x* = q + h v*, v* = v + h a_ext
+        project(v, q, inverse_mass, sweep, steps.iterations, steps.carried, work)
+        # update, in one contiguous loop over the padded rows that the compiler vectorises (scalar
+        # divisions cost a quarter of the step); the padding stays 0 (0 + 0, 0 / h)
+        for k in range(q_.shape[0]):
+            q_[k] += v_[k]
+            v_[k] = v_[k] / h
