@@ -21,7 +21,7 @@ w / (w + alpha_tilde) of C, Mueller et al.'s (2007) stiffness per iteration, wit
 carried between iterations. The sweep is Gauss-Seidel (each projection sees the positions
 the previous ones moved), a Numba loop; the NumPy path calls it, and the JAX path
 (:mod:`.constraint_projection_jax`) is the same sweep. Both evaluate the projection through the
-one definition here, :func:`factors` and :func:`projection` (plain arithmetic, which Numba
+one definition, :func:`.projection_law.factors` and :func:`.projection_law.projection` (plain arithmetic, which Numba
 compiles into the kernel and JAX evaluates on a colour's columns).
 
 The constraints are swept in the order of a greedy edge colouring (:func:`ordered`), colour
@@ -49,31 +49,9 @@ from typing import NamedTuple
 import numpy as np
 from numba import njit
 
-from .vector4 import axpy4, gather4, prefetch
-
-
-def factors(compliance, damping, inverse_mass_sum, h):
-    """(alpha_tilde, gamma, denominator) of a constraint for substeps of ``h``: alpha / h^2, alpha beta / h and
-    (1 + gamma) w + alpha_tilde (w = ``inverse_mass_sum``; a pair of pinned bodies, w = 0, is the caller's to skip)."""
-    inv_h = 1.0 / h
-    alpha_tilde = compliance * (inv_h * inv_h)
-    gamma = compliance * damping * inv_h
-    return alpha_tilde, gamma, (1.0 + gamma) * inverse_mass_sum + alpha_tilde
-
-
-def projection(rest_length, length, approach, gamma, below, held):
-    """s = dlambda / l, the projection's move per unit of d (x_i -= w_i s d, x_j += w_j s d).
-
-    dlambda = (-C - alpha_tilde lambda - gamma grad C . (x - x_prev)) / denominator with C = l - L,
-    grad C . (x - x_prev) = d . u / l (``approach`` = d . u) and ``held`` = alpha_tilde lambda;
-    numerator and denominator multiplied by l, ``below`` = denominator l^2 = denominator |d|^2, leave
-    one square root (l) and one division per projection. ``below`` = 0 (no direction, or two pinned
-    bodies) gives inf or NaN: the callers take s = 0 there.
-    """
-    return ((rest_length - length - held) * length - gamma * approach) / below
-
-
-_projection = njit(inline="always", error_model="numpy")(projection)
+from .projection_block import LANES, project_block, project_one
+from .projection_law import factors
+from .vector4 import prefetch
 
 
 class Sweep(NamedTuple):
@@ -107,14 +85,10 @@ class Substeps(NamedTuple):
 class Workspace(NamedTuple):
     """Scratch a step writes, allocated once per run: the ``state`` q, v (2, N, 4) as padded rows (x, y, z, 0)
     (:mod:`.vector4`), which the step moves in place (during a substep v's rows carry the displacement dx,
-    q's the positions at the start of the substep); the multipliers ``lam`` (P,); one segment's
-    d = x_j - x_i, ``d`` (largest segment, 4), and ``colour`` (2, largest segment), its |d|^2 and
-    d . (dx_j - dx_i), then its s."""
+    q's the positions at the start of the substep), and the multipliers ``lam`` (P,)."""
 
     state: np.ndarray
     lam: np.ndarray
-    d: np.ndarray
-    colour: np.ndarray
 
 
 def ordered(constraints, n_bodies: int):
@@ -175,10 +149,8 @@ def sweep_columns(constraints, segments, inverse_mass, h: float) -> Sweep:
                  alpha_tilde, gamma, denominator, segments)
 
 
-def workspace(n_bodies: int, n_constraints: int, segments: np.ndarray) -> Workspace:
-    largest = max(int(np.diff(segments).max(initial=0)), 1)
-    return Workspace(aligned_zeros((2, n_bodies, 4)), np.empty(n_constraints), aligned_zeros((largest, 4)),
-                     np.empty((2, largest)))
+def workspace(n_bodies: int, n_constraints: int) -> Workspace:
+    return Workspace(aligned_zeros((2, n_bodies, 4)), np.empty(n_constraints))
 
 
 #: bytes of a cache line
@@ -203,53 +175,28 @@ def padded(a: np.ndarray) -> np.ndarray:
 #: cover a read from memory (~100 ns, ~3 ns a constraint), near enough to stay in L1 (128 x 32 bytes);
 #: 96 to 192 measured alike, from cold caches on the bench's cloth (docs/performance.md)
 PREFETCH_AHEAD = 128
-#: the sweep prefetches at every PREFETCH_EVERY-th constraint: a cache line of a float64 column (two
-#: prefetches per line of a uint32 one); prefetching at every constraint cost the warm step about 3 %
-PREFETCH_EVERY = CACHE_LINE // 8
 
 
 @njit(inline="always", error_model="numpy")
 def _segment(lo, hi, d_, x_, inverse_mass, sweep, carried, work):
     """One segment's projections (constraints lo to hi, no two sharing a body) on the flat padded rows
-    ``d_`` (dx) and ``x_`` (x_prev): gather, solve, scatter."""
-    d, squared_, s_ = work.d.reshape(-1), work.colour[0], work.colour[1]
-    # the segment's columns as slices indexed from 0: no negative-index wraparound in the loops
-    i, j = sweep.i[lo:hi], sweep.j[lo:hi]
-    # gather: d = x_prev_j - x_prev_i + u, u = dx_j - dx_i, |d|^2 and d . u (grad C . (x - x_prev) times l);
-    # meanwhile, ask for the columns PREFETCH_AHEAD constraints on (this segment's solve, the next
-    # segment's gather): the columns are read once a step, from memory when the caches are cold, and the
-    # hardware prefetcher alone leaves those reads mostly unoverlapped with the sweep's work
-    for k in range(hi - lo):
-        if k % PREFETCH_EVERY == 0:
-            ahead = lo + k + PREFETCH_AHEAD  # past the last constraint at the end: harmless for a prefetch
-            prefetch(sweep.i, ahead)
-            prefetch(sweep.j, ahead)
-            prefetch(sweep.rest_length, ahead)
-            prefetch(sweep.gamma, ahead)
-            prefetch(sweep.denominator, ahead)
-        squared_[k], s_[k] = gather4(d, 4 * k, x_, d_, 4 * np.intp(i[k]), 4 * np.intp(j[k]))
-    # solve, vectorised: dlambda n = s d with n = d / l (:func:`projection`)
-    rest, gamma, denominator = sweep.rest_length[lo:hi], sweep.gamma[lo:hi], sweep.denominator[lo:hi]
-    if carried:
-        alpha_tilde, held = sweep.alpha_tilde[lo:hi], work.lam[lo:hi]
-        for k in range(hi - lo):
-            length = np.sqrt(squared_[k])
-            below = denominator[k] * squared_[k]
-            s = _projection(rest[k], length, s_[k], gamma[k], below, alpha_tilde[k] * held[k])
-            s = s if below != 0.0 else 0.0
-            held[k] += s * length
-            s_[k] = s
-    else:
-        for k in range(hi - lo):
-            length = np.sqrt(squared_[k])
-            below = denominator[k] * squared_[k]
-            s = _projection(rest[k], length, s_[k], gamma[k], below, 0.0)
-            s_[k] = s if below != 0.0 else 0.0
-    # scatter: x_i -= w_i s d, x_j += w_j s d (x - y is x + (-y) exactly)
-    for k in range(hi - lo):
-        a, b = np.intp(i[k]), np.intp(j[k])
-        axpy4(d_, 4 * a, d, 4 * k, -(inverse_mass[a] * s_[k]))
-        axpy4(d_, 4 * b, d, 4 * k, inverse_mass[b] * s_[k])
+    ``d_`` (dx) and ``x_`` (x_prev): LANES at a time (:func:`.projection_block.project_block`), the rest
+    one by one."""
+    k = lo
+    while k + LANES <= hi:
+        # ask for the columns PREFETCH_AHEAD constraints on (this segment's next blocks, the next
+        # segment's): the columns are read once a step, from memory when the caches are cold, and the
+        # hardware prefetcher alone leaves those reads mostly unoverlapped with the sweep's work
+        ahead = k + PREFETCH_AHEAD  # past the last constraint at the end: harmless for a prefetch
+        prefetch(sweep.i, ahead)
+        prefetch(sweep.j, ahead)
+        prefetch(sweep.rest_length, ahead)
+        prefetch(sweep.gamma, ahead)
+        prefetch(sweep.denominator, ahead)
+        project_block(d_, x_, inverse_mass, sweep, work.lam, carried, k)
+        k += LANES
+    for p in range(k, hi):
+        project_one(p, d_, x_, inverse_mass, sweep, work.lam, carried)
 
 
 @njit(cache=True, error_model="numpy")

@@ -71,7 +71,7 @@ def advance(table: ColourTable, q, v, steps):
     import jax.numpy as jnp
     from jax import lax
 
-    from .constraint_projection import factors, projection
+    from .projection_law import factors, projection
 
     h = steps.h
     w = table.inverse_mass[table.i] + table.inverse_mass[table.j]

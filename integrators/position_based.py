@@ -126,7 +126,7 @@ class PositionBased(Integrator):
 
             return colour_table(c, colours, inverse_mass, external, model.dtype)
         c, segments = wavefront(c, colours)
-        return SweepCarry(c, external, inverse_mass, workspace(model.n_bodies, len(c.i), segments), segments)
+        return SweepCarry(c, external, inverse_mass, workspace(model.n_bodies, len(c.i)), segments)
 
     def substeps_of(self, dt: float):
         """:class:`.constraint_projection.Substeps` of a step of ``dt``."""

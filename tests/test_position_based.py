@@ -322,11 +322,14 @@ def test_the_sweep_by_colour_is_the_sequential_gauss_seidel_sweep(iterations):
     assert np.abs(expected - h * (v + h * carry.external)).max() > 1e-4  # the sweep moved the bodies
 
 
-@pytest.mark.parametrize("band", [64, 256])
-def test_the_sweep_in_bands_is_the_sweep_colour_by_colour(band):
+@pytest.mark.parametrize(("band", "iterations"), [(64, 1), (256, 1), (256, 3)])
+def test_the_sweep_in_bands_is_the_sweep_colour_by_colour(band, iterations):
     # the wavefront reorders the constraints across colours, band by band, keeping each body's
-    # projections in colour order: the bytes of the plain colour-by-colour sequential sweep
+    # projections in colour order: the bytes of the plain colour-by-colour sequential sweep; the
+    # kernel projects eight constraints of a segment at once (projection_block), the rest one by one,
+    # with the multipliers carried or held at 0
     from steplab.integrators.constraint_projection import (
+        LANES,
         advance,
         ordered,
         padded,
@@ -339,7 +342,7 @@ def test_the_sweep_in_bands_is_the_sweep_colour_by_colour(band):
     from steplab.bench.systems import cloth_model
 
     model, (q, v), _ = cloth_model(40)  # 1,600 bodies, 6,162 springs with dampers, reach 41, 8 colours
-    h, method = 1 / 600, XPBD(1, 1)
+    h, method = 1 / 600, XPBD(1, iterations)
     c, external, inverse_mass = method.constraints(model)
     c, colours = ordered(c, model.n_bodies)
     banded, segments = wavefront(c, colours, band)
@@ -351,9 +354,11 @@ def test_the_sweep_in_bands_is_the_sweep_colour_by_colour(band):
     assert np.diff(colour[where]).min() < 0  # ... the colours starting over in each band
     expected = h * (v + h * external)
     dx = padded(expected)
-    sequential_sweep(expected, q, inverse_mass, c, h, 1, False)
-    sweep, work = sweep_columns(banded, segments, inverse_mass, h), workspace(model.n_bodies, len(c.i), segments)
-    project(dx, padded(q), inverse_mass, sweep, 1, False, work)
+    carried = method.substeps_of(h).carried
+    sequential_sweep(expected, q, inverse_mass, c, h, iterations, carried)
+    sweep, work = sweep_columns(banded, segments, inverse_mass, h), workspace(model.n_bodies, len(c.i))
+    assert np.diff(segments).mean() >= 2 * LANES  # mostly blocks, and a tail in most segments
+    project(dx, padded(q), inverse_mass, sweep, iterations, carried, work)
     assert dx[:, :3].tobytes() == expected.tobytes()
     y = work.state  # and the whole step, on the padded rows (x, y, z, 0) of q, v
     y[..., :3] = q, v
@@ -373,22 +378,29 @@ def test_the_jax_path_is_the_numba_sweep(method):
 
 
 def test_both_sweeps_evaluate_the_one_projection():
-    # the projection and its per-substep factors are written once (constraint_projection): the
-    # Numba kernel compiles them, the JAX path evaluates them on a colour's columns
+    # the projection and its per-substep factors are written once (projection_law): the Numba
+    # sweep compiles them (its scalar step) and evaluates them on vector lanes (its block), the JAX
+    # path evaluates them on a colour's columns
     import ast
     import inspect
 
-    from steplab.integrators import constraint_projection, constraint_projection_jax
+    from steplab.integrators import (
+        constraint_projection,
+        constraint_projection_jax,
+        projection_block,
+        projection_law,
+    )
 
-    for module, names in ((constraint_projection, {"_projection", "factors"}),
+    for module, names in ((constraint_projection, {"factors"}), (projection_block, {"_projection", "projection"}),
                           (constraint_projection_jax, {"projection", "factors"})):
         tree = ast.parse(inspect.getsource(module))
         used = {node.id for node in ast.walk(tree) if isinstance(node, ast.Name)}
         assert names <= used, module.__name__
     # the law's text appears once, in projection itself
-    assert inspect.getsource(constraint_projection).count("* length - gamma") == 1
-    assert "* length - gamma" not in inspect.getsource(constraint_projection_jax)
-    assert constraint_projection._projection.py_func is constraint_projection.projection
+    assert inspect.getsource(projection_law).count("* length - gamma") == 1
+    for module in (constraint_projection, constraint_projection_jax, projection_block):
+        assert "* length - gamma" not in inspect.getsource(module), module.__name__
+    assert projection_law._projection.py_func is projection_law.projection
 
 
 def test_the_sweeps_prefetch_compiles_to_a_prefetch_that_changes_nothing():
