@@ -26,20 +26,22 @@ compiles into the kernel and JAX evaluates on a colour's columns).
 
 The constraints are swept in the order of a greedy edge colouring (:func:`ordered`), colour
 after colour. Within a colour no two constraints share a body, so its projections are
-independent: the sweep gathers a run of one colour's differences d = x_j - x_i first, then
-solves its projections in one loop that the compiler vectorises (the square roots and
-divisions, the costliest operations, eight at a time), then scatters the moves. That is the
+independent: the sweep projects eight consecutive constraints of a colour at once, each in a
+lane of LLVM vector code (:func:`.projection_block.project_block`: the bodies' rows gathered,
+transposed into lanes, the square roots and divisions eight at a time, the moves scattered),
+and a run's last few one by one (:func:`.projection_block.project_one`). That is the
 sequential Gauss-Seidel sweep exactly, the same operations in the same order per constraint
 (so the same bytes). What depends only on the constraint and the substep h (alpha_tilde,
 gamma and the denominator (1 + gamma) w + alpha_tilde) is computed once per run
-(:func:`sweep_columns`). Each body's displacement and start position are padded rows
-(x, y, z, 0) that one 256-bit load or store moves (:mod:`.vector4`); the colours are swept
-in bands of bodies (:func:`wavefront`), each body still receiving its projections in colour
-order (the same bytes), so that a band's bodies stay in the core's caches; the gather prefetches
-the columns :data:`PREFETCH_AHEAD` constraints ahead (their reads from memory then overlap the
-sweep when the caches are cold). On the
-25,600-particle cloth, one step: 0.59-0.62 ms gathered per colour, 0.48-0.50 ms now (warm;
-docs/performance.md has the steps between and the cold-cache times).
+(:func:`sweep_columns`). Each body's position and velocity are padded rows (x, y, z, 0) that
+one 256-bit load or store moves (:mod:`.vector4`), and the step moves them in place (the
+velocity's rows carry the displacement during the substep, :func:`advance`); the colours are
+swept in bands of bodies (:func:`wavefront`), each body still receiving its projections in
+colour order (the same bytes), so that a band's bodies stay in the core's caches; the sweep
+prefetches the columns :data:`PREFETCH_AHEAD` constraints ahead (their reads from memory then
+overlap the sweep when the caches are cold). On the 25,600-particle cloth, one step, warm:
+0.59-0.62 ms gathered per colour, 0.38-0.40 ms with bands, rows and prefetch, 0.27-0.30 ms now
+(docs/performance.md has the steps between and the cold-cache times).
 """
 
 from __future__ import annotations
