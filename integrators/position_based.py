@@ -253,7 +253,7 @@ def cloth_benchmark_step(model, y0, dt: float, method: PositionBased | None = No
 
     Each step calls the kernel's compiled entry point, resolved once: a call through Numba's
     dispatcher types its seven arguments (three NamedTuples of 16 arrays) in Python first,
-    about 25 us more from cold caches, which a game engine calling native code does not pay.
+    about 30 us more from cold caches, which a game engine calling native code does not pay.
     """
     from numba import typeof
 

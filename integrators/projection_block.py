@@ -5,18 +5,19 @@ share a body, so LANES consecutive projections are independent: :func:`project_b
 constraints k to k + LANES - 1 together, each in a lane of a vector of LANES float64:
 
 - gather: each constraint's bodies a, b as padded rows (x, y, z, 0) of the start positions
-  ``x`` and the displacement ``d``, one four-wide load each (:mod:`.vector4`), u = d_b - d_a and
+  ``x`` and the displacement ``d``, one four-wide load each (:mod:`.vector4` says why four), u = d_b - d_a and
   e = (x_b - x_a) + u; the rows transposed into lanes (e_x, e_y, e_z, u_x, u_y, u_z across
   the eight constraints), |e|^2 and e . u, summed left to right as the scalar code sums them;
 - solve: l = sqrt |e|^2 and s from :func:`.projection_law.projection` itself, the one
   definition, evaluated here on vectors (its arithmetic emitted as vector instructions by
   :class:`_Lanes`), s = 0 where the denominator is 0; the multipliers, when carried;
 - scatter: d_a += (-(w_a s)) e and d_b += (w_b s) e, each a four-wide multiply and add into the
-  row already in a register (no constraint of the block touched it since its load).
+  row, reloaded from L1 (no constraint of the block touched it since its first load; holding
+  all sixteen in registers across the solve spills them).
 
-Per constraint that is 4 row loads and 2 row stores, against the separate gather, solve and
-scatter loops' 6 row loads, 3 row stores and 3 stores and 5 loads of per-constraint scalars
-through scratch arrays. Each lane is the scalar operation it replaces (IEEE add, subtract,
+Per constraint that is 6 row loads and 2 row stores, against the separate gather, solve and
+scatter loops' 7 row loads, 3 row stores and 3 stores and 3 to 4 loads of per-constraint
+scalars through scratch arrays. Each lane is the scalar operation it replaces (IEEE add, subtract,
 multiply, divide and square root, no fused multiply-add, the same order), so the bytes are
 those of the sequential sweep; the plain Python :func:`project_block` is that scalar code, the
 projections one after another (:func:`project_one`), which ``py_func``

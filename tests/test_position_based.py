@@ -366,6 +366,32 @@ def test_the_sweep_in_bands_is_the_sweep_colour_by_colour(band, iterations):
     assert y[..., :3].tobytes() == np.stack([q + expected, expected / h]).tobytes() and not y[..., 3].any()
 
 
+@pytest.mark.parametrize("iterations", [1, 3])
+def test_the_vector_block_is_its_python_twin(monkeypatch, iterations):
+    # the compiled sweep projects eight constraints of a segment in LLVM vector lanes
+    # (projection_block); interpreted, the same sweep runs the block's plain-Python twin, the
+    # projections one after another: the same bytes, on segments long enough for many blocks
+    from steplab.integrators import constraint_projection
+    from steplab.integrators.constraint_projection import LANES, padded, project
+
+    from steplab.bench.systems import cloth_model
+
+    model, (q, v), _ = cloth_model(20)
+    h, method = 1 / 600, XPBD(1, iterations)
+    carry = method.init(model, 0.0, None).for_substep(h)
+    assert np.diff(carry.segments).mean() >= 3 * LANES
+    runs = []
+    for kernel in (project, project.py_func):
+        dx = padded(h * (v + h * carry.external))
+        with monkeypatch.context() as patch:
+            if kernel is project.py_func:
+                patch.setattr(constraint_projection, "_segment", constraint_projection._segment.py_func)
+            kernel(dx, padded(q), carry.inverse_mass, carry.sweep, iterations, iterations > 1, carry.work)
+        runs.append(dx)
+    assert runs[0].tobytes() == runs[1].tobytes()
+    assert np.abs(runs[0][:, :3] - h * (v + h * carry.external)).max() > 1e-5  # the sweep moved the bodies
+
+
 @pytest.mark.parametrize("method", [XPBD(1, 1), XPBD(3, 3), PBD(1, 4)], ids=["xpbd-1x1", "xpbd-3x3", "pbd-1x4"])
 def test_the_jax_path_is_the_numba_sweep(method):
     # the same Gauss-Seidel sweep in the same colour order, traced: equal to round-off (XLA may fuse

@@ -98,7 +98,7 @@ def test_vbd_refuses_inextensible_springs_in_one_line():
 def test_the_python_and_compiled_sweeps_agree(monkeypatch):
     # Numba's compiled kernels against the same functions run by the Python interpreter on NumPy
     # scalars: the same operations in the same order, so the same bytes (for xpbd, the sweep's
-    # four-wide intrinsics against their plain-Python twins in integrators/vector4.py)
+    # eight-lane vector block against its plain-Python twin in integrators/projection_block.py)
     from steplab.integrators import constraint_projection
 
     model, y0 = damped_net(3)
