@@ -35,10 +35,12 @@ from __future__ import annotations
 
 from typing import NamedTuple
 
+import numba
 import numpy as np
 from numba import njit, prange
 
 from .. import quaternion as quat
+from .contact_colouring import span
 from .manifold_box import box_box, box_plane
 from .manifold_capsule_box import box_capsule
 from .manifold_geometry import make_scratch, to_local
@@ -359,13 +361,20 @@ def sorted_rows(pairs, static_pairs, counts, n):
     return order[:rows]
 
 
-@njit(cache=True)
-def take_rows(points, order, out):
+@njit(cache=True, parallel=True)
+def take_rows(points, order, out, threads):
     """``out`` row k = ``points`` row ``order[k]``, every column (one pass: NumPy's fancy indexing of
-    the six columns took a millisecond on 10^4 boxes' points)."""
+    the six columns took a millisecond on 10^4 boxes' points); ``threads`` parts in parallel."""
+    for part in prange(threads):
+        _take_rows_of(points, order, out, span(0, len(order), part, threads))
+
+
+@njit(cache=True)
+def _take_rows_of(points, order, out, rows):
+    """:func:`take_rows` of the rows ``rows`` = (first, end)."""
     a, b, normal, point, separation, feature = points
     a_out, b_out, normal_out, point_out, separation_out, feature_out = out
-    for k in range(len(order)):
+    for k in range(rows[0], rows[1]):
         i = order[k]
         a_out[k], b_out[k], separation_out[k], feature_out[k] = a[i], b[i], separation[i], feature[i]
         for m in range(3):
@@ -441,14 +450,14 @@ def manifolds(shapes: RigidShapes, poses: Poses, pairs, statics=(), margin=0.0) 
                            np.empty((capacity, 3)), np.empty(capacity), np.empty(capacity, np.int64))
     counts = np.empty(len(pairs) + len(static_pairs), np.int64)
     margins = (np.ascontiguousarray(margin), extent)
-    if len(counts) >= PARALLEL_PAIRS:
+    if len(counts) >= PARALLEL_PAIRS and numba.get_num_threads() > 1:
         manifold_slots(bodies, static, pairs, static_pairs, margins, slots, counts)
-    else:  # the same rows on this thread alone (a parallel region costs more than a few pairs)
+    else:  # the same rows on this thread alone (a parallel region costs more than a few pairs, or one thread)
         _slots_of_chunk((bodies, static), (pairs, static_pairs), margins, slots, counts, (0, len(counts)))
     order = sorted_rows(pairs, static_pairs, counts, n)
     sort_by_feature(order, slots.a, slots.b, slots.feature)
     rows = len(order)
     out = ManifoldPoints(np.empty(rows, np.int64), np.empty(rows, np.int64), np.empty((rows, 3)), np.empty((rows, 3)),
                          np.empty(rows), np.empty(rows, np.int64))
-    take_rows(slots, order, out)
+    take_rows(slots, order, out, numba.get_num_threads())
     return out

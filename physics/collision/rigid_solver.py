@@ -480,6 +480,12 @@ def _solve_rolling(state, rolls, k, a, b, n):
     _apply_angular(state, a, b, d)
 
 
+@njit(cache=True, inline="always")
+def _holds_nothing(pt, pr, k):
+    """Whether contact k holds no tangential and no rolling impulse."""
+    return pt[k, 0] == 0.0 and pt[k, 1] == 0.0 and pr[k, 0] == 0.0 and pr[k, 1] == 0.0 and pr[k, 2] == 0.0
+
+
 @njit(cache=True, parallel=True)
 def _sweep(bodies, contacts, sub, use_bias, colours):
     """One Gauss-Seidel sweep over the contacts, colour by colour (:mod:`.contact_colouring`): each
@@ -496,15 +502,21 @@ def _sweep(bodies, contacts, sub, use_bias, colours):
 @njit(cache=True)
 def _sweep_blocks(bodies, contacts, how, colours, blocks):
     """:func:`_sweep` over the manifolds ``blocks`` = (first, end) (their rows are consecutive);
-    ``how`` = (the substep, whether the bias pushes)."""
+    ``how`` = (the substep, whether the bias pushes).
+
+    A contact whose impulse does not change applies none, and one that ends the pass unpressed
+    (P = 0) and holding no friction or rolling impulse skips them: both are clamped to zero, so
+    the step is the same numbers without them (a zero impulse can at most turn a velocity of -0.0
+    into +0.0). Most points of a falling pile are such, speculative points that are never pressed:
+    75 to 100 % of the 10^4 box pit's in its first 30 steps, which made the skip halve its sweeps."""
     sub, use_bias = how
     state = _state(bodies)
     v, omega = bodies.v, bodies.omega
     a_, b_, normal, separation = contacts.a, contacts.b, contacts.normal, contacts.s
     lever_a, lever_b, pn, mass, hit = contacts.la, contacts.lb, contacts.pn, contacts.mass, contacts.hit
-    friction, rolling = contacts.friction, contacts.rolling
-    tangential = (contacts.tangent, contacts.pt, mass, friction, pn)
-    rolls = (contacts.pr, rolling, pn)
+    friction, rolling, pt, pr = contacts.friction, contacts.rolling, contacts.pt, contacts.pr
+    tangential = (contacts.tangent, pt, mass, friction, pn)
+    rolls = (pr, rolling, pn)
     for k in range(colours.rows[blocks[0]], colours.rows[blocks[1]]):
         a, b, n = a_[k], b_[k], _row(normal, k)
         la, lb = _row(lever_a, k), _row(lever_b, k)
@@ -516,7 +528,10 @@ def _sweep_blocks(bodies, contacts, how, colours, blocks):
         pn[k] = total
         if dp > 0.0 and hit[k] == np.inf:  # the impact: the speed it bounces back from
             hit[k] = vn
-        _apply(state, a, b, la, lb, (dp * n[0], dp * n[1], dp * n[2]))
+        if dp != 0.0:
+            _apply(state, a, b, la, lb, (dp * n[0], dp * n[1], dp * n[2]))
+        if total == 0.0 and _holds_nothing(pt, pr, k):
+            continue  # friction and rolling: clamped to |P_t| <= mu 0 and |M| <= c_r 0, they stay zero
         if friction[k] > 0.0:
             _solve_friction(state, tangential, k, a, b, la, lb)
         if rolling[k] > 0.0:
@@ -542,6 +557,8 @@ def _warm_blocks(bodies, contacts, colours, blocks):
     a_, b_, n, t, lever_a, lever_b = contacts.a, contacts.b, contacts.normal, contacts.tangent, contacts.la, contacts.lb
     pn_, pt, pr, rolling = contacts.pn, contacts.pt, contacts.pr, contacts.rolling
     for k in range(colours.rows[blocks[0]], colours.rows[blocks[1]]):
+        if pn_[k] == 0.0 and _holds_nothing(pt, pr, k):
+            continue  # no impulse to apply again (a speculative point not yet pressed)
         pn, p1, p2 = pn_[k], pt[k, 0], pt[k, 1]
         p = (pn * n[k, 0] + p1 * t[k, 0, 0] + p2 * t[k, 1, 0], pn * n[k, 1] + p1 * t[k, 0, 1] + p2 * t[k, 1, 1],
              pn * n[k, 2] + p1 * t[k, 0, 2] + p2 * t[k, 1, 2])

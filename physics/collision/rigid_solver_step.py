@@ -58,7 +58,7 @@ DEFAULT_ROTATION = "exponential-map"
 KINDS = {"sphere": SPHERE, "box": BOX, "capsule": CAPSULE}
 #: the most a rotation moves a point of a body: its diameter, 2 R (a half turn)
 MAX_ROTATION_REACH = 2.0
-#: scenes of this many bodies or more are swept colour by colour on Numba's threads
+#: scenes of this many bodies or more are swept colour by colour on the solver's threads
 #: (:mod:`.contact_colouring`, which says why smaller ones keep the sorted order on one thread): a step
 #: makes about 12 parallel regions per colour, which cost more than a small scene's sweep, and on a
 #: loaded machine each waits for its slowest thread's time slice
@@ -193,7 +193,18 @@ class RigidSolverStep:
         self.history = {0: (self.orientation.copy(), self.omega.copy())}
 
     def __call__(self, t, y, dt, carry):
-        """Advance ``y`` (2, N, 3) and the rotation from ``t`` by ``dt``; returns ``(y, carry)``."""
+        """Advance ``y`` (2, N, 3) and the rotation from ``t`` by ``dt``; returns ``(y, carry)``.
+
+        The step's parallel parts run on the solver's ``threads`` (Numba's count is set for the
+        step and restored after it)."""
+        threads = numba.get_num_threads()
+        numba.set_num_threads(self.world.solver.threads)
+        try:
+            return self._advance(t, y, dt, carry)
+        finally:
+            numba.set_num_threads(threads)
+
+    def _advance(self, t, y, dt, carry):
         q0, v0 = np.array(y[0], dtype=float), np.array(y[1], dtype=float)
         a = self.field if self.field is not None else np.asarray(self.model.acceleration(t, q0, v0), dtype=float)
         points = self.contact_points(t, y, dt, a)
@@ -262,15 +273,15 @@ class RigidSolverStep:
         key = np.column_stack([points.a, points.b, points.feature]).astype(np.int64)
         old = self._previous
         rows = rs.previous_rows(old.key, key)
-        if n >= COLOURED_BODIES:  # coloured, on Numba's threads (the same bytes on any number of them)
-            order, colours = colour_contacts(points.a, points.b, n, numba.get_num_threads())
+        if n >= COLOURED_BODIES:  # coloured, on the solver's threads (the same bytes on any number of them)
+            order, colours = colour_contacts(points.a, points.b, n, s.threads)
         else:
             order, colours = in_sorted_order(points.a, points.b)
         self._sorted_key, self._order = key, order
         self._points_b = points.b[order]
         rows = rows[order]
-        gather((points, order), (q0, np.ascontiguousarray(a, dtype=float), self.rolling), self.materials,
-               (rows, old.pn, old.pt, old.pr), (float(self.world.rest_speed), float(dt)), contacts)
+        gather(points, order, (q0, np.ascontiguousarray(a, dtype=float), self.rolling), self.materials,
+               (rows, old.pn, old.pt, old.pr), (float(self.world.rest_speed), float(dt)), contacts, s.threads)
         rs.prepare(bodies, contacts, colours)
         bias_rate, mass_scale, impulse_scale = s.softness(h)
         sub = rs.RigidSubstep(h, s.iterations, bias_rate, mass_scale, impulse_scale, s.push_speed, s.slop,
@@ -296,7 +307,7 @@ class RigidSolverStep:
             self.model.names, self.world.shapes))
         self.log.most_impacts_in_a_step = max(self.log.most_impacts_in_a_step, len(first))
         self.log.largest_residual = max(self.log.largest_residual, float(residual))
-        self._previous = Solved(self._sorted_key, *in_sorted_rows(c, self._order))
+        self._previous = Solved(self._sorted_key, *in_sorted_rows(c, self._order, self.world.solver.threads))
 
     def rotation_at(self, steps: np.ndarray):
         """(orientations (K, N, 4), angular velocities (K, N, 3)) after each of ``steps`` steps (recorded ones)."""
