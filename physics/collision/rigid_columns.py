@@ -41,7 +41,7 @@ def gather(points, order, movers, materials, previous, context, out, threads):
     ``movers`` = (q, accel, rolling) of the bodies: centres at the start of the step, the forces'
     accelerations, and each body's rolling resistance (coefficient times rounding radius, m);
     ``materials`` a :class:`.contact_buffer.Materials`; ``previous`` = (rows, pn, pt, pr): each
-    row's point among the last step's points, or -1 (:func:`.rigid_solver.previous_rows`), and
+    point's row among the last step's points, or -1 (:func:`.rigid_solver.previous_rows`), and
     their impulses (pt a world vector); ``context`` = (the world's rest speed, dt). Each row its
     own: ``threads`` parts in parallel, the same bytes on any number of threads.
     """
@@ -93,7 +93,7 @@ def _gather_rows(source, movers, materials, previous, context, out, rows_):
             tangent[k, 0, x], tangent[k, 1, x] = t1[x], t2[x]
         s0[k], vn0[k], hit[k] = separation[i], 0.0, np.inf
         total[k], most[k] = 0.0, 0.0
-        row = rows[k]
+        row = rows[i]
         if row >= 0:
             p = (old_pt[row, 0], old_pt[row, 1], old_pt[row, 2])
             pn[k], pt[k, 0], pt[k, 1] = old_pn[row], dot3(p, t1), dot3(p, t2)
@@ -129,3 +129,29 @@ def _sorted_rows_of(contacts, order, out, rows):
         for x in range(3):
             normal[i, x], pr[i, x] = c_normal[k, x], c_pr[k, x]
             pt[i, x] = c_pt[k, 0] * tangent[k, 0, x] + c_pt[k, 1] * tangent[k, 1, x]
+
+
+@njit(cache=True)
+def newly_pressed(total, order, rows, previous_total):
+    """The contacts (rows of the sweep order, ascending) pressed in the step (``total`` > 0) whose
+    point was not pressed in the last step: ``rows[order[k]]`` is contact k's point among the last
+    step's points, or -1 (:func:`.rigid_solver.previous_rows`), ``previous_total`` their impulses."""
+    out = np.empty(len(total), np.int64)
+    found = 0
+    for k in range(len(total)):
+        if total[k] > 0:
+            row = rows[order[k]]
+            if row < 0 or not previous_total[row] > 0:
+                out[found] = k
+                found += 1
+    return out[:found]
+
+
+@njit(cache=True)
+def is_sorted(a, b, feature):
+    """Whether the rows (a, b, feature) are in strictly increasing lexicographic order."""
+    for k in range(1, len(a)):
+        if not (a[k] > a[k - 1] or (a[k] == a[k - 1] and (b[k] > b[k - 1] or (
+                b[k] == b[k - 1] and feature[k] > feature[k - 1])))):
+            return False
+    return True

@@ -756,13 +756,16 @@ def step(bodies, contacts, sub, substeps, colours):
 def previous_rows(old, new):
     """Each new contact's row among the last step's, matched by (a, b, feature), or -1.
 
-    ``old`` and ``new`` are (C, 3) int64 keys sorted lexicographically: one merge."""
-    rows = np.full(len(new), -1, dtype=np.int64)
+    ``old`` and ``new`` are the columns (a, b, feature), int64, each sorted lexicographically: one
+    merge."""
+    oa, ob, of = old
+    na, nb, nf = new
+    rows = np.full(len(na), -1, dtype=np.int64)
     p = 0
-    for k in range(len(new)):
-        while p < len(old) and (old[p, 0] < new[k, 0] or (old[p, 0] == new[k, 0] and (
-                old[p, 1] < new[k, 1] or (old[p, 1] == new[k, 1] and old[p, 2] < new[k, 2])))):
+    for k in range(len(na)):
+        while p < len(oa) and (oa[p] < na[k] or (oa[p] == na[k] and (
+                ob[p] < nb[k] or (ob[p] == nb[k] and of[p] < nf[k])))):
             p += 1
-        if p < len(old) and old[p, 0] == new[k, 0] and old[p, 1] == new[k, 1] and old[p, 2] == new[k, 2]:
+        if p < len(oa) and oa[p] == na[k] and ob[p] == nb[k] and of[p] == nf[k]:
             rows[k] = p
     return rows
