@@ -164,13 +164,25 @@ def _rotate_inverse(q, k, x):
 @njit(cache=True, inline="always")
 def _turn(q, k, w, h, update):
     """q[k] <- (turn by h w, world frame) q[k], normalised (exp(h w / 2), or 1 + h w / 2)."""
+    _turn_by(q, k, _half_turn(w, h, update))
+
+
+@njit(cache=True, inline="always")
+def _half_turn(w, h, update):
+    """The quaternion of the turn by h w (world frame): exp(h w / 2), or its first-order 1 + h w / 2."""
     if update == EXPONENTIAL:
         x = 0.5 * h * np.sqrt(w[0] * w[0] + w[1] * w[1] + w[2] * w[2])  # the half angle
         c = np.cos(x)
         s = 0.5 * h * (np.sin(x) / x if x > 1e-8 else 1.0 - x * x / 6.0)  # sin(x) / |w|, exact to round-off
     else:
         c, s = 1.0, 0.5 * h
-    p0, p1, p2, p3 = c, s * w[0], s * w[1], s * w[2]
+    return c, s * w[0], s * w[1], s * w[2]
+
+
+@njit(cache=True, inline="always")
+def _turn_by(q, k, p):
+    """q[k] <- p q[k], normalised."""
+    p0, p1, p2, p3 = p
     q0, q1, q2, q3 = q[k, 0], q[k, 1], q[k, 2], q[k, 3]
     r0 = p0 * q0 - p1 * q1 - p2 * q2 - p3 * q3
     r1 = p0 * q1 + p1 * q0 + p2 * q3 - p3 * q2
@@ -413,9 +425,9 @@ def _positions_of(bodies, sub, span_):
             q[body, x] += h * v[body, x]
             dq[body, x] += h * v[body, x]
         if inverse_principal[body, 0] > 0.0:
-            w = _row(omega, body)
-            _turn(orientation, body, w, h, update)
-            _turn(turn, body, w, h, update)
+            p = _half_turn(_row(omega, body), h, update)  # one sine and cosine for both
+            _turn_by(orientation, body, p)
+            _turn_by(turn, body, p)
 
 
 @njit(cache=True, inline="always")
