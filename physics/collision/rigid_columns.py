@@ -45,13 +45,8 @@ def gather(points, order, movers, materials, previous, context, out, threads):
     their impulses (pt a world vector); ``context`` = (the world's rest speed, dt). Each row its
     own: ``threads`` parts in parallel, the same bytes on any number of threads.
     """
-    # the tuples unpacked and made again inside the parallel loop (Numba's cannot take them whole)
-    q, accel, rolls = movers
-    rows, old_pn, old_pt, old_pr = previous
-    floor, dt = context
-    for part in prange(threads):
-        _gather_rows((points, order), (q, accel, rolls), materials, (rows, old_pn, old_pt, old_pr), (floor, dt), out,
-                     span(0, len(order), part, threads))
+    for part in prange(threads):  # (points and order apart: Numba's parallel loop takes no tuple of a NamedTuple)
+        _gather_rows((points, order), movers, materials, previous, context, out, span(0, len(order), part, threads))
 
 
 @njit(cache=True)
