@@ -21,7 +21,12 @@ from steplab.physics import quaternion as quat
 from steplab.physics.collision import CollisionWorld, PairProperties, Plane, rigid_solver_step
 from steplab.physics.collision.contact_colouring import COLOURS, colour_contacts
 from steplab.physics.collision.rigid_solver_step import RigidScene, RigidSolverStep
+from steplab.physics.collision.solver_settings import ContactSolver
 from steplab.physics.rigid_body import RigidBodies, principal_inertia
+from steplab.physics.scene import SceneError, parse_scene
+
+from steplab.bench.stacking import box_pit_toml
+from steplab.cli import main
 
 #: the rigid narrow phase's module (the package's name ``manifolds`` is its function)
 manifolds = importlib.import_module("steplab.physics.collision.manifolds")
@@ -61,15 +66,16 @@ def test_a_body_in_more_manifolds_than_colours_goes_to_the_overflow():
     assert order[-2:].tolist() == [COLOURS, COLOURS + 1]
 
 
-def box_pile(n, seed):
-    """n boxes (0.1-0.2 m) in a seeded jumble above a floor, turned and spinning: (step, y0)."""
+def box_pile(n, seed, threads=1):
+    """n boxes (0.1-0.2 m) in a seeded jumble above a floor, turned and spinning, the solver on
+    ``threads`` threads: (step, y0)."""
     rng = np.random.default_rng(seed)
     half, masses = rng.uniform(0.05, 0.1, (n, 3)), rng.uniform(0.5, 2.0, n)
     inertia = np.array([principal_inertia("box", m, 0.0, 2 * h) for m, h in zip(masses, half)])
     bodies = RigidBodies(np.arange(n), inertia, quat.normalize(np, rng.normal(size=(n, 4))),
                          2 * rng.normal(size=(n, 3)), ("box",) * n)
     world = CollisionWorld(shapes=(Plane(np.array([0.0, 0.0, 1.0])),), method="solver",
-                           pair_properties=PairProperties(0.2, 0.5),
+                           pair_properties=PairProperties(0.2, 0.5), solver=ContactSolver(threads=threads),
                            rigid=RigidScene(np.full(n, manifolds.BOX, np.int8), np.zeros(n), half, bodies))
     k = np.arange(n)
     side = int(np.ceil(np.sqrt(n / 3)))
@@ -78,19 +84,87 @@ def box_pile(n, seed):
     return step, np.stack([position + rng.uniform(-0.03, 0.03, (n, 3)), rng.normal(size=(n, 3))])
 
 
+def pile_run(threads, steps=40):
+    """The bytes of :func:`box_pile`'s 40 boxes after ``steps`` steps on ``threads`` threads, and its
+    last step's contact points."""
+    step, y = box_pile(40, seed=3, threads=threads)
+    for k in range(steps):
+        y, _ = step(k / 60, y, 1 / 60, None)
+    return y.tobytes(), step.orientation.tobytes(), step.omega.tobytes(), len(step._previous.pn)
+
+
 @pytest.mark.parametrize("parts", [2, 3])
 def test_the_parallel_sweep_gives_the_bytes_of_one_thread(monkeypatch, parts):
     """A pile of 40 boxes, 40 steps, every stage parallel (the size thresholds set to 0): the same bytes
-    with each colour cut into ``parts`` parts on Numba's threads as on one thread."""
+    with each colour cut into ``parts`` parts (the solver's threads) as on one thread. Numba runs the
+    parts on the threads it has, so 3 parts are tested on a 2-core machine too."""
     monkeypatch.setattr(rigid_solver_step, "COLOURED_BODIES", 0)
     monkeypatch.setattr(manifolds, "PARALLEL_PAIRS", 0)
-    runs = []
-    for threads in (1, parts):
-        # the parts each colour is cut into (Numba runs them on the threads it has)
-        monkeypatch.setattr(numba, "get_num_threads", lambda threads=threads: threads)
-        step, y = box_pile(40, seed=3)
-        for k in range(40):
-            y, _ = step(k / 60, y, 1 / 60, None)
-        runs.append((y.tobytes(), step.orientation.tobytes(), step.omega.tobytes(), len(step._previous.pn)))
+    monkeypatch.setattr(numba.config, "NUMBA_NUM_THREADS", max(parts, numba.config.NUMBA_NUM_THREADS))
+    monkeypatch.setattr(numba, "set_num_threads", lambda threads: None)
+    runs = [pile_run(threads) for threads in (1, parts)]
     assert runs[0][3] > 40  # the boxes came to touch: many manifolds, several colours
     assert runs[0] == runs[1]
+
+
+@pytest.mark.skipif(numba.config.NUMBA_NUM_THREADS < 2, reason="Numba has one thread here (NUMBA_NUM_THREADS)")
+def test_the_threads_setting_runs_the_step_on_that_many_threads_with_the_same_bytes(monkeypatch):
+    """``[collisions.solver] threads``: the step's parallel parts run on that many of Numba's threads
+    (set for the step, restored after it), and threads = 1 and 2 give the same bytes."""
+    monkeypatch.setattr(rigid_solver_step, "COLOURED_BODIES", 0)
+    monkeypatch.setattr(manifolds, "PARALLEL_PAIRS", 0)
+    seen = []
+    colour = rigid_solver_step.colour_contacts
+
+    def spy(*args):
+        seen.append(numba.get_num_threads())
+        return colour(*args)
+
+    monkeypatch.setattr(rigid_solver_step, "colour_contacts", spy)
+    before = numba.get_num_threads()
+    runs = []
+    for threads in (1, 2):
+        seen.clear()
+        runs.append(pile_run(threads, steps=20))
+        assert set(seen) == {threads} and numba.get_num_threads() == before
+    assert runs[0][3] > 40 and runs[0] == runs[1]
+
+
+@pytest.mark.parametrize("threads", [0, -1, True, 1.0, "2", 10**6])
+def test_the_threads_setting_is_refused_in_one_line_unless_numba_can_run_it(threads):
+    """threads must be an integer from 1 to NUMBA_NUM_THREADS: the settings, the scene file (its key
+    named) and the command line (status 2) say so in one line."""
+    allowed = f"an integer from 1 to {numba.config.NUMBA_NUM_THREADS}"
+    with pytest.raises(ValueError, match=f"contact solver: threads must be {allowed}"):
+        ContactSolver(threads=threads)
+    with pytest.raises(SceneError) as err:
+        parse_scene(with_threads(box_pit_toml(3), toml(threads)), "pit.toml")
+    line = str(err.value)
+    assert line.startswith(f"pit.toml: collisions.solver.threads: must be {allowed}") and "\n" not in line
+
+
+def toml(value) -> str:
+    """A TOML value: true for True, "2" for a string."""
+    return "true" if value is True else f'"{value}"' if isinstance(value, str) else repr(value)
+
+
+def with_threads(text: str, value: str) -> str:
+    """The box pit's scene file with ``[collisions.solver] threads = value``."""
+    return text.replace("friction = 0.6\n", f"friction = 0.6\n\n[collisions.solver]\nthreads = {value}\n")
+
+
+def test_the_command_line_refuses_a_bad_thread_count_with_status_2(tmp_path, capsys):
+    path = tmp_path / "pit.toml"
+    path.write_text(with_threads(box_pit_toml(3, t_end=0.05), str(numba.config.NUMBA_NUM_THREADS + 1)))
+    assert main(["run", str(path)]) == 2
+    err = capsys.readouterr().err
+    assert "collisions.solver.threads: must be an integer from 1 to" in err and err.count("\n") == 1
+
+
+def test_a_scene_states_its_threads_and_defaults_to_one():
+    """The default is one thread (Box2D's one worker); the bench's 2-core scene says 2, and so does its
+    description."""
+    assert parse_scene(box_pit_toml(3), "pit.toml").collisions.solver.threads == 1
+    if numba.config.NUMBA_NUM_THREADS >= 2:
+        solver = parse_scene(box_pit_toml(3, threads=2), "pit.toml").collisions.solver
+        assert solver.threads == 2 and solver.describe().endswith(", 2 threads")

@@ -58,7 +58,9 @@ def test_tiny_stacking_section_records_the_pyramid_and_the_pit(monkeypatch):
 
 def test_the_box_pit_on_two_cores_runs_in_a_child_with_two_threads():
     """The 2-core timing (issue 26's "on 2 cores") comes from a child process given 2 cores and 2 Numba
-    threads, whatever the bench process runs on; it says so in its record."""
+    threads, its scene's solver set to 2 threads, whatever the bench process runs on; it says so in
+    its record."""
     child = stacking.on_cores(20, 2, 1, 2)
     assert child["numba_threads"] == 2 and child["cores"] == min(2, len(os.sched_getaffinity(0)))
+    assert child["solver_threads"] == 2 and child["settings"].endswith(", 2 threads")  # the scene asks for them
     assert child["seconds_per_step"]["median"] > 0 and child["threading_layer"] in ("omp", "tbb", "workqueue")

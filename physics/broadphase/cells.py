@@ -50,8 +50,10 @@ MAX_CELLS_PER_BODY = 32
 #: the dense grid uses one level when the widest box is at most this many times the median one
 #: (cells as wide as the widest box); beyond, the hierarchy keeps outliers off the fine cells
 ONE_LEVEL_SPREAD = 2.0
-#: room for this many pairs per sphere in the one-level grid's buffer (more: it runs again)
-PAIRS_PER_BODY = 4
+#: room for this many pairs per sphere in the one-level grid's buffer (more: it runs again); a pile of
+#: bodies with wide speculative margins has more than 4 (the 10^4 box pit: 5.3 in its first 30
+#: steps, so every step ran the grid twice), and the room costs nothing until it is written
+PAIRS_PER_BODY = 8
 #: the level-0 cell edge uses the median radius of at most about this many evenly strided spheres
 MEDIAN_SAMPLE = 1024
 #: hash buckets per sphere (rounded up to a power of two)

@@ -148,8 +148,7 @@ def face_contact(box1, axis, box2, reference, margin, out):
     for plane in range(4):
         along = (axis + 1 + plane // 2) % 3
         sense = 1.0 if plane % 2 == 0 else -1.0
-        count = clip((polygon[now], label[now]), count, (along, sense, h1[along], 4 + plane),
-                     (polygon[1 - now], label[1 - now]))
+        count = clip((polygon, label), (now, count), (along, sense, h1[along], 4 + plane))
         now = 1 - now
         if count == 0:
             return 0
@@ -174,38 +173,41 @@ def face_contact(box1, axis, box2, reference, margin, out):
 
 
 @njit(cache=True, inline="always")
-def clip(source, count, cut, target):
-    """Sutherland–Hodgman: the part of the polygon ``source`` = (vertices, labels) with
-    sense * x_along <= limit, ``cut`` = (along, sense, limit, the plane's line id), written into
-    ``target`` = (vertices, labels); its vertex count.
+def clip(buffers, source, cut):
+    """Sutherland–Hodgman: the part of the polygon ``buffers`` = (vertices, labels) [now] with
+    sense * x_along <= limit, ``source`` = (now, its vertex count), ``cut`` = (along, sense, limit,
+    the plane's line id), written into the buffers' other half [1 - now]; its vertex count.
 
     A vertex less than :data:`CLIP_TOLERANCE` outside the plane is kept as it is; an edge
     leaving the kept side is cut where it crosses the plane itself. The cut vertex lies on the
     edge's line and on the plane: leaving the kept side it is named (that line, plane), entering
     it (plane, that line), so each vertex is named by the line the boundary arrives along and
-    the one it leaves along.
+    the one it leaves along. (Element by element: a row slice of the buffers would be a view made
+    and freed per vertex, which made the clipping most of the narrow phase's time.)
     """
-    polygon, label = source
+    polygon, label = buffers
+    now, count = source
     along, sense, limit, plane = cut
-    clipped, clipped_label = target
+    out = 1 - now
     kept = 0
     for k in range(count):
-        q = (k + 1) % count
-        dp = sense * polygon[k, along] - limit
-        dq = sense * polygon[q, along] - limit
+        q = k + 1 if k + 1 < count else 0  # (k + 1) % count without a division per vertex
+        dp = sense * polygon[now, k, along] - limit
+        dq = sense * polygon[now, q, along] - limit
         if dp <= CLIP_TOLERANCE:
-            clipped[kept] = polygon[k]
-            clipped_label[kept] = label[k]
+            for m in range(3):
+                polygon[out, kept, m] = polygon[now, k, m]
+            label[out, kept, 0], label[out, kept, 1] = label[now, k, 0], label[now, k, 1]
             kept += 1
         if (dp <= CLIP_TOLERANCE) != (dq <= CLIP_TOLERANCE):
             s = dp / (dp - dq)
             if 0 < s < 1:  # not where a vertex kept within the tolerance already stands
                 for m in range(3):
-                    clipped[kept, m] = polygon[k, m] + s * (polygon[q, m] - polygon[k, m])
+                    polygon[out, kept, m] = polygon[now, k, m] + s * (polygon[now, q, m] - polygon[now, k, m])
                 if dp <= CLIP_TOLERANCE:
-                    clipped_label[kept, 0], clipped_label[kept, 1] = label[k, 1], plane
+                    label[out, kept, 0], label[out, kept, 1] = label[now, k, 1], plane
                 else:
-                    clipped_label[kept, 0], clipped_label[kept, 1] = plane, label[k, 1]
+                    label[out, kept, 0], label[out, kept, 1] = plane, label[now, k, 1]
                 kept += 1
     return kept
 

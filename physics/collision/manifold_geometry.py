@@ -142,39 +142,55 @@ def reduce_to_four(point, separation, feature, count):
     it; then the one making the largest triangle with those two; then the one adding the
     largest area outside that triangle, so the four span the largest quadrilateral of the set
     (the reduction of Box2D and Box3D's manifolds, which keeps the support polygon a stack
-    stands on). The kept points are moved to rows 0..3; returns 4.
+    stands on). The kept points are moved to rows 0..3; returns 4. (Rows and indices as
+    scalars and tuples: the arrays and copies it made cost more than the choice.)
     """
-    keep = np.empty(4, dtype=np.int64)
-    keep[0] = 0
+    k0 = 0
     for k in range(1, count):
-        if separation[k] < separation[keep[0]]:
-            keep[0] = k
-    p0 = (point[keep[0], 0], point[keep[0], 1], point[keep[0], 2])
-    best = -1.0
+        if separation[k] < separation[k0]:
+            k0 = k
+    p0 = _point(point, k0)
+    best, k1 = -1.0, 0
     for k in range(count):
-        d = sub3((point[k, 0], point[k, 1], point[k, 2]), p0)
+        d = sub3(_point(point, k), p0)
         if dot3(d, d) > best:
-            best, keep[1] = dot3(d, d), k
-    p1 = (point[keep[1], 0], point[keep[1], 1], point[keep[1], 2])
+            best, k1 = dot3(d, d), k
+    p1 = _point(point, k1)
     edge = sub3(p1, p0)
-    best, normal = -1.0, (0.0, 0.0, 0.0)
+    best, normal, k2 = -1.0, (0.0, 0.0, 0.0), 0
     for k in range(count):
-        c = cross3(edge, sub3((point[k, 0], point[k, 1], point[k, 2]), p0))
+        c = cross3(edge, sub3(_point(point, k), p0))
         if dot3(c, c) > best:
-            best, keep[2], normal = dot3(c, c), k, c
-    p2 = (point[keep[2], 0], point[keep[2], 1], point[keep[2], 2])
+            best, k2, normal = dot3(c, c), k, c
+    p2 = _point(point, k2)
     # the fourth: the most negative signed area against the triangle's normal, over its three edges
-    best = np.inf
+    best, k3 = np.inf, 0
     corners = (p0, p1, p2)
     for k in range(count):
-        if k == keep[0] or k == keep[1] or k == keep[2]:
+        if k == k0 or k == k1 or k == k2:
             continue
-        q = (point[k, 0], point[k, 1], point[k, 2])
+        q = _point(point, k)
         for i in range(3):
             u, w = corners[i], corners[(i + 1) % 3]
             area = dot3(cross3(sub3(w, u), sub3(q, u)), normal)
             if area < best:
-                best, keep[3] = area, k
-    kept_point, kept_separation, kept_feature = point[keep].copy(), separation[keep].copy(), feature[keep].copy()
-    point[:4], separation[:4], feature[:4] = kept_point, kept_separation, kept_feature
+                best, k3 = area, k
+    p3 = _point(point, k3)
+    s0, s1, s2, s3 = separation[k0], separation[k1], separation[k2], separation[k3]
+    f0, f1, f2, f3 = feature[k0], feature[k1], feature[k2], feature[k3]
+    _put(point, separation, feature, 0, (p0, s0, f0))
+    _put(point, separation, feature, 1, (p1, s1, f1))
+    _put(point, separation, feature, 2, (p2, s2, f2))
+    _put(point, separation, feature, 3, (p3, s3, f3))
     return 4
+
+
+@njit(cache=True, inline="always")
+def _point(point, k):
+    return point[k, 0], point[k, 1], point[k, 2]
+
+
+@njit(cache=True, inline="always")
+def _put(point, separation, feature, k, row):
+    """Row k of the points := ``row`` = (point, separation, feature)."""
+    (point[k, 0], point[k, 1], point[k, 2]), separation[k], feature[k] = row

@@ -35,10 +35,12 @@ from __future__ import annotations
 
 from typing import NamedTuple
 
+import numba
 import numpy as np
 from numba import njit, prange
 
 from .. import quaternion as quat
+from .contact_colouring import span
 from .manifold_box import box_box, box_plane
 from .manifold_capsule_box import box_capsule
 from .manifold_geometry import make_scratch, to_local
@@ -338,13 +340,15 @@ def _slots_of_chunk(solids_, pairs_, margins, slots, counts, span):
 
 
 @njit(cache=True)
-def sorted_rows(pairs, static_pairs, counts, n):
-    """The rows of :func:`manifold_slots`'s points in the order (a, b, feature): an index into ``slots``.
+def sorted_rows(pairs, static_pairs, found, n):
+    """The rows of :func:`manifold_slots`'s points in the order (a, b, feature): an index into ``slots``;
+    ``found`` = (counts, feature): each pair's point count and the points' features.
 
     For each body a in turn: its static shapes (b = -1 - s, so s descending), then its partners
     j > a ascending (``pairs`` and ``static_pairs`` are sorted); within a pair its points by
     feature, equal features kept in the order found (as a stable sort of all the points would
     put them, without sorting them all)."""
+    counts, feature = found
     order = np.empty(MAX_POINTS * (len(pairs) + len(static_pairs)), np.int64)
     rows, p, s = 0, 0, 0
     for a in range(n):
@@ -352,20 +356,27 @@ def sorted_rows(pairs, static_pairs, counts, n):
         while s < len(static_pairs) and static_pairs[s, 0] == a:
             s += 1
         for q in range(s - 1, first - 1, -1):
-            rows = _append_pair(order, rows, len(pairs) + q, counts)
+            rows = _append_pair(order, rows, len(pairs) + q, found)
         while p < len(pairs) and pairs[p, 0] == a:
-            rows = _append_pair(order, rows, p, counts)
+            rows = _append_pair(order, rows, p, found)
             p += 1
     return order[:rows]
 
 
-@njit(cache=True)
-def take_rows(points, order, out):
+@njit(cache=True, parallel=True)
+def take_rows(points, order, out, threads):
     """``out`` row k = ``points`` row ``order[k]``, every column (one pass: NumPy's fancy indexing of
-    the six columns took a millisecond on 10^4 boxes' points)."""
+    the six columns took a millisecond on 10^4 boxes' points); ``threads`` parts in parallel."""
+    for part in prange(threads):
+        _take_rows_of(points, order, out, span(0, len(order), part, threads))
+
+
+@njit(cache=True)
+def _take_rows_of(points, order, out, rows):
+    """:func:`take_rows` of the rows ``rows`` = (first, end)."""
     a, b, normal, point, separation, feature = points
     a_out, b_out, normal_out, point_out, separation_out, feature_out = out
-    for k in range(len(order)):
+    for k in range(rows[0], rows[1]):
         i = order[k]
         a_out[k], b_out[k], separation_out[k], feature_out[k] = a[i], b[i], separation[i], feature[i]
         for m in range(3):
@@ -373,31 +384,32 @@ def take_rows(points, order, out):
 
 
 @njit(cache=True, inline="always")
-def _append_pair(order, rows, pair, counts):
-    """Pair ``pair``'s rows appended to ``order`` (the row numbers alone; sorted by feature at the end
-    of :func:`manifolds`); the new length."""
+def _append_pair(order, rows, pair, found):
+    """Pair ``pair``'s rows appended to ``order`` (the row numbers alone), sorted by feature
+    (insertion sort: a pair has at most 4 points; stable); the new length. ``found`` = (counts,
+    feature) as in :func:`sorted_rows`."""
+    counts, feature = found
+    start = rows
     for k in range(counts[pair]):
-        order[rows] = MAX_POINTS * pair + k
+        x = MAX_POINTS * pair + k
+        j = rows
+        while j > start and feature[order[j - 1]] > feature[x]:
+            order[j] = order[j - 1]
+            j -= 1
+        order[j] = x
         rows += 1
     return rows
 
 
 @njit(cache=True)
-def sort_by_feature(order, a, b, feature):
-    """Within each run of one (a, b) in ``order``, the rows sorted by feature (insertion sort: a
-    run has at most 4 rows; stable)."""
-    start = 0
-    for k in range(1, len(order) + 1):
-        if k < len(order) and a[order[k]] == a[order[start]] and b[order[k]] == b[order[start]]:
-            continue
-        for m in range(start + 1, k):
-            x = order[m]
-            j = m
-            while j > start and feature[order[j - 1]] > feature[x]:
-                order[j] = order[j - 1]
-                j -= 1
-            order[j] = x
-        start = k
+def _in_order(pairs):
+    """Whether each pair (i, j) has i < j and the pairs are strictly increasing (lexicographically)."""
+    for p in range(len(pairs)):
+        if pairs[p, 0] >= pairs[p, 1]:
+            return False
+        if p and (pairs[p, 0] < pairs[p - 1, 0] or (pairs[p, 0] == pairs[p - 1, 0] and pairs[p, 1] <= pairs[p - 1, 1])):
+            return False
+    return True
 
 
 def manifolds(shapes: RigidShapes, poses: Poses, pairs, statics=(), margin=0.0) -> ManifoldPoints:
@@ -430,9 +442,10 @@ def manifolds(shapes: RigidShapes, poses: Poses, pairs, statics=(), margin=0.0) 
     if np.any(bad):
         raise ValueError(f"pair {int(np.argmax(bad))} must join two different bodies 0 .. {n - 1}, "
                          f"got {pairs[np.argmax(bad)].tolist()}")
-    key = np.sort(lo * n + hi)  # each pair once, as (min, max), in order
-    key = key[np.diff(key, prepend=-1) != 0]
-    pairs = np.column_stack([key // n, key % n])
+    if not _in_order(pairs):  # a broadphase's pairs are (min, max), each once, sorted: kept as they are
+        key = np.sort(lo * n + hi)  # each pair once, as (min, max), in order
+        key = key[np.diff(key, prepend=-1) != 0]
+        pairs = np.column_stack([key // n, key % n])
     bodies, static = body_solids(shapes, poses), static_solids(statics)
     extent = np.ascontiguousarray(reach(shapes) + margin)
     static_pairs = static_candidates(bodies, static, extent)
@@ -441,14 +454,13 @@ def manifolds(shapes: RigidShapes, poses: Poses, pairs, statics=(), margin=0.0) 
                            np.empty((capacity, 3)), np.empty(capacity), np.empty(capacity, np.int64))
     counts = np.empty(len(pairs) + len(static_pairs), np.int64)
     margins = (np.ascontiguousarray(margin), extent)
-    if len(counts) >= PARALLEL_PAIRS:
+    if len(counts) >= PARALLEL_PAIRS and numba.get_num_threads() > 1:
         manifold_slots(bodies, static, pairs, static_pairs, margins, slots, counts)
-    else:  # the same rows on this thread alone (a parallel region costs more than a few pairs)
+    else:  # the same rows on this thread alone (a parallel region costs more than a few pairs, or one thread)
         _slots_of_chunk((bodies, static), (pairs, static_pairs), margins, slots, counts, (0, len(counts)))
-    order = sorted_rows(pairs, static_pairs, counts, n)
-    sort_by_feature(order, slots.a, slots.b, slots.feature)
+    order = sorted_rows(pairs, static_pairs, (counts, slots.feature), n)
     rows = len(order)
     out = ManifoldPoints(np.empty(rows, np.int64), np.empty(rows, np.int64), np.empty((rows, 3)), np.empty((rows, 3)),
                          np.empty(rows), np.empty(rows, np.int64))
-    take_rows(slots, order, out)
+    take_rows(slots, order, out, numba.get_num_threads())
     return out

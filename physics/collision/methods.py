@@ -23,7 +23,7 @@ from typing import ClassVar
 
 from steplab.core.registry import PluginError, Registry
 
-from .solver_settings import CORRECTIONS, ContactSolver
+from .solver_settings import CORRECTIONS, ContactSolver, is_thread_count, threads_allowed
 
 
 class CollisionMethod:
@@ -82,6 +82,9 @@ class ContactSolverMethod(CollisionMethod):
         if baumgarte > 1:
             table.fail(f"must be in (0, 1] (the fraction of the penetration undone per substep), got {baumgarte:g}",
                        "baumgarte")
+        threads = table.raw("threads", d.threads)
+        if not is_thread_count(threads):
+            table.fail(f"must be {threads_allowed()}, got {threads!r}", "threads")
         return {"solver": ContactSolver(
             iterations=table.integer("iterations", d.iterations, 1, 10**6),
             substeps=table.integer("substeps", d.substeps, 1, 10**6),
@@ -90,7 +93,8 @@ class ContactSolverMethod(CollisionMethod):
             damping_ratio=table.number("damping_ratio", d.damping_ratio, nonnegative=True),
             baumgarte=baumgarte, slop=table.number("slop", d.slop, nonnegative=True),
             push_speed=table.number("push_speed", d.push_speed, positive=True),
-            rolling_resistance=table.number("rolling_resistance", d.rolling_resistance, nonnegative=True))}
+            rolling_resistance=table.number("rolling_resistance", d.rolling_resistance, nonnegative=True),
+            threads=threads)}
 
     @classmethod
     def step(cls, world, model, integrator):

@@ -11,9 +11,10 @@ the pyramid's step (2,360 points) and a tenth of that compiled.
 from __future__ import annotations
 
 import numpy as np
-from numba import njit
+from numba import njit, prange
 
 from .approach import AT_REST, approach_speed
+from .contact_colouring import span
 from .resting import rest_speed
 from .sphere_contacts import dot3, row3
 
@@ -31,18 +32,26 @@ def tangent_basis(n):
     return (1.0 + sign * x * x * a, sign * b, -sign * x), (b, sign + y * y * a, -y)
 
 
-@njit(cache=True)
-def gather(source, movers, materials, previous, context, out):
-    """Fill ``out`` (a :class:`.rigid_solver.RigidContactColumns` of C rows) from ``source`` =
-    (points, order): row k from point ``order[k]`` of ``points`` (:class:`.manifolds.ManifoldPoints`),
-    so the points are taken in the solver's order without a permuted copy of them.
+@njit(cache=True, parallel=True)
+def gather(points, order, movers, materials, previous, context, out, threads):
+    """Fill ``out`` (a :class:`.rigid_solver.RigidContactColumns` of C rows): row k from point
+    ``order[k]`` of ``points`` (:class:`.manifolds.ManifoldPoints`), so the points are taken in the
+    solver's order without a permuted copy of them.
 
     ``movers`` = (q, accel, rolling) of the bodies: centres at the start of the step, the forces'
     accelerations, and each body's rolling resistance (coefficient times rounding radius, m);
     ``materials`` a :class:`.contact_buffer.Materials`; ``previous`` = (rows, pn, pt, pr): each
-    row's point among the last step's points, or -1 (:func:`.rigid_solver.previous_rows`), and
-    their impulses (pt a world vector); ``context`` = (the world's rest speed, dt).
+    point's row among the last step's points, or -1 (:func:`.rigid_solver.previous_rows`), and
+    their impulses (pt a world vector); ``context`` = (the world's rest speed, dt). Each row its
+    own: ``threads`` parts in parallel, the same bytes on any number of threads.
     """
+    for part in prange(threads):  # (points and order apart: Numba's parallel loop takes no tuple of a NamedTuple)
+        _gather_rows((points, order), movers, materials, previous, context, out, span(0, len(order), part, threads))
+
+
+@njit(cache=True)
+def _gather_rows(source, movers, materials, previous, context, out, rows_):
+    """:func:`gather` of the rows ``rows_`` = (first, end)."""
     q, accel, rolls = movers
     rows, old_pn, old_pt, old_pr = previous
     floor, dt = context
@@ -52,7 +61,7 @@ def gather(source, movers, materials, previous, context, out):
     # the columns out of the NamedTuple before the loops (a field read in a loop costs a reference count)
     (a_out, b_out, n_out, ra, rb, tangent, s0, vn0, hit, _, friction, restitution, threshold, rolling_out, pn, pt,
      pr, total, most, _, _, _) = out
-    for k in range(len(order)):
+    for k in range(rows_[0], rows_[1]):
         i = order[k]
         a, b = a_[i], b_[i]
         n = (normal[i, 0], normal[i, 1], normal[i, 2])
@@ -79,7 +88,7 @@ def gather(source, movers, materials, previous, context, out):
             tangent[k, 0, x], tangent[k, 1, x] = t1[x], t2[x]
         s0[k], vn0[k], hit[k] = separation[i], 0.0, np.inf
         total[k], most[k] = 0.0, 0.0
-        row = rows[k]
+        row = rows[i]
         if row >= 0:
             p = (old_pt[row, 0], old_pt[row, 1], old_pt[row, 2])
             pn[k], pt[k, 0], pt[k, 1] = old_pn[row], dot3(p, t1), dot3(p, t2)
@@ -91,20 +100,53 @@ def gather(source, movers, materials, previous, context, out):
                 pr[k, x] = 0.0
 
 
-@njit(cache=True)
-def in_sorted_rows(contacts, order):
+@njit(cache=True, parallel=True)
+def in_sorted_rows(contacts, order, threads):
     """(normal, pn, pt, pr, total) of the step's contacts back in the sorted order of their points
     (row ``order[k]`` from the contacts' row k), pt as a world vector: what the next step warm-starts
-    from (:func:`.rigid_solver.previous_rows` matches sorted keys)."""
+    from (:func:`.rigid_solver.previous_rows` matches sorted keys); ``threads`` parts in parallel."""
     count = len(order)
-    normal, pt, pr = np.empty((count, 3)), np.empty((count, 3)), np.empty((count, 3))
-    pn, total = np.empty(count), np.empty(count)
+    out = (np.empty((count, 3)), np.empty(count), np.empty((count, 3)), np.empty((count, 3)), np.empty(count))
+    for part in prange(threads):
+        _sorted_rows_of(contacts, order, out, span(0, count, part, threads))
+    return out
+
+
+@njit(cache=True)
+def _sorted_rows_of(contacts, order, out, rows):
+    """:func:`in_sorted_rows` of the contacts' rows ``rows`` = (first, end)."""
+    normal, pn, pt, pr, total = out
     c_normal, c_pn, c_pt, c_pr, c_total, tangent = (contacts.normal, contacts.pn, contacts.pt, contacts.pr,
                                                     contacts.total, contacts.tangent)
-    for k in range(count):
+    for k in range(rows[0], rows[1]):
         i = order[k]
         pn[i], total[i] = c_pn[k], c_total[k]
         for x in range(3):
             normal[i, x], pr[i, x] = c_normal[k, x], c_pr[k, x]
             pt[i, x] = c_pt[k, 0] * tangent[k, 0, x] + c_pt[k, 1] * tangent[k, 1, x]
-    return normal, pn, pt, pr, total
+
+
+@njit(cache=True)
+def newly_pressed(total, order, rows, previous_total):
+    """The contacts (rows of the sweep order, ascending) pressed in the step (``total`` > 0) whose
+    point was not pressed in the last step: ``rows[order[k]]`` is contact k's point among the last
+    step's points, or -1 (:func:`.rigid_solver.previous_rows`), ``previous_total`` their impulses."""
+    out = np.empty(len(total), np.int64)
+    found = 0
+    for k in range(len(total)):
+        if total[k] > 0:
+            row = rows[order[k]]
+            if row < 0 or not previous_total[row] > 0:
+                out[found] = k
+                found += 1
+    return out[:found]
+
+
+@njit(cache=True)
+def is_sorted(a, b, feature):
+    """Whether the rows (a, b, feature) are in strictly increasing lexicographic order."""
+    for k in range(1, len(a)):
+        if not (a[k] > a[k - 1] or (a[k] == a[k - 1] and (b[k] > b[k - 1] or (
+                b[k] == b[k - 1] and feature[k] > feature[k - 1])))):
+            return False
+    return True

@@ -164,13 +164,25 @@ def _rotate_inverse(q, k, x):
 @njit(cache=True, inline="always")
 def _turn(q, k, w, h, update):
     """q[k] <- (turn by h w, world frame) q[k], normalised (exp(h w / 2), or 1 + h w / 2)."""
+    _turn_by(q, k, _half_turn(w, h, update))
+
+
+@njit(cache=True, inline="always")
+def _half_turn(w, h, update):
+    """The quaternion of the turn by h w (world frame): exp(h w / 2), or its first-order 1 + h w / 2."""
     if update == EXPONENTIAL:
         x = 0.5 * h * np.sqrt(w[0] * w[0] + w[1] * w[1] + w[2] * w[2])  # the half angle
         c = np.cos(x)
         s = 0.5 * h * (np.sin(x) / x if x > 1e-8 else 1.0 - x * x / 6.0)  # sin(x) / |w|, exact to round-off
     else:
         c, s = 1.0, 0.5 * h
-    p0, p1, p2, p3 = c, s * w[0], s * w[1], s * w[2]
+    return c, s * w[0], s * w[1], s * w[2]
+
+
+@njit(cache=True, inline="always")
+def _turn_by(q, k, p):
+    """q[k] <- p q[k], normalised."""
+    p0, p1, p2, p3 = p
     q0, q1, q2, q3 = q[k, 0], q[k, 1], q[k, 2], q[k, 3]
     r0 = p0 * q0 - p1 * q1 - p2 * q2 - p3 * q3
     r1 = p0 * q1 + p1 * q0 + p2 * q3 - p3 * q2
@@ -413,9 +425,9 @@ def _positions_of(bodies, sub, span_):
             q[body, x] += h * v[body, x]
             dq[body, x] += h * v[body, x]
         if inverse_principal[body, 0] > 0.0:
-            w = _row(omega, body)
-            _turn(orientation, body, w, h, update)
-            _turn(turn, body, w, h, update)
+            p = _half_turn(_row(omega, body), h, update)  # one sine and cosine for both
+            _turn_by(orientation, body, p)
+            _turn_by(turn, body, p)
 
 
 @njit(cache=True, inline="always")
@@ -480,6 +492,12 @@ def _solve_rolling(state, rolls, k, a, b, n):
     _apply_angular(state, a, b, d)
 
 
+@njit(cache=True, inline="always")
+def _holds_nothing(pt, pr, k):
+    """Whether contact k holds no tangential and no rolling impulse."""
+    return pt[k, 0] == 0.0 and pt[k, 1] == 0.0 and pr[k, 0] == 0.0 and pr[k, 1] == 0.0 and pr[k, 2] == 0.0
+
+
 @njit(cache=True, parallel=True)
 def _sweep(bodies, contacts, sub, use_bias, colours):
     """One Gauss-Seidel sweep over the contacts, colour by colour (:mod:`.contact_colouring`): each
@@ -496,15 +514,21 @@ def _sweep(bodies, contacts, sub, use_bias, colours):
 @njit(cache=True)
 def _sweep_blocks(bodies, contacts, how, colours, blocks):
     """:func:`_sweep` over the manifolds ``blocks`` = (first, end) (their rows are consecutive);
-    ``how`` = (the substep, whether the bias pushes)."""
+    ``how`` = (the substep, whether the bias pushes).
+
+    A contact whose impulse does not change applies none, and one that ends the pass unpressed
+    (P = 0) and holding no friction or rolling impulse skips them: both are clamped to zero, so
+    the step is the same numbers without them (a zero impulse can at most turn a velocity of -0.0
+    into +0.0). Most points of a falling pile are such, speculative points that are never pressed:
+    75 to 100 % of the 10^4 box pit's in its first 30 steps, which made the skip halve its sweeps."""
     sub, use_bias = how
     state = _state(bodies)
     v, omega = bodies.v, bodies.omega
     a_, b_, normal, separation = contacts.a, contacts.b, contacts.normal, contacts.s
     lever_a, lever_b, pn, mass, hit = contacts.la, contacts.lb, contacts.pn, contacts.mass, contacts.hit
-    friction, rolling = contacts.friction, contacts.rolling
-    tangential = (contacts.tangent, contacts.pt, mass, friction, pn)
-    rolls = (contacts.pr, rolling, pn)
+    friction, rolling, pt, pr = contacts.friction, contacts.rolling, contacts.pt, contacts.pr
+    tangential = (contacts.tangent, pt, mass, friction, pn)
+    rolls = (pr, rolling, pn)
     for k in range(colours.rows[blocks[0]], colours.rows[blocks[1]]):
         a, b, n = a_[k], b_[k], _row(normal, k)
         la, lb = _row(lever_a, k), _row(lever_b, k)
@@ -516,7 +540,10 @@ def _sweep_blocks(bodies, contacts, how, colours, blocks):
         pn[k] = total
         if dp > 0.0 and hit[k] == np.inf:  # the impact: the speed it bounces back from
             hit[k] = vn
-        _apply(state, a, b, la, lb, (dp * n[0], dp * n[1], dp * n[2]))
+        if dp != 0.0:
+            _apply(state, a, b, la, lb, (dp * n[0], dp * n[1], dp * n[2]))
+        if total == 0.0 and _holds_nothing(pt, pr, k):
+            continue  # friction and rolling: clamped to |P_t| <= mu 0 and |M| <= c_r 0, they stay zero
         if friction[k] > 0.0:
             _solve_friction(state, tangential, k, a, b, la, lb)
         if rolling[k] > 0.0:
@@ -542,6 +569,8 @@ def _warm_blocks(bodies, contacts, colours, blocks):
     a_, b_, n, t, lever_a, lever_b = contacts.a, contacts.b, contacts.normal, contacts.tangent, contacts.la, contacts.lb
     pn_, pt, pr, rolling = contacts.pn, contacts.pt, contacts.pr, contacts.rolling
     for k in range(colours.rows[blocks[0]], colours.rows[blocks[1]]):
+        if pn_[k] == 0.0 and _holds_nothing(pt, pr, k):
+            continue  # no impulse to apply again (a speculative point not yet pressed)
         pn, p1, p2 = pn_[k], pt[k, 0], pt[k, 1]
         p = (pn * n[k, 0] + p1 * t[k, 0, 0] + p2 * t[k, 1, 0], pn * n[k, 1] + p1 * t[k, 0, 1] + p2 * t[k, 1, 1],
              pn * n[k, 2] + p1 * t[k, 0, 2] + p2 * t[k, 1, 2])
@@ -739,13 +768,16 @@ def step(bodies, contacts, sub, substeps, colours):
 def previous_rows(old, new):
     """Each new contact's row among the last step's, matched by (a, b, feature), or -1.
 
-    ``old`` and ``new`` are (C, 3) int64 keys sorted lexicographically: one merge."""
-    rows = np.full(len(new), -1, dtype=np.int64)
+    ``old`` and ``new`` are the columns (a, b, feature), int64, each sorted lexicographically: one
+    merge."""
+    oa, ob, of = old
+    na, nb, nf = new
+    rows = np.full(len(na), -1, dtype=np.int64)
     p = 0
-    for k in range(len(new)):
-        while p < len(old) and (old[p, 0] < new[k, 0] or (old[p, 0] == new[k, 0] and (
-                old[p, 1] < new[k, 1] or (old[p, 1] == new[k, 1] and old[p, 2] < new[k, 2])))):
+    for k in range(len(na)):
+        while p < len(oa) and (oa[p] < na[k] or (oa[p] == na[k] and (
+                ob[p] < nb[k] or (ob[p] == nb[k] and of[p] < nf[k])))):
             p += 1
-        if p < len(old) and old[p, 0] == new[k, 0] and old[p, 1] == new[k, 1] and old[p, 2] == new[k, 2]:
+        if p < len(oa) and oa[p] == na[k] and ob[p] == nb[k] and of[p] == nf[k]:
             rows[k] = p
     return rows

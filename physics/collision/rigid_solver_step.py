@@ -40,7 +40,7 @@ from .contact_colouring import colour_contacts, in_sorted_order
 from .events import CollisionLog, ImpactBlock, cancel_triggers
 from .manifolds import BOX, CAPSULE, SPHERE, check_shapes
 from .pairs import SweptSpheres
-from .rigid_columns import gather, in_sorted_rows
+from .rigid_columns import gather, in_sorted_rows, is_sorted, newly_pressed
 from .solver_step import INTEGRATOR
 from .step import ConstantField
 
@@ -58,7 +58,7 @@ DEFAULT_ROTATION = "exponential-map"
 KINDS = {"sphere": SPHERE, "box": BOX, "capsule": CAPSULE}
 #: the most a rotation moves a point of a body: its diameter, 2 R (a half turn)
 MAX_ROTATION_REACH = 2.0
-#: scenes of this many bodies or more are swept colour by colour on Numba's threads
+#: scenes of this many bodies or more are swept colour by colour on the solver's threads
 #: (:mod:`.contact_colouring`, which says why smaller ones keep the sorted order on one thread): a step
 #: makes about 12 parallel regions per colour, which cost more than a small scene's sweep, and on a
 #: loaded machine each waits for its slowest thread's time slice
@@ -111,17 +111,11 @@ def world_inverse_inertia(orientation, inverse_principal) -> np.ndarray:
                                     np.ascontiguousarray(inverse_principal, dtype=float))
 
 
-def _sorted(a, b, feature) -> bool:
-    """Whether the rows (a, b, feature) are in strictly increasing lexicographic order."""
-    da, db, df = np.diff(a), np.diff(b), np.diff(feature)
-    return bool(np.all((da > 0) | ((da == 0) & ((db > 0) | ((db == 0) & (df > 0))))))
-
-
 @dataclasses.dataclass
 class Solved:
     """A step's contact points and their impulses, for the next step's warm start and the log."""
 
-    key: np.ndarray  # (C, 3) int64 (a, b, feature), sorted
+    key: tuple  # the columns (a, b, feature), int64, sorted
     normal: np.ndarray
     pn: np.ndarray
     pt: np.ndarray  # (C, 3) the tangential impulse as a world vector
@@ -129,7 +123,7 @@ class Solved:
     total: np.ndarray
 
 
-_NOTHING = Solved(np.zeros((0, 3), np.int64), np.zeros((0, 3)), np.zeros(0), np.zeros((0, 3)), np.zeros((0, 3)),
+_NOTHING = Solved((np.zeros(0, np.int64),) * 3, np.zeros((0, 3)), np.zeros(0), np.zeros((0, 3)), np.zeros((0, 3)),
                   np.zeros(0))
 
 
@@ -193,7 +187,18 @@ class RigidSolverStep:
         self.history = {0: (self.orientation.copy(), self.omega.copy())}
 
     def __call__(self, t, y, dt, carry):
-        """Advance ``y`` (2, N, 3) and the rotation from ``t`` by ``dt``; returns ``(y, carry)``."""
+        """Advance ``y`` (2, N, 3) and the rotation from ``t`` by ``dt``; returns ``(y, carry)``.
+
+        The step's parallel parts run on the solver's ``threads`` (Numba's count is set for the
+        step and restored after it)."""
+        threads = numba.get_num_threads()
+        numba.set_num_threads(self.world.solver.threads)
+        try:
+            return self._advance(t, y, dt, carry)
+        finally:
+            numba.set_num_threads(threads)
+
+    def _advance(self, t, y, dt, carry):
         q0, v0 = np.array(y[0], dtype=float), np.array(y[1], dtype=float)
         a = self.field if self.field is not None else np.asarray(self.model.acceleration(t, q0, v0), dtype=float)
         points = self.contact_points(t, y, dt, a)
@@ -234,10 +239,13 @@ class RigidSolverStep:
         margin = reach - self.bounding + self.margin + np.linalg.norm(np.asarray(y_forces[0]) - q0, axis=1)
         points = self.narrow_phase.manifolds(self.shapes, self.narrow_phase.Poses(q0, self.orientation),
                                              np.column_stack([pairs.i, pairs.j]), self.world.shapes, margin)
-        if _sorted(points.a, points.b, points.feature):  # as the narrow phase returns them
-            return type(points)(*(np.ascontiguousarray(column) for column in points))
+        points = type(points)(*(np.ascontiguousarray(column) for column in points))
+        points = points._replace(a=points.a.astype(np.int64, copy=False), b=points.b.astype(np.int64, copy=False),
+                                 feature=points.feature.astype(np.int64, copy=False))
+        if is_sorted(points.a, points.b, points.feature):  # as the narrow phase returns them
+            return points
         order = np.lexsort((points.feature, points.b, points.a))
-        return type(points)(*(np.ascontiguousarray(column)[order] for column in points))
+        return type(points)(*(column[order] for column in points))
 
     def columns(self, q0, v0, a, points, dt):
         """The kernels' bodies, contacts (warm-started, effective masses, laid out in the sweep order:
@@ -259,44 +267,40 @@ class RigidSolverStep:
             np.empty(count), np.empty(count), np.zeros(count), np.zeros((count, 3)), np.zeros((count, 3)))
         # the points arrive sorted by (a, b, feature), the order the last step's are matched in; the
         # solver takes them in its sweep order
-        key = np.column_stack([points.a, points.b, points.feature]).astype(np.int64)
+        key = (points.a, points.b, points.feature)
         old = self._previous
         rows = rs.previous_rows(old.key, key)
-        if n >= COLOURED_BODIES:  # coloured, on Numba's threads (the same bytes on any number of them)
-            order, colours = colour_contacts(points.a, points.b, n, numba.get_num_threads())
+        if n >= COLOURED_BODIES:  # coloured, on the solver's threads (the same bytes on any number of them)
+            order, colours = colour_contacts(points.a, points.b, n, s.threads)
         else:
             order, colours = in_sorted_order(points.a, points.b)
-        self._sorted_key, self._order = key, order
-        self._points_b = points.b[order]
-        rows = rows[order]
-        gather((points, order), (q0, np.ascontiguousarray(a, dtype=float), self.rolling), self.materials,
-               (rows, old.pn, old.pt, old.pr), (float(self.world.rest_speed), float(dt)), contacts)
+        self._sorted_key, self._order, self._rows = key, order, rows
+        gather(points, order, (q0, np.ascontiguousarray(a, dtype=float), self.rolling), self.materials,
+               (rows, old.pn, old.pt, old.pr), (float(self.world.rest_speed), float(dt)), contacts, s.threads)
         rs.prepare(bodies, contacts, colours)
         bias_rate, mass_scale, impulse_scale = s.softness(h)
         sub = rs.RigidSubstep(h, s.iterations, bias_rate, mass_scale, impulse_scale, s.push_speed, s.slop,
                               *self.codes)
-        self._key, self._rows = key[order], rows
         return bodies, contacts, sub, colours
 
     def _conclude(self, t, dt, contacts, residual):
         """The log (impacts, residual) and what the next step warm-starts from (in the sorted order)."""
         c = contacts
-        rows = self._rows
-        was_hit = np.zeros(len(rows), bool)
-        was_hit[rows >= 0] = self._previous.total[rows[rows >= 0]] > 0
-        new = np.flatnonzero((c.total > 0) & ~was_hit)
+        new = newly_pressed(c.total, self._order, self._rows, self._previous.total)
         # one impact per pair: its first point newly hit (the pairs as one code, increasing in (a, b):
         # NumPy's unique of rows sorts structured rows, many times slower than of numbers)
         statics = len(self.world.shapes)
-        code = self._key[new, 0] * (len(self.inverse_masses) + statics) + (self._key[new, 1] + statics)
-        first = new[np.unique(code, return_index=True)[1]] if len(new) else new
+        b = self._sorted_key[1][self._order[new]]  # c.b holds -1 for every static shape
+        code = c.a[new] * (len(self.inverse_masses) + statics) + (b + statics)
+        keep = np.unique(code, return_index=True)[1] if len(new) else new
+        first, b = new[keep], b[keep]
         self.log.add_impacts(ImpactBlock(
-            np.full(len(first), float(t)), c.a[first], np.asarray(self._points_b, np.int64)[first], c.normal[first],
+            np.full(len(first), float(t)), c.a[first], b, c.normal[first],
             -c.hit[first], c.restitution[first], c.friction[first], c.total[first], (float(t), float(t + dt)),
             self.model.names, self.world.shapes))
         self.log.most_impacts_in_a_step = max(self.log.most_impacts_in_a_step, len(first))
         self.log.largest_residual = max(self.log.largest_residual, float(residual))
-        self._previous = Solved(self._sorted_key, *in_sorted_rows(c, self._order))
+        self._previous = Solved(self._sorted_key, *in_sorted_rows(c, self._order, self.world.solver.threads))
 
     def rotation_at(self, steps: np.ndarray):
         """(orientations (K, N, 4), angular velocities (K, N, 3)) after each of ``steps`` steps (recorded ones)."""

@@ -34,8 +34,21 @@ from __future__ import annotations
 import dataclasses
 import math
 
+import numba
+
 #: position corrections, the default first
 CORRECTIONS = ("soft", "baumgarte", "none")
+
+
+def is_thread_count(value) -> bool:
+    """Whether ``value`` is a thread count Numba can run: an integer from 1 to the threads it started with."""
+    return not isinstance(value, bool) and isinstance(value, int) and 1 <= value <= numba.config.NUMBA_NUM_THREADS
+
+
+def threads_allowed() -> str:
+    """What :func:`is_thread_count` allows, in words."""
+    return (f"an integer from 1 to {numba.config.NUMBA_NUM_THREADS} (the threads Numba started with on this "
+            "machine, NUMBA_NUM_THREADS)")
 
 
 @dataclasses.dataclass(frozen=True)
@@ -65,6 +78,14 @@ class ContactSolver:
     rolling_resistance : float
         Rigid bodies (:mod:`.rigid_solver`): torques up to c_r r P oppose the rolling of a
         sphere or capsule of radius r pressed with the impulse P (>= 0; 0, the default: none).
+    threads : int
+        Rigid bodies: the threads the step runs its parallel parts on (the narrow phase's
+        pairs, and from :data:`.rigid_solver_step.COLOURED_BODIES` bodies the coloured sweep),
+        1 to ``numba.config.NUMBA_NUM_THREADS``; 1, the default, as Box2D's one worker. More
+        threads change no byte of a run (:mod:`.contact_colouring`), only its wall time, and
+        on a machine whose cores are busy they cost more than they save: each of a step's
+        parallel regions waits for its slowest thread's time slice (the 10^4 box pit took 58 to
+        1,146 ms a step on 2 threads against 48 to 76 ms on one at load 6 to 11).
 
     Notes
     -----
@@ -82,12 +103,15 @@ class ContactSolver:
     slop: float = 0.0
     push_speed: float = 3.0
     rolling_resistance: float = 0.0
+    threads: int = 1
 
     def __post_init__(self):
         for name in ("iterations", "substeps"):
             value = getattr(self, name)
             if isinstance(value, bool) or not isinstance(value, int) or value < 1:
                 raise ValueError(f"contact solver: {name} must be an integer >= 1, got {value!r}")
+        if not is_thread_count(self.threads):
+            raise ValueError(f"contact solver: threads must be {threads_allowed()}, got {self.threads!r}")
         if self.correction not in CORRECTIONS:
             raise ValueError(f"contact solver: unknown correction {self.correction!r}; valid: {', '.join(CORRECTIONS)}")
         checks = (("contact_hertz", self.contact_hertz > 0, "> 0"),
@@ -107,7 +131,7 @@ class ContactSolver:
             return f"{n} {word}" + ("" if n == 1 else "s")
 
         return (f"{count(self.substeps, 'substep')} x {count(self.iterations, 'iteration')}, "
-                f"{self.correction} correction")
+                f"{self.correction} correction" + (f", {count(self.threads, 'thread')}" if self.threads != 1 else ""))
 
     def softness(self, h: float) -> tuple[float, float, float]:
         """(bias rate 1/s, mass scale, impulse scale) of the correction for a substep of ``h`` s.

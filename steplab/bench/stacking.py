@@ -14,7 +14,8 @@
   target: 10^4 boxes at >= 1x real time on 2 cores. The bench itself runs on one core with one
   thread per side (:mod:`.timing`), the fair footing for its ratios; so steplab's 10^4 box pit is
   also timed in a child process given ``BOX_PIT_CORES`` cores and as many Numba threads
-  (:func:`on_cores`), and the target is judged on that run, its cores and threads in the record.
+  (:func:`on_cores`) with the solver's ``threads`` = cores, and the target is judged on that run, its
+  cores and threads in the record.
 
 Each comparison keeps both sides' spread over the rounds (min, median, max) and, as a check
 that the contenders computed the same scene, where each one's top box is at the end.
@@ -55,11 +56,11 @@ BOX_PIT_REAL_TIME = {10_000: 1.0}
 BOX_PIT_CORES = {10_000: 2}
 
 
-def box_pit_toml(n: int, seed: int = SEED, t_end: float = 1.0) -> str:
+def box_pit_toml(n: int, seed: int = SEED, t_end: float = 1.0, threads: int = 1) -> str:
     """The scene file of ``n`` boxes falling into a box: a jittered lattice of randomly turned
     0.2 m cubes, layer by layer from 0.3 m up, in a square box of 0.05 m^2 floor per box (at least
-    1 m wide), moving
-    at up to 1 m/s; the contact solver's defaults, friction 0.6, no bounce."""
+    1 m wide), moving at up to 1 m/s; the contact solver's defaults on ``threads`` threads (a
+    ``[collisions.solver]`` table only where it is not the default 1), friction 0.6, no bounce."""
     if n < 1:
         raise ValueError(f"a box pit needs at least one box, got n = {n}")
     side = max(round(math.sqrt(FLOOR_AREA_PER_BOX * n), 1), 1.0)
@@ -80,20 +81,21 @@ def box_pit_toml(n: int, seed: int = SEED, t_end: float = 1.0) -> str:
         f'size = [{BOX_EDGE!r}, {BOX_EDGE!r}, {BOX_EDGE!r}]\norientation = [{q[0]!r}, {q[1]!r}, {q[2]!r}, {q[3]!r}]\n\n'
         for i, (c, v, q) in enumerate(zip(centres.tolist(), velocities.tolist(), turns.tolist())))
     half = side / 2
+    solver = f"\n[collisions.solver]\nthreads = {threads}\n" if threads != 1 else ""
     walls = "".join(f'\n[[collisions.planes]]\nname = "{name}"\nnormal = {normal}\noffset = {-half!r}\n'
                     for name, normal in (("wall -x", "[1.0, 0.0, 0.0]"), ("wall +x", "[-1.0, 0.0, 0.0]"),
                                          ("wall -y", "[0.0, 1.0, 0.0]"), ("wall +y", "[0.0, -1.0, 0.0]")))
     return (f'description = "{n:,} boxes (0.2 m cubes) falling into a {side:g} m box (steplab bench)"\n\n'
             f'[simulation]\nintegrator = "semi-implicit-euler"\ndt = {1 / 60!r}\nt_end = {t_end!r}\n\n{bodies}'
-            f'[forces.gravity]\n\n[collisions]\nmethod = "solver"\nrestitution = 0.0\nfriction = 0.6\n\n'
+            f'[forces.gravity]\n\n[collisions]\nmethod = "solver"\nrestitution = 0.0\nfriction = 0.6\n{solver}\n'
             f'[[collisions.planes]]\nname = "floor"\nnormal = [0.0, 0.0, 1.0]\n{walls}')
 
 
-def box_pit(n: int, seed: int = SEED, t_end: float = 1.0):
+def box_pit(n: int, seed: int = SEED, t_end: float = 1.0, threads: int = 1):
     """The scene of :func:`box_pit_toml`, loaded."""
     from steplab.physics.scene import parse_scene
 
-    return parse_scene(box_pit_toml(n, seed, t_end), f"<box pit of {n}>", name=f"box-pit-{n}")
+    return parse_scene(box_pit_toml(n, seed, t_end, threads), f"<box pit of {n}>", name=f"box-pit-{n}")
 
 
 def per_step(times: Times, steps: int) -> Times:
@@ -236,7 +238,7 @@ def _timed_on_cores(boxes: int, steps: int, repeats: int, cores: int) -> dict:
     import numba
 
     load = os.getloadavg()[0] if hasattr(os, "getloadavg") else None
-    runs, settings, _ = contenders(box_pit(boxes), {})
+    runs, settings, _ = contenders(box_pit(boxes, threads=cores), {})
     samples = interleaved_samples({"steplab": lambda: runs["steplab"](steps)}, repeats)["steplab"]
     times = Times.of(samples)
     per_step = {"median": times.median / steps, "minimum": times.minimum / steps}
@@ -244,7 +246,8 @@ def _timed_on_cores(boxes: int, steps: int, repeats: int, cores: int) -> dict:
         per_step |= {"cpu_median": times.cpu.median / steps, "cpu_minimum": times.cpu.minimum / steps}
     return {"seconds_per_step": per_step, "steps": steps, "rounds": times.rounds, "settings": settings["steplab"],
             "cores": len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else None,
-            "numba_threads": int(numba.get_num_threads()), "threading_layer": numba.threading_layer(),
+            "solver_threads": cores, "numba_threads": int(numba.get_num_threads()),
+            "threading_layer": numba.threading_layer(),
             "cpu_per_wall": times.threads,
             "load_average": [load, os.getloadavg()[0] if hasattr(os, "getloadavg") else None]}
 
