@@ -331,6 +331,23 @@ def test_tiny_bench_run_measures_the_ball_pit(tiny_record):
     assert "`crowded_pit_30`" in markdown and "crowded_pit_30" in table
 
 
+def test_box_pits_print_their_real_time_and_the_target_on_the_run_that_judged_it(tiny_record):
+    from steplab.bench.report import box_pit_rows
+
+    markdown, table = bench.format_markdown(tiny_record), bench.format_table(tiny_record)
+    assert "`box_pit_30`" in markdown and "\nbox_pit_30 " in table
+    record = json.loads(json.dumps(tiny_record))  # a 2-core run of the tiny pit judged, as the 10^4 pit's is
+    pit = record["stacking"]["box_pit_30"]
+    pit["real_time_factor"]["steplab_2_cores"] = 0.5
+    pit["cores"]["steplab_2_cores"] = 2
+    pit["on_cores"] = {"cores": 2, "settings": "steplab, 2 threads"}
+    record["targets"]["real_time_box_pit_30"] = {"target": 1.0, "met": False, "real_time_target": 1.0, "cores": 2}
+    rows = [r for r in box_pit_rows(record) if r["pit"] == "box_pit_30"]
+    judged = [r for r in rows if r["target"] is not None]
+    assert [(r["contender"], r["cores"], r["real_time_factor"]) for r in judged] == [("steplab, 2 threads", 2, 0.5)]
+    assert "| `box_pit_30` | 30 | 2 | steplab, 2 threads | 2 | 0.5 | ≥ 1x: missed |" in bench.format_markdown(record)
+
+
 def test_ball_pit_scene_files_are_the_generators():
     from steplab.bench import ball_pit_scene as pit
 

@@ -1,7 +1,8 @@
 """The bench's report: one row per comparison, as a table for the terminal or as Markdown.
 
-Below it, the ball pits of the collision section: one row per pit and contender, with the
-real-time factor (simulated seconds per wall second) and its target.
+Below it, the ball pits of the collision section and the box pits of the stacking section: one
+row per pit and contender, with the real-time factor (simulated seconds per wall second) and its
+target.
 """
 
 from __future__ import annotations
@@ -47,6 +48,28 @@ def collision_rows(record: dict) -> list[dict]:
     return out
 
 
+def box_pit_rows(record: dict) -> list[dict]:
+    """One row per box pit and contender (the 2-core run of steplab its own row): the cores it ran
+    on, its real-time factor, and the real-time target where the row is the run that judged it."""
+    out = []
+    for label, pit in record.get("stacking", {}).items():
+        if not label.startswith("box_pit_"):
+            continue
+        target = record["targets"].get(f"real_time_{label}")
+        settings = dict(pit["settings"])
+        if "settings" in pit.get("on_cores", {}):
+            settings[f"steplab_{pit['on_cores']['cores']}_cores"] = pit["on_cores"]["settings"]
+        for name, factor in pit["real_time_factor"].items():
+            cores = pit.get("cores", {}).get(name, 1)
+            judged = target is not None and target.get("cores", 1) == cores and name.startswith("steplab")
+            out.append({"pit": label, "boxes": pit["boxes"], "steps": pit["steps"], "contender": settings[name],
+                        "cores": cores, "real_time_factor": factor, "target": target if judged else None})
+        for name, note in pit["not_compared"].items():
+            out.append({"pit": label, "boxes": pit["boxes"], "steps": pit["steps"], "contender": f"{name}: {note}",
+                        "cores": None, "real_time_factor": None, "target": None})
+    return out
+
+
 def _real_time_verdict(target) -> str:
     if target is None:
         return ""
@@ -79,6 +102,34 @@ def collision_markdown(record: dict) -> list[str]:
                      f"{_optional(r['per_step'], _seconds)} | {_optional(r['real_time_factor'], '{:.3g}'.format)} | "
                      f"{_real_time_verdict(r['target'])} | {r['impacts']} | "
                      f"{_optional(r['balls_inside'], '{:,}'.format)} |")
+    return lines
+
+
+def _box_pit_table(record: dict) -> list[str]:
+    rows_ = box_pit_rows(record)
+    if not rows_:
+        return []
+    lines = ["", f"{'box pit':<15} {'boxes':>7} {'steps':>5}  {'contender':<72} {'cores':>5} "
+                 f"{'x real time':>11}  target"]
+    for r in rows_:
+        lines.append(f"{r['pit']:<15} {r['boxes']:>7,} {r['steps']:>5}  {r['contender'][:72]:<72} "
+                     f"{_optional(r['cores'], str):>5} {_optional(r['real_time_factor'], '{:.3g}'.format):>11}  "
+                     f"{_real_time_verdict(r['target'])}")
+    return lines
+
+
+def box_pit_markdown(record: dict) -> list[str]:
+    """The box-pit table (steplab on one core and on the target's cores, beside the engines) as
+    Markdown lines; none without box pits."""
+    rows_ = box_pit_rows(record)
+    if not rows_:
+        return []
+    lines = ["", "| box pit | boxes | steps | contender | cores | simulated s per wall s | target |",
+             "|---|---|---|---|---|---|---|"]
+    for r in rows_:
+        lines.append(f"| `{r['pit']}` | {r['boxes']:,} | {r['steps']} | {r['contender']} | "
+                     f"{_optional(r['cores'], str)} | {_optional(r['real_time_factor'], '{:.3g}'.format)} | "
+                     f"{_real_time_verdict(r['target'])} |")
     return lines
 
 
@@ -121,6 +172,7 @@ def format_table(record: dict) -> str:
                      f"{_ratio(r['ratio_of_minimums']):>7} {_ratio(r['ratio_wall']):>7}  {_verdict(r):<20} "
                      f"{_stability(r)}")
     lines += _collision_table(record)
+    lines += _box_pit_table(record)
     lines += _footer(record)
     return "\n".join(lines)
 
@@ -136,6 +188,7 @@ def format_markdown(record: dict) -> str:
                      f"{_verdict(r)} | {_spread(r['steplab_spread'])} | {_spread(r['peer_spread'])} | "
                      f"{_stability(r)} |")
     lines += collision_markdown(record)
+    lines += box_pit_markdown(record)
     lines.append("")
     lines += [f"- {line}" for line in _footer(record)]
     return "\n".join(lines)
