@@ -15,6 +15,7 @@ from scipy.optimize import minimize
 from steplab.physics import quaternion as quat
 from steplab.physics.collision import Box, OrientedBox, Plane
 from steplab.physics.collision.manifold_box import AXIS_TOLERANCE, CLIP_TOLERANCE, LINEAR_SLOP
+from steplab.physics.collision.manifold_capsule_box import segment_box_closest
 from steplab.physics.collision.manifolds import BOX, CAPSULE, SPHERE, Poses, RigidShapes, bounding_radius, manifolds
 from steplab.physics.collision.shapes import rotation_matrix
 
@@ -229,6 +230,21 @@ def test_a_box_resting_on_a_box_gets_four_points_of_the_top_boxs_bottom_face():
 # --- capsules ------------------------------------------------------------------------------
 
 
+@SETTINGS
+@given(half=st.tuples(size, size, size), inside=st.tuples(*[st.floats(-0.99, 0.99)] * 3), direction=vector,
+       length=st.floats(2.5, 4.0))
+def test_a_segment_through_a_box_is_at_distance_zero(half, inside, direction, length):
+    # through a point inside the box and out on both sides: every point of it between the two faces it
+    # crosses is inside, so the distance is exactly 0, whatever p + t d rounds to on those faces' planes
+    # (one in seven such segments came out a hair outside and took another face's contact)
+    assume(np.linalg.norm(direction) > 0.1)
+    d = length * np.max(half) * direction / np.linalg.norm(direction)
+    p = np.asarray(inside) * np.asarray(half) - 0.5 * d
+    t, distance2 = segment_box_closest(tuple(p), tuple(d), half)
+    assert distance2 == 0.0
+    assert np.all(np.abs(p + t * d) <= np.asarray(half) * (1 + 1e-12))
+
+
 def segment(centre, q, half_length):
     axis = quat.rotate(np, q, UP)
     return centre - half_length * axis, 2 * half_length * axis
@@ -325,11 +341,23 @@ def test_feature_ids_survive_a_reordering_of_the_pairs(bodies, seed):
 @given(a=body, b=body, direction=vector, twist=vector)
 def test_feature_ids_are_unchanged_by_a_tiny_change_of_the_poses(a, b, direction, twist):
     shapes, poses = bodies_scene([a, b])
-    before = manifolds(shapes, poses, [[0, 1]], STATICS, margin=0.05)
+    # in a generic pose: hypothesis's simple numbers (sizes of 1.0, the centres together) put two
+    # shapes exactly on one of the kernel's decision boundaries (a capsule through a box's centre is
+    # as deep behind two or four of its faces), where any nudge may flip the features; the same
+    # small fixed shift and turn of every example leaves those boundaries
+    rng = np.random.default_rng(20261204)
+    turn_axes = rng.normal(size=(2, 3))
+    generic = quat.from_axis_angle(np, turn_axes / np.linalg.norm(turn_axes, axis=1, keepdims=True),
+                                   1e-3 * rng.uniform(0.5, 1.0, 2))
+    poses = Poses(poses.position + rng.uniform(-1e-3, 1e-3, (2, 3)), quat.multiply(np, poses.orientation, generic))
     axis = twist / np.linalg.norm(twist) if np.linalg.norm(twist) > 0.1 else np.array([0.6, 0.0, 0.8])
-    nudge = quat.from_axis_angle(np, axis, 1e-9)
-    moved = Poses(poses.position + 1e-9 * direction, quat.multiply(np, poses.orientation, nudge))
-    after = manifolds(shapes, moved, [[0, 1]], STATICS, margin=0.05)
+
+    def nudged(size):  # the poses moved by size along direction and turned by size radians about axis
+        turn = quat.from_axis_angle(np, axis, size)
+        return manifolds(shapes, Poses(poses.position + size * direction, quat.multiply(np, poses.orientation, turn)),
+                         [[0, 1]], STATICS, margin=0.05)
+
+    before, after = nudged(0.0), nudged(1e-9)
     assume(np.all(np.abs(before.separation - 0.05) > 1e-6))  # no point on the edge of the margin
     assert np.array_equal(before.a, after.a) and np.array_equal(before.b, after.b)
     assert np.array_equal(before.feature, after.feature)

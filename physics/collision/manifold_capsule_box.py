@@ -59,14 +59,21 @@ def segment_box_closest(p, d, half):
         lo, hi = ts[i], ts[i + 1]
         middle = 0.5 * (lo + hi)
         a = b = 0.0
+        inside = True
         for k in range(3):
             y = p[k] + middle * d[k]
             if abs(y) > half[k]:
                 e0 = p[k] - sign_of(y) * half[k]
                 a += d[k] * d[k]
                 b += 2 * e0 * d[k]
-        t = min(max(-b / (2 * a), lo), hi) if a > 0 else lo
-        f = excess2(madd3(p, t, d), half)
+                inside = False
+        if inside:  # within every slab from lo to hi: the distance is 0, though p + lo d, on a face's
+            # plane, may round to a hair outside it, which would send a segment through the box to the
+            # outside's face test (and a nudge of 1e-9 to another face)
+            t, f = lo, 0.0
+        else:
+            t = min(max(-b / (2 * a), lo), hi) if a > 0 else lo
+            f = excess2(madd3(p, t, d), half)
         if f < best:
             best_t, best = t, f
     return best_t, best
