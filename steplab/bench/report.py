@@ -76,61 +76,53 @@ def _real_time_verdict(target) -> str:
     return f"≥ {target['real_time_target']:g}x: {'met' if target['met'] else 'missed'}"
 
 
-def _collision_table(record: dict) -> list[str]:
-    rows_ = collision_rows(record)
+def _pit_lines(rows_: list[dict], columns: tuple, markdown: bool) -> list[str]:
+    """A pit table's lines, none without rows: ``columns`` are (terminal heading, its width as a format
+    spec, Markdown heading, the row's cell); Markdown sets the first cell, the pit's label, as code."""
     if not rows_:
         return []
-    lines = ["", f"{'ball pit':<15} {'balls':>7} {'steps':>5}  {'contender':<58} {'per step':>9} "
-                 f"{'x real time':>11}  {'target':<14} {'impacts':<27} inside"]
-    for r in rows_:
-        lines.append(f"{r['pit']:<15} {r['balls']:>7,} {r['steps']:>5}  {r['contender'][:58]:<58} "
-                     f"{_optional(r['per_step'], _seconds):>9} {_optional(r['real_time_factor'], '{:.3g}'.format):>11}"
-                     f"  {_real_time_verdict(r['target']):<14} {r['impacts']:<27} "
-                     f"{_optional(r['balls_inside'], '{:,}'.format)}")
-    return lines
+    if markdown:
+        def line(r):
+            label, *cells = (c[3](r) for c in columns)
+            return " | ".join([f"| `{label}`", *cells]) + " |"
+        return ["", "| " + " | ".join(c[2] for c in columns) + " |", "|" + "---|" * len(columns), *map(line, rows_)]
+    return ["", "  ".join(f"{c[0]:{c[1]}}" for c in columns).rstrip(),
+            *("  ".join(f"{c[3](r):{c[1]}}" for c in columns).rstrip() for r in rows_)]
+
+
+def _real_time(r) -> str:
+    return _optional(r["real_time_factor"], "{:.3g}".format)
+
+
+#: the ball pits' columns (:func:`_pit_lines`)
+BALL_PIT_COLUMNS = (
+    ("ball pit", "<15", "ball pit", lambda r: r["pit"]), ("balls", ">7", "balls", lambda r: f"{r['balls']:,}"),
+    ("steps", ">5", "steps", lambda r: str(r["steps"])),
+    ("contender", "<58.58", "contender", lambda r: r["contender"]),
+    ("per step", ">9", "per step", lambda r: _optional(r["per_step"], _seconds)),
+    ("x real time", ">11", "simulated s per wall s", _real_time),
+    ("target", "<14", "target", lambda r: _real_time_verdict(r["target"])),
+    ("impacts", "<27", "impacts", lambda r: r["impacts"]),
+    ("inside", "", "balls inside", lambda r: _optional(r["balls_inside"], "{:,}".format)))
+#: the box pits' columns (:func:`_pit_lines`)
+BOX_PIT_COLUMNS = (
+    ("box pit", "<15", "box pit", lambda r: r["pit"]), ("boxes", ">7", "boxes", lambda r: f"{r['boxes']:,}"),
+    ("steps", ">5", "steps", lambda r: str(r["steps"])),
+    ("contender", "<72.72", "contender", lambda r: r["contender"]),
+    ("cores", ">5", "cores", lambda r: _optional(r["cores"], str)),
+    ("x real time", ">11", "simulated s per wall s", _real_time),
+    ("target", "", "target", lambda r: _real_time_verdict(r["target"])))
 
 
 def collision_markdown(record: dict) -> list[str]:
     """The ball-pit table (steplab against the physics engines) as Markdown lines; none without pits."""
-    rows_ = collision_rows(record)
-    if not rows_:
-        return []
-    lines = ["", "| ball pit | balls | steps | contender | per step | simulated s per wall s | target | "
-                 "impacts | balls inside |", "|---|---|---|---|---|---|---|---|---|"]
-    for r in rows_:
-        lines.append(f"| `{r['pit']}` | {r['balls']:,} | {r['steps']} | {r['contender']} | "
-                     f"{_optional(r['per_step'], _seconds)} | {_optional(r['real_time_factor'], '{:.3g}'.format)} | "
-                     f"{_real_time_verdict(r['target'])} | {r['impacts']} | "
-                     f"{_optional(r['balls_inside'], '{:,}'.format)} |")
-    return lines
-
-
-def _box_pit_table(record: dict) -> list[str]:
-    rows_ = box_pit_rows(record)
-    if not rows_:
-        return []
-    lines = ["", f"{'box pit':<15} {'boxes':>7} {'steps':>5}  {'contender':<72} {'cores':>5} "
-                 f"{'x real time':>11}  target"]
-    for r in rows_:
-        lines.append(f"{r['pit']:<15} {r['boxes']:>7,} {r['steps']:>5}  {r['contender'][:72]:<72} "
-                     f"{_optional(r['cores'], str):>5} {_optional(r['real_time_factor'], '{:.3g}'.format):>11}  "
-                     f"{_real_time_verdict(r['target'])}")
-    return lines
+    return _pit_lines(collision_rows(record), BALL_PIT_COLUMNS, markdown=True)
 
 
 def box_pit_markdown(record: dict) -> list[str]:
     """The box-pit table (steplab on one core and on the target's cores, beside the engines) as
     Markdown lines; none without box pits."""
-    rows_ = box_pit_rows(record)
-    if not rows_:
-        return []
-    lines = ["", "| box pit | boxes | steps | contender | cores | simulated s per wall s | target |",
-             "|---|---|---|---|---|---|---|"]
-    for r in rows_:
-        lines.append(f"| `{r['pit']}` | {r['boxes']:,} | {r['steps']} | {r['contender']} | "
-                     f"{_optional(r['cores'], str)} | {_optional(r['real_time_factor'], '{:.3g}'.format)} | "
-                     f"{_real_time_verdict(r['target'])} |")
-    return lines
+    return _pit_lines(box_pit_rows(record), BOX_PIT_COLUMNS, markdown=True)
 
 
 def _optional(value, form) -> str:
@@ -171,8 +163,8 @@ def format_table(record: dict) -> str:
                      f"{_seconds(r['peer_seconds']):>9} {r['clock']:>5} {r['ratio']:>7.3g} "
                      f"{_ratio(r['ratio_of_minimums']):>7} {_ratio(r['ratio_wall']):>7}  {_verdict(r):<20} "
                      f"{_stability(r)}")
-    lines += _collision_table(record)
-    lines += _box_pit_table(record)
+    lines += _pit_lines(collision_rows(record), BALL_PIT_COLUMNS, markdown=False)
+    lines += _pit_lines(box_pit_rows(record), BOX_PIT_COLUMNS, markdown=False)
     lines += _footer(record)
     return "\n".join(lines)
 
