@@ -14,9 +14,9 @@ Speculative contacts: a pair becomes a contact while its bodies' bounds can meet
 Each body's bound is its bounding sphere swept from where it is to where its forces alone take
 it, q + dt (v + dt a), widened by what its rotation can move a point of it, |omega| dt R (R its
 bounding radius; at most 2 R, the diameter), as Box3D bounds it, and by a margin
-(:data:`.contact_buffer.MARGIN_OF_RADIUS` of the median bounding radius) for what a contact can add
-to its speed within the step. Points found up to that margin apart are speculative: the solver
-lets them close the gap, not pass it.
+(:data:`SPECULATIVE_OF_RADIUS` of the median bounding radius) for what a contact can add to its
+speed within the step. Points found up to that margin apart are speculative: the solver lets them
+close the gap, not pass it.
 
 The rotation: each substep's velocity stage adds the gyroscopic term and its position stage
 turns each orientation by h omega, both as the scene's rotation method does them when it is one
@@ -35,7 +35,7 @@ import numpy as np
 
 from .. import quaternion as quat
 from . import rigid_solver as rs
-from .contact_buffer import MARGIN_OF_RADIUS, Materials
+from .contact_buffer import Materials
 from .contact_colouring import colour_contacts, in_sorted_order
 from .events import CollisionLog, ImpactBlock, cancel_triggers
 from .manifolds import BOX, CAPSULE, SPHERE, check_shapes
@@ -58,6 +58,15 @@ DEFAULT_ROTATION = "exponential-map"
 KINDS = {"sphere": SPHERE, "box": BOX, "capsule": CAPSULE}
 #: the most a rotation moves a point of a body: its diameter, 2 R (a half turn)
 MAX_ROTATION_REACH = 2.0
+#: the margin each body's bound adds for what a contact can add to its speed within the step, as a
+#: fraction of the median bounding radius. A pair's constant part is twice this, 1/8 R: 0.022 m on the
+#: bench's 0.2 m cubes, Box3D's speculative distance (4 linear slops, 0.02 m). Box3D stops there; here
+#: each body's move under its forces and its rotation's reach come on top, so a falling or spinning
+#: body's contacts are still known before it touches. The sphere solver's margin,
+#: :data:`.contact_buffer.MARGIN_OF_RADIUS` (1/4), is four times wider: at 1/4 the 10^4-box pit's
+#: steps 1 to 30 carried 51,000 points a step against 32,000, and the same 9,400 of them pressed
+#: (docs/performance.md); every study scene gives the same bytes at either
+SPECULATIVE_OF_RADIUS = 1 / 16
 #: scenes of this many bodies or more are swept colour by colour on the solver's threads
 #: (:mod:`.contact_colouring`, which says why smaller ones keep the sorted order on one thread): a step
 #: makes about 12 parallel regions per colour, which cost more than a small scene's sweep, and on a
@@ -168,7 +177,7 @@ class RigidSolverStep:
         field = self.model.constant_acceleration
         self.field = None if field is None else np.array(field, dtype=float, order="C")  # writable: one kernel type
         self.materials = Materials.of(world, n)
-        self.margin = MARGIN_OF_RADIUS * float(np.median(self.bounding)) if n else 0.0
+        self.margin = SPECULATIVE_OF_RADIUS * float(np.median(self.bounding)) if n else 0.0
         # spheres and capsules are rounded about their core (centre, segment) by their radius; boxes are not
         self.rounding = np.where(np.asarray(rigid.kind) != BOX, np.asarray(rigid.radius, float), 0.0)
         self.rolling = world.solver.rolling_resistance * self.rounding
