@@ -254,7 +254,7 @@ def cloth_benchmark_step(model, y0, dt: float, method: PositionBased | None = No
     Each step calls a compiled entry point resolved once, on one argument: a call through Numba's
     dispatcher types the kernel's seven arguments (three NamedTuples of 13 arrays) in Python
     first, about 30 us more from cold caches, and the kernel's own entry point still unboxes
-    them one by one, about 20 us more than one array; so the step passes the kernel a table of
+    them one by one, 15 to 25 us more than one array; so the step passes the kernel a table of
     the arrays' addresses (:func:`.position_based_entry.advance_at`), as a game engine calling
     native code passes pointers.
     """

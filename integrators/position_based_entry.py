@@ -3,12 +3,13 @@
 :func:`.position_based.cloth_benchmark_step` steps a cloth in place with the kernel every pbd
 and xpbd step runs (:func:`.constraint_projection.advance`). Called from Python, that kernel's
 compiled entry point first unboxes its seven arguments, thirteen arrays in three NamedTuples,
-one C-API call after another; from cold caches that alone cost about 20 us (38 us against 17 for
-a call on one array, on a 16-particle cloth; docs/performance.md), which a game engine calling
-native code with pointers does not pay. So the bench's step calls :func:`advance_at` instead,
-on one int64 array, :func:`table`: the sizes, the substeps and the addresses of the arrays, which
-it views again in place (``numba.carray``, no copy) and passes to the same kernel. The arrays
-must outlive the table (the caller keeps them).
+one C-API call after another, which a game engine calling native code with pointers does not
+pay: from cold caches, a step of a 16-particle cloth costs 31 us that way and 23 us through the
+table (an empty Python call, 11), and the bench's step 15 to 25 us less (docs/performance.md).
+So the bench's step calls :func:`advance_at` instead, on one int64 array, :func:`table`: the
+sizes, the substeps and the addresses of the arrays, which it views again in place
+(``numba.carray``, no copy) and passes to the same kernel. The arrays must outlive the table
+(the caller keeps them).
 """
 
 from __future__ import annotations
