@@ -251,25 +251,31 @@ def cloth_benchmark_step(model, y0, dt: float, method: PositionBased | None = No
     Its bytes read and written are counted as (2, N, 3) float64, the least a step must move: the
     padding's third more is the step's own cost, not the bound's.
 
-    Each step calls the kernel's compiled entry point, resolved once: a call through Numba's
-    dispatcher types its seven arguments (three NamedTuples of 16 arrays) in Python first,
-    about 30 us more from cold caches, which a game engine calling native code does not pay.
+    Each step calls a compiled entry point resolved once, on one argument: a call through Numba's
+    dispatcher types the kernel's seven arguments (three NamedTuples of 13 arrays) in Python
+    first, about 30 us more from cold caches, and the kernel's own entry point still unboxes
+    them one by one, 15 to 25 us more than one array; so the step passes the kernel a table of
+    the arrays' addresses (:func:`.position_based_entry.advance_at`), as a game engine calling
+    native code passes pointers.
     """
     from numba import typeof
 
-    from .constraint_projection import advance
+    from .position_based_entry import advance_at, table
 
     method = XPBD(substeps=1, iterations=1) if method is None else method
     substeps = method.substeps_of(dt)
     carry = method.init(model, 0.0, y0).for_substep(substeps.h)
     state = carry.work.state
     state[..., :3] = y0
-    arguments = (state[0], state[1], carry.external, carry.inverse_mass, carry.sweep, substeps, carry.work)
-    kernel = advance.compile(tuple(typeof(a) for a in arguments))  # loaded from Numba's cache where it is
+    arguments = table(carry.external, carry.inverse_mass, carry.sweep, substeps, carry.work)
+    kernel = advance_at.compile((typeof(arguments),))  # loaded from Numba's cache where it is
+
+    held = (arguments, carry)  # the table, and the arrays it points at, alive as long as the step
 
     def steps(n: int = 1) -> None:
+        at = held[0]
         for _ in range(n):
-            kernel(*arguments)
+            kernel(at)
 
     # the columns the sweep reads: alpha_tilde only where the multipliers are carried
     read = [a for name, a in carry.sweep._asdict().items() if name != "alpha_tilde" or substeps.carried]

@@ -265,6 +265,30 @@ def test_the_benchmark_step_is_the_integrators_step_in_place():
     assert step.bytes_read == springs * (2 * 4 + 3 * 8) + segments * 8 + 400 * 8 + 400 * 3 * 8
 
 
+def test_the_benchmark_steps_table_points_at_the_carry_with_multipliers_carried():
+    # the bench's step calls the kernel on one table of addresses (position_based_entry): with the
+    # multipliers carried (xpbd, several iterations) it is still simulate's step to the byte; arrays
+    # the kernel is not compiled for are refused in one line
+    from steplab.integrators.constraint_projection import workspace
+    from steplab.integrators.position_based import cloth_benchmark_step
+    from steplab.integrators.position_based_entry import table
+
+    from steplab.bench.systems import cloth_model
+
+    model, y0, _ = cloth_model(20)
+    method = XPBD(2, 3)
+    step = cloth_benchmark_step(model, y0, 5e-4, method)
+    step.advance(5)
+    expected = simulate(model, method, y0, 0.0, n_steps=5, dt=5e-4).y[-1]
+    assert step.y.tobytes() == expected.tobytes() and not np.array_equal(step.y, y0)
+    carry = method.init(model, 0.0, y0).for_substep(2.5e-4)
+    steps = method.substeps_of(5e-4)
+    with pytest.raises(ValueError, match="^advance_at: inverse_mass must be C-contiguous float64, got float32$"):
+        table(carry.external, carry.inverse_mass.astype(np.float32), carry.sweep, steps, carry.work)
+    with pytest.raises(ValueError, match="do not fit 400 bodies"):
+        table(carry.external, carry.inverse_mass, carry.sweep, steps, workspace(399, len(carry.sweep.i)))
+
+
 def sequential_sweep(dx, x_prev, inverse_mass, c, h, iterations, carried):
     """Macklin et al.'s projection (eq. 18 with eq. 26's damping), one constraint after another in
     the order of ``c``, in plain Python: the sequential Gauss-Seidel sweep, written independently."""

@@ -1,0 +1,84 @@
+"""The bench's position-based step as one compiled call on one argument: a table of its arrays' addresses.
+
+:func:`.position_based.cloth_benchmark_step` steps a cloth in place with the kernel every pbd
+and xpbd step runs (:func:`.constraint_projection.advance`). Called from Python, that kernel's
+compiled entry point first unboxes its seven arguments, thirteen arrays in three NamedTuples,
+one C-API call after another, which a game engine calling native code with pointers does not
+pay: from cold caches, a step of a 16-particle cloth costs 31 us that way and 23 us through the
+table (an empty Python call, 11), and the bench's step 15 to 25 us less (docs/performance.md).
+So the bench's step calls :func:`advance_at` instead, on one int64 array, :func:`table`: the
+sizes, the substeps and the addresses of the arrays, which it views again in place
+(``numba.carray``, no copy) and passes to the same kernel. The arrays must outlive the table
+(the caller keeps them).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from llvmlite import ir
+from numba import carray, njit, types
+from numba.extending import intrinsic
+
+from .constraint_projection import Substeps, Sweep, Workspace, advance
+
+#: the table's slots: sizes and settings, then one address per array (in this order)
+_BODIES, _CONSTRAINTS, _SEGMENTS, _SUBSTEPS, _ITERATIONS, _CARRIED, _H = range(7)
+_ARRAYS = ("state", "external", "inverse_mass", "i", "j", "rest_length", "alpha_tilde", "gamma", "denominator",
+           "segments", "lam")
+_STATE, _EXTERNAL, _INVERSE_MASS, _I, _J, _REST, _ALPHA, _GAMMA, _DENOMINATOR, _STARTS, _LAM = range(
+    7, 7 + len(_ARRAYS))
+
+
+def table(external, inverse_mass, sweep: Sweep, steps: Substeps, work: Workspace) -> np.ndarray:
+    """The int64 table :func:`advance_at` reads: the sizes, ``steps`` (h as its float64 bits) and the addresses
+    of ``work.state`` (2, N, 4), ``external`` (N, 3), ``inverse_mass`` (N,), the sweep's columns and ``work.lam``,
+    each C-contiguous and of the dtype :func:`.constraint_projection.advance` is compiled for (checked)."""
+    arrays = {"state": work.state, "external": external, "inverse_mass": inverse_mass, "lam": work.lam,
+              **{name: getattr(sweep, name) for name in Sweep._fields}}
+    kinds = dict.fromkeys(_ARRAYS, np.float64) | {"i": np.uint32, "j": np.uint32, "segments": np.int64}
+    for name, a in arrays.items():
+        if a.dtype != kinds[name] or not a.flags.c_contiguous:
+            raise ValueError(f"advance_at: {name} must be C-contiguous {np.dtype(kinds[name])}, got {a.dtype}")
+    n, p = len(inverse_mass), len(sweep.i)
+    if work.state.shape != (2, n, 4) or external.shape != (n, 3) or len(work.lam) < p:
+        raise ValueError(f"advance_at: state {work.state.shape}, external {external.shape} and lam "
+                         f"{work.lam.shape} do not fit {n} bodies and {p} constraints")
+    t = np.zeros(7 + len(_ARRAYS), np.int64)
+    t[[_BODIES, _CONSTRAINTS, _SEGMENTS, _SUBSTEPS, _ITERATIONS, _CARRIED]] = (
+        n, p, len(sweep.segments), steps.substeps, steps.iterations, steps.carried)
+    t[_H] = np.float64(steps.h).view(np.int64)
+    for slot, name in enumerate(_ARRAYS, start=_STATE):
+        t[slot] = arrays[name].ctypes.data
+    return t
+
+
+@intrinsic
+def _pointer(typingctx, address):
+    """The int64 ``address`` as a pointer (LLVM's inttoptr), for ``numba.carray``."""
+    if not isinstance(address, types.Integer):
+        return None
+
+    def codegen(context, builder, signature, args):
+        return builder.inttoptr(args[0], ir.IntType(8).as_pointer())
+
+    return types.voidptr(address), codegen
+
+
+@njit(inline="always")
+def _at(t, slot, shape, dtype):
+    """The array of ``shape`` and ``dtype`` at the address in slot ``slot`` of ``t`` (a view, no copy)."""
+    return carray(_pointer(t[slot]), shape, dtype)
+
+
+@njit(cache=True, error_model="numpy")
+def advance_at(t):
+    """:func:`.constraint_projection.advance` on the arrays :func:`table` ``t`` holds, in place."""
+    n, p, s = t[_BODIES], t[_CONSTRAINTS], t[_SEGMENTS]
+    state = _at(t, _STATE, (2, n, 4), np.float64)
+    sweep = Sweep(_at(t, _I, p, np.uint32), _at(t, _J, p, np.uint32), _at(t, _REST, p, np.float64),
+                  _at(t, _ALPHA, p, np.float64), _at(t, _GAMMA, p, np.float64), _at(t, _DENOMINATOR, p, np.float64),
+                  _at(t, _STARTS, s, np.int64))
+    h = t[_H:_H + 1].view(np.float64)[0]
+    steps = Substeps(h, t[_SUBSTEPS], t[_ITERATIONS], t[_CARRIED] != 0)
+    advance(state[0], state[1], _at(t, _EXTERNAL, (n, 3), np.float64), _at(t, _INVERSE_MASS, n, np.float64), sweep,
+            steps, Workspace(state, _at(t, _LAM, p, np.float64)))
