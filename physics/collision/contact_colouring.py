@@ -154,12 +154,12 @@ def next_groups(colours, group):
     faster.) The bytes do not depend on it."""
     start, groups = colours.colour_start, len(colours.colour_start) - 1
 
-    def large(g):
-        return g < colours.parallel and start[g + 1] - start[g] >= colours.serial_below
+    def cut(g):  # whether group g is a colour swept in parts
+        return colours.threads > 1 and g < colours.parallel and start[g + 1] - start[g] >= colours.serial_below
 
-    if large(group) and colours.threads > 1:
+    if cut(group):
         return (start[group], start[group + 1]), colours.threads, group + 1
     last = group + 1
-    while last < groups and not (large(last) and colours.threads > 1):
+    while last < groups and not cut(last):
         last += 1
     return (start[group], start[last]), 1, last
