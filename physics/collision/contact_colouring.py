@@ -37,8 +37,9 @@ from numba import njit
 COLOURS = 64
 #: a colour of fewer manifolds than this is swept on one thread (``Colours.serial_below``): a parallel
 #: region ends when its slowest thread does, and a step opened one per colour and pass (6 to 21
-#: colours, 12 passes); the 10^4 box pit's last colours hold a few hundred manifolds down to one, a
-#: few microseconds of work each, against a wait of up to a time slice for a thread another process holds
+#: colours, 12 passes); the 10^4 box pit's last colours hold a few hundred manifolds down to one,
+#: tens of microseconds of work at most, against a wait of up to a time slice for a thread that
+#: another process holds
 SERIAL_MANIFOLDS = 512
 
 
