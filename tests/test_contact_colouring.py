@@ -19,7 +19,7 @@ from steplab.integrators import get_integrator
 from steplab.physics import Gravity, Model
 from steplab.physics import quaternion as quat
 from steplab.physics.collision import CollisionWorld, PairProperties, Plane, rigid_solver_step
-from steplab.physics.collision.contact_colouring import COLOURS, colour_contacts
+from steplab.physics.collision.contact_colouring import COLOURS, Colours, colour_contacts, next_groups
 from steplab.physics.collision.rigid_solver_step import RigidScene, RigidSolverStep
 from steplab.physics.collision.solver_settings import ContactSolver
 from steplab.physics.rigid_body import RigidBodies, principal_inertia
@@ -93,13 +93,44 @@ def pile_run(threads, steps=40):
     return y.tobytes(), step.orientation.tobytes(), step.omega.tobytes(), len(step._previous.pn)
 
 
+def every_colour_parallel(monkeypatch):
+    """The step's colours cut into parts however few manifolds they hold (``serial_below`` 0)."""
+    colour = rigid_solver_step.colour_contacts
+
+    def parallel(*args):
+        order, colours = colour(*args)
+        return order, colours._replace(serial_below=0)
+
+    monkeypatch.setattr(rigid_solver_step, "colour_contacts", parallel)
+
+
+@pytest.mark.parametrize("threads", [1, 2])
+def test_small_colours_and_the_overflow_are_swept_in_runs_on_one_thread(threads):
+    """Groups of 600, 500, 20, 700 and 3 manifolds (the last the overflow), serial below 512: the
+    sweep visits them in order, every manifold once; on 2 threads the colours of 600 and 700 alone
+    in 2 parts and the others in runs on one thread, on 1 thread all of them in one run."""
+    sizes = [600, 500, 20, 700, 3]
+    start = np.concatenate([[0], np.cumsum(sizes)]).astype(np.int64)
+    colours = Colours(np.arange(start[-1] + 1, dtype=np.int64), start, 4, threads, 512)
+    runs, group = [], 0
+    while group < len(sizes):
+        span_, parts, group = next_groups(colours, group)
+        runs.append((int(span_[0]), int(span_[1]), parts))
+    if threads == 2:
+        assert runs == [(0, 600, 2), (600, 1120, 1), (1120, 1820, 2), (1820, 1823, 1)]
+    else:
+        assert runs == [(0, 1823, 1)]
+
+
 @pytest.mark.parametrize("parts", [2, 3])
 def test_the_parallel_sweep_gives_the_bytes_of_one_thread(monkeypatch, parts):
-    """A pile of 40 boxes, 40 steps, every stage parallel (the size thresholds set to 0): the same bytes
-    with each colour cut into ``parts`` parts (the solver's threads) as on one thread. Numba runs the
-    parts on the threads it has, so 3 parts are tested on a 2-core machine too."""
+    """A pile of 40 boxes, 40 steps, every stage parallel (the size thresholds set to 0, every colour
+    cut into parts): the same bytes with each colour cut into ``parts`` parts (the solver's threads)
+    as on one thread. Numba runs the parts on the threads it has, so 3 parts are tested on a 2-core
+    machine too."""
     monkeypatch.setattr(rigid_solver_step, "COLOURED_BODIES", 0)
     monkeypatch.setattr(manifolds, "PARALLEL_PAIRS", 0)
+    every_colour_parallel(monkeypatch)
     monkeypatch.setattr(numba.config, "NUMBA_NUM_THREADS", max(parts, numba.config.NUMBA_NUM_THREADS))
     monkeypatch.setattr(numba, "set_num_threads", lambda threads: None)
     runs = [pile_run(threads) for threads in (1, parts)]
@@ -113,6 +144,7 @@ def test_the_threads_setting_runs_the_step_on_that_many_threads_with_the_same_by
     (set for the step, restored after it), and threads = 1 and 2 give the same bytes."""
     monkeypatch.setattr(rigid_solver_step, "COLOURED_BODIES", 0)
     monkeypatch.setattr(manifolds, "PARALLEL_PAIRS", 0)
+    every_colour_parallel(monkeypatch)
     seen = []
     colour = rigid_solver_step.colour_contacts
 

@@ -35,6 +35,12 @@ from numba import njit
 
 #: colours a body's 64-bit mask can hold; a manifold finding them all taken goes to the overflow
 COLOURS = 64
+#: a colour of fewer manifolds than this is swept on one thread (``Colours.serial_below``): a parallel
+#: region ends when its slowest thread does, and a step opened one per colour and pass (6 to 21
+#: colours, 12 passes); the 10^4 box pit's last colours hold a few hundred manifolds down to one,
+#: tens of microseconds of work at most, against a wait of up to a time slice for a thread that
+#: another process holds
+SERIAL_MANIFOLDS = 512
 
 
 class Colours(NamedTuple):
@@ -48,6 +54,7 @@ class Colours(NamedTuple):
     colour_start: np.ndarray  # (G + 1,) int64 each non-empty colour's first manifold, then B
     parallel: int             # how many of the G groups are colours (the rest, the overflow, serial)
     threads: int              # the parts a colour is cut into: Numba's thread count (the bytes do not depend on it)
+    serial_below: int         # a colour of fewer manifolds is swept on one thread (:func:`next_groups`)
 
 
 @njit(cache=True)
@@ -117,7 +124,7 @@ def colour_contacts(a, b, n, threads):
     for m in range(blocks):
         for k in range(rows[m + 1] - rows[m]):
             order[laid[place[m]] + k] = rows[m] + k
-    return order, Colours(laid, colour_start[:groups + 1], parallel, max(threads, 1))
+    return order, Colours(laid, colour_start[:groups + 1], parallel, max(threads, 1), SERIAL_MANIFOLDS)
 
 
 @njit(cache=True)
@@ -128,10 +135,32 @@ def in_sorted_order(a, b):
     blocks = len(rows) - 1
     colour_start = np.zeros(2 if blocks else 1, np.int64)
     colour_start[-1] = blocks
-    return np.arange(len(a)), Colours(rows, colour_start, 0, 1)
+    return np.arange(len(a)), Colours(rows, colour_start, 0, 1, SERIAL_MANIFOLDS)
 
 
 @njit(cache=True, inline="always")
 def span(start, end, part, parts):
     """Part ``part`` of ``parts`` nearly equal parts of start .. end - 1: (its first, its end)."""
     return start + (end - start) * part // parts, start + (end - start) * (part + 1) // parts
+
+
+@njit(cache=True, inline="always")
+def next_groups(colours, group):
+    """((first, end) manifolds, parts, the group after them) of the sweep from group ``group`` of
+    ``colours`` on: a colour of at least ``colours.serial_below`` manifolds alone, cut into
+    ``colours.threads`` parts; or the run of groups from ``group`` up to the next such colour (small
+    colours, the overflow, the sorted order's one group), whose manifolds are consecutive, in one
+    part: one parallel region on one thread instead of one per group. (Calling the sweep's kernel
+    outside a parallel region instead made it 1.5 times slower: Numba's code for the loop's body is
+    faster.) The bytes do not depend on it."""
+    start, groups = colours.colour_start, len(colours.colour_start) - 1
+
+    def cut(g):  # whether group g is a colour swept in parts
+        return colours.threads > 1 and g < colours.parallel and start[g + 1] - start[g] >= colours.serial_below
+
+    if cut(group):
+        return (start[group], start[group + 1]), colours.threads, group + 1
+    last = group + 1
+    while last < groups and not cut(last):
+        last += 1
+    return (start[group], start[last]), 1, last

@@ -50,7 +50,7 @@ from typing import NamedTuple
 import numpy as np
 from numba import njit, prange
 
-from .contact_colouring import span
+from .contact_colouring import next_groups, span
 from .manifold_geometry import cross3
 from .sphere_contacts import dot3
 
@@ -502,11 +502,11 @@ def _holds_nothing(pt, pr, k):
 def _sweep(bodies, contacts, sub, use_bias, colours):
     """One Gauss-Seidel sweep over the contacts, colour by colour (:mod:`.contact_colouring`): each
     contact's normal impulse, then friction and rolling. A colour's manifolds share no body: they are
-    solved on all threads at once, the same bytes as on one."""
-    threads, groups = colours.threads, len(colours.colour_start) - 1
-    for group in range(groups):
-        first, end = colours.colour_start[group], colours.colour_start[group + 1]
-        parts = threads if group < colours.parallel else 1  # the overflow: on one thread
+    solved on all threads at once, the same bytes as on one; small colours and the overflow one after
+    the other on one thread, in one parallel region (:func:`.contact_colouring.next_groups`)."""
+    group = 0
+    while group < len(colours.colour_start) - 1:
+        (first, end), parts, group = next_groups(colours, group)
         for part in prange(parts):
             _sweep_blocks(bodies, contacts, (sub, use_bias), colours, span(first, end, part, parts))
 
@@ -554,10 +554,9 @@ def _sweep_blocks(bodies, contacts, how, colours, blocks):
 def warm_start(bodies, contacts, colours):
     """Each contact's impulses of the last substep applied again: a good first guess. By colour, as
     :func:`_sweep`: a body's impulses are added in the one order, whatever the threads."""
-    threads, groups = colours.threads, len(colours.colour_start) - 1
-    for group in range(groups):
-        first, end = colours.colour_start[group], colours.colour_start[group + 1]
-        parts = threads if group < colours.parallel else 1
+    group = 0
+    while group < len(colours.colour_start) - 1:
+        (first, end), parts, group = next_groups(colours, group)
         for part in prange(parts):
             _warm_blocks(bodies, contacts, colours, span(first, end, part, parts))
 
