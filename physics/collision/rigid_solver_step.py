@@ -65,7 +65,7 @@ MAX_ROTATION_REACH = 2.0
 #: body's contacts are still known before it touches. The sphere solver's margin,
 #: :data:`.contact_buffer.MARGIN_OF_RADIUS` (1/4), is four times wider: at 1/4 the 10^4-box pit's
 #: steps 1 to 30 carried 51,000 points a step against 32,000, and the same 9,400 of them pressed
-#: (docs/performance.md); every study scene gives the same bytes at either
+#: (docs/performance.md); every study scene gives the same bytes at either width
 SPECULATIVE_OF_RADIUS = 1 / 16
 #: scenes of this many bodies or more are swept colour by colour on the solver's threads
 #: (:mod:`.contact_colouring`, which says why smaller ones keep the sorted order on one thread): a step

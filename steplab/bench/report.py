@@ -94,24 +94,26 @@ def _real_time(r) -> str:
     return _optional(r["real_time_factor"], "{:.3g}".format)
 
 
-#: the ball pits' columns (:func:`_pit_lines`)
-BALL_PIT_COLUMNS = (
-    ("ball pit", "<15", "ball pit", lambda r: r["pit"]), ("balls", ">7", "balls", lambda r: f"{r['balls']:,}"),
-    ("steps", ">5", "steps", lambda r: str(r["steps"])),
-    ("contender", "<58.58", "contender", lambda r: r["contender"]),
-    ("per step", ">9", "per step", lambda r: _optional(r["per_step"], _seconds)),
-    ("x real time", ">11", "simulated s per wall s", _real_time),
-    ("target", "<14", "target", lambda r: _real_time_verdict(r["target"])),
-    ("impacts", "<27", "impacts", lambda r: r["impacts"]),
-    ("inside", "", "balls inside", lambda r: _optional(r["balls_inside"], "{:,}".format)))
-#: the box pits' columns (:func:`_pit_lines`)
-BOX_PIT_COLUMNS = (
-    ("box pit", "<15", "box pit", lambda r: r["pit"]), ("boxes", ">7", "boxes", lambda r: f"{r['boxes']:,}"),
-    ("steps", ">5", "steps", lambda r: str(r["steps"])),
-    ("contender", "<72.72", "contender", lambda r: r["contender"]),
-    ("cores", ">5", "cores", lambda r: _optional(r["cores"], str)),
-    ("x real time", ">11", "simulated s per wall s", _real_time),
-    ("target", "", "target", lambda r: _real_time_verdict(r["target"])))
+def _pit_columns(pit: str, bodies: str, contender_width: str, middle: tuple, target_width: str, after=()) -> tuple:
+    """A pit table's columns (:func:`_pit_lines`): the pit, its ``bodies`` (the rows' key and the
+    heading), the steps and the contender, then ``middle``, the real-time factor and its target,
+    then ``after``; each column (terminal heading, terminal format, Markdown heading, cell of a row)."""
+    return (
+        (pit, "<15", pit, lambda r: r["pit"]), (bodies, ">7", bodies, lambda r: f"{r[bodies]:,}"),
+        ("steps", ">5", "steps", lambda r: str(r["steps"])),
+        ("contender", contender_width, "contender", lambda r: r["contender"]), *middle,
+        ("x real time", ">11", "simulated s per wall s", _real_time),
+        ("target", target_width, "target", lambda r: _real_time_verdict(r["target"])), *after)
+
+
+#: the ball pits' columns
+BALL_PIT_COLUMNS = _pit_columns(
+    "ball pit", "balls", "<58.58", (("per step", ">9", "per step", lambda r: _optional(r["per_step"], _seconds)),),
+    "<14", (("impacts", "<27", "impacts", lambda r: r["impacts"]),
+            ("inside", "", "balls inside", lambda r: _optional(r["balls_inside"], "{:,}".format))))
+#: the box pits' columns
+BOX_PIT_COLUMNS = _pit_columns("box pit", "boxes", "<72.72",
+                               (("cores", ">5", "cores", lambda r: _optional(r["cores"], str)),), "")
 
 
 def collision_markdown(record: dict) -> list[str]:
