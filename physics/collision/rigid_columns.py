@@ -33,36 +33,41 @@ def tangent_basis(n):
 
 
 @njit(cache=True, parallel=True)
-def gather(points, order, movers, materials, previous, context, out, threads):
+def gather(points, layout, movers, materials, previous, context, out, threads):
     """Fill ``out`` (a :class:`.rigid_solver.RigidContactColumns` of C rows): row k from point
     ``order[k]`` of ``points`` (:class:`.manifolds.ManifoldPoints`), so the points are taken in the
-    solver's order without a permuted copy of them.
+    solver's order without a permuted copy of them; ``layout`` = (order, place), and ``place`` (C,)
+    is filled with its inverse: point i went to row ``place[i]``.
 
     ``movers`` = (q, accel, rolling) of the bodies: centres at the start of the step, the forces'
     accelerations, and each body's rolling resistance (coefficient times rounding radius, m);
-    ``materials`` a :class:`.contact_buffer.Materials`; ``previous`` = (rows, pn, pt, pr): each
-    point's row among the last step's points, or -1 (:func:`.rigid_solver.previous_rows`), and
-    their impulses (pt a world vector); ``context`` = (the world's rest speed, dt). Each row its
-    own: ``threads`` parts in parallel, the same bytes on any number of threads.
+    ``materials`` a :class:`.contact_buffer.Materials`; ``previous`` = (rows, pn, pt, tangent, pr):
+    each point's row among the last step's contacts (in their sweep order), or -1
+    (:func:`.rigid_solver.previous_rows`), and those contacts' columns, whose impulses warm-start
+    the new ones (the tangential one as a world vector, pt1 t1 + pt2 t2 of the last step's
+    tangents, taken into the new contact plane); ``context`` = (the world's rest speed, dt). Each row its own:
+    ``threads`` parts in parallel, the same bytes on any number of threads.
     """
     for part in prange(threads):  # (points and order apart: Numba's parallel loop takes no tuple of a NamedTuple)
-        _gather_rows((points, order), movers, materials, previous, context, out, span(0, len(order), part, threads))
+        _gather_rows((points, layout), movers, materials, previous, context, out,
+                     span(0, len(layout[0]), part, threads))
 
 
 @njit(cache=True)
 def _gather_rows(source, movers, materials, previous, context, out, rows_):
     """:func:`gather` of the rows ``rows_`` = (first, end)."""
     q, accel, rolls = movers
-    rows, old_pn, old_pt, old_pr = previous
+    rows, old_pn, old_pt, old_tangent, old_pr = previous
     floor, dt = context
     body_material, shape_material, restitution_table, friction_table = materials
-    points, order = source
+    points, (order, place) = source
     a_, b_, normal, point, separation, _ = points
     # the columns out of the NamedTuple before the loops (a field read in a loop costs a reference count)
     (a_out, b_out, n_out, ra, rb, tangent, s0, vn0, hit, _, friction, restitution, threshold, rolling_out, pn, pt,
      pr, total, most, _, _, _) = out
     for k in range(rows_[0], rows_[1]):
         i = order[k]
+        place[i] = k
         a, b = a_[i], b_[i]
         n = (normal[i, 0], normal[i, 1], normal[i, 2])
         a_out[k], b_out[k] = a, max(b, -1)
@@ -90,7 +95,10 @@ def _gather_rows(source, movers, materials, previous, context, out, rows_):
         total[k], most[k] = 0.0, 0.0
         row = rows[i]
         if row >= 0:
-            p = (old_pt[row, 0], old_pt[row, 1], old_pt[row, 2])
+            p1, p2 = old_pt[row, 0], old_pt[row, 1]
+            p = (p1 * old_tangent[row, 0, 0] + p2 * old_tangent[row, 1, 0],
+                 p1 * old_tangent[row, 0, 1] + p2 * old_tangent[row, 1, 1],
+                 p1 * old_tangent[row, 0, 2] + p2 * old_tangent[row, 1, 2])
             pn[k], pt[k, 0], pt[k, 1] = old_pn[row], dot3(p, t1), dot3(p, t2)
             for x in range(3):
                 pr[k, x] = old_pr[row, x]
@@ -100,45 +108,30 @@ def _gather_rows(source, movers, materials, previous, context, out, rows_):
                 pr[k, x] = 0.0
 
 
-@njit(cache=True, parallel=True)
-def in_sorted_rows(contacts, order, threads):
-    """(normal, pn, pt, pr, total) of the step's contacts back in the sorted order of their points
-    (row ``order[k]`` from the contacts' row k), pt as a world vector: what the next step warm-starts
-    from (:func:`.rigid_solver.previous_rows` matches sorted keys); ``threads`` parts in parallel."""
-    count = len(order)
-    out = (np.empty((count, 3)), np.empty(count), np.empty((count, 3)), np.empty((count, 3)), np.empty(count))
-    for part in prange(threads):
-        _sorted_rows_of(contacts, order, out, span(0, count, part, threads))
-    return out
-
-
 @njit(cache=True)
-def _sorted_rows_of(contacts, order, out, rows):
-    """:func:`in_sorted_rows` of the contacts' rows ``rows`` = (first, end)."""
-    normal, pn, pt, pr, total = out
-    c_normal, c_pn, c_pt, c_pr, c_total, tangent = (contacts.normal, contacts.pn, contacts.pt, contacts.pr,
-                                                    contacts.total, contacts.tangent)
-    for k in range(rows[0], rows[1]):
-        i = order[k]
-        pn[i], total[i] = c_pn[k], c_total[k]
-        for x in range(3):
-            normal[i, x], pr[i, x] = c_normal[k, x], c_pr[k, x]
-            pt[i, x] = c_pt[k, 0] * tangent[k, 0, x] + c_pt[k, 1] * tangent[k, 1, x]
-
-
-@njit(cache=True)
-def newly_pressed(total, order, rows, previous_total):
-    """The contacts (rows of the sweep order, ascending) pressed in the step (``total`` > 0) whose
-    point was not pressed in the last step: ``rows[order[k]]`` is contact k's point among the last
-    step's points, or -1 (:func:`.rigid_solver.previous_rows`), ``previous_total`` their impulses."""
-    out = np.empty(len(total), np.int64)
+def first_impacts(key, place, rows, previous_total, total):
+    """The step's impacts: of each pair (a, b), its first point pressed in the step (``total`` > 0)
+    that was not pressed in the last step, as its row of the sweep order; the pairs in their sorted
+    order. ``key`` = (a, b, feature), the sorted points, point i at row ``place[i]``; ``rows[i]``
+    its row among the last step's contacts, or -1 (:func:`.rigid_solver.previous_rows`),
+    ``previous_total`` their impulses. (A pair's points are one manifold: consecutive in the sorted
+    order, and in the same order in the sweep.)"""
+    a, b, _ = key
+    out = np.empty(len(a), np.int64)
     found = 0
-    for k in range(len(total)):
+    taken = False  # whether the pair of the point before already has its impact
+    for i in range(len(a)):
+        if i == 0 or a[i] != a[i - 1] or b[i] != b[i - 1]:
+            taken = False
+        if taken:
+            continue
+        k = place[i]
         if total[k] > 0:
-            row = rows[order[k]]
+            row = rows[i]
             if row < 0 or not previous_total[row] > 0:
                 out[found] = k
                 found += 1
+                taken = True
     return out[:found]
 
 

@@ -192,20 +192,17 @@ def _turn_by(q, k, p):
     q[k, 0], q[k, 1], q[k, 2], q[k, 3] = r0 / size, r1 / size, r2 / size, r3 / size
 
 
-@njit(cache=True)
-def world_inverse_inertia(orientation, inverse_principal):
-    """(N, 3, 3): R diag(1/I1, 1/I2, 1/I3) R^T of each body, R's columns its axes, the unit vectors
-    turned by its quaternion (one pass; NumPy's three-operand einsum took 2-4 ms for 10^4 bodies)."""
-    out = np.empty((len(orientation), 3, 3))
-    for body in range(len(orientation)):
-        r0 = rotate(orientation, body, (1.0, 0.0, 0.0))
-        r1 = rotate(orientation, body, (0.0, 1.0, 0.0))
-        r2 = rotate(orientation, body, (0.0, 0.0, 1.0))
-        d0, d1, d2 = inverse_principal[body, 0], inverse_principal[body, 1], inverse_principal[body, 2]
-        for i in range(3):
-            for k in range(3):
-                out[body, i, k] = r0[i] * d0 * r0[k] + r1[i] * d1 * r1[k] + r2[i] * d2 * r2[k]
-    return out
+@njit(cache=True, inline="always")
+def _world_inverse_inertia(orientation, inverse_principal, body, out):
+    """out[body] = R diag(1/I1, 1/I2, 1/I3) R^T, R's columns the body's axes, the unit vectors turned
+    by its quaternion (NumPy's three-operand einsum took 2-4 ms for 10^4 bodies)."""
+    r0 = rotate(orientation, body, (1.0, 0.0, 0.0))
+    r1 = rotate(orientation, body, (0.0, 1.0, 0.0))
+    r2 = rotate(orientation, body, (0.0, 0.0, 1.0))
+    d0, d1, d2 = inverse_principal[body, 0], inverse_principal[body, 1], inverse_principal[body, 2]
+    for i in range(3):
+        for k in range(3):
+            out[body, i, k] = r0[i] * d0 * r0[k] + r1[i] * d1 * r1[k] + r2[i] * d2 * r2[k]
 
 
 # --- the contact's kinematics ---------------------------------------------------------------
@@ -616,16 +613,28 @@ def _energy_line(inertias, body, v, w, dv, dw):
     return e, g, c
 
 
+@njit(cache=True, parallel=True)
+def start_bodies(bodies, threads):
+    """The bodies at the start of a step: no move yet (``dq`` zero, ``turn`` the identity), each one's
+    world inverse inertia R diag(1/I1, 1/I2, 1/I3) R^T and kinetic energy 1/2 m v^2 + 1/2 omega . I omega
+    (J); each body its own, ``threads`` parts in parallel."""
+    for part in prange(threads):
+        _start_of(bodies, span(0, len(bodies.v), part, threads))
+
+
 @njit(cache=True)
-def kinetic_energies(bodies):
-    """(N,) each body's kinetic energy, 1/2 m v^2 + 1/2 omega . I omega, J."""
-    v, omega = bodies.v, bodies.omega
-    inertias = (bodies.inverse_mass, bodies.inverse_principal, bodies.orientation)
-    out = np.zeros(len(v))
+def _start_of(bodies, span_):
+    """:func:`start_bodies` of the bodies ``span_`` = (first, end)."""
+    v, omega, dq, turn, energy = bodies.v, bodies.omega, bodies.dq, bodies.turn, bodies.energy
+    orientation, inverse_principal = bodies.orientation, bodies.inverse_principal
+    inertias = (bodies.inverse_mass, inverse_principal, orientation)
     zero = (0.0, 0.0, 0.0)
-    for body in range(len(out)):
-        out[body] = _energy_line(inertias, body, _row(v, body), _row(omega, body), zero, zero)[0]
-    return out
+    for body in range(span_[0], span_[1]):
+        for x in range(3):
+            dq[body, x] = 0.0
+        turn[body, 0], turn[body, 1], turn[body, 2], turn[body, 3] = 1.0, 0.0, 0.0, 0.0
+        _world_inverse_inertia(orientation, inverse_principal, body, bodies.inverse_inertia)
+        energy[body] = _energy_line(inertias, body, _row(v, body), _row(omega, body), zero, zero)[0]
 
 
 @njit(cache=True)
@@ -763,20 +772,38 @@ def step(bodies, contacts, sub, substeps, colours):
     return finish(bodies, contacts, sub)
 
 
-@njit(cache=True)
-def previous_rows(old, new):
-    """Each new contact's row among the last step's, matched by (a, b, feature), or -1.
+@njit(cache=True, parallel=True)
+def previous_rows(old, new, place, threads):
+    """Each new point's contact among the last step's, matched by (a, b, feature), or -1.
 
-    ``old`` and ``new`` are the columns (a, b, feature), int64, each sorted lexicographically: one
-    merge."""
-    oa, ob, of = old
-    na, nb, nf = new
-    rows = np.full(len(na), -1, dtype=np.int64)
-    p = 0
-    for k in range(len(na)):
-        while p < len(oa) and (oa[p] < na[k] or (oa[p] == na[k] and (
-                ob[p] < nb[k] or (ob[p] == nb[k] and of[p] < nf[k])))):
-            p += 1
-        if p < len(oa) and oa[p] == na[k] and ob[p] == nb[k] and of[p] == nf[k]:
-            rows[k] = p
+    ``old`` and ``new`` are the columns (a, b, feature), int64, each sorted lexicographically; the
+    last step's point p was its contact ``place[p]``. One merge, cut into ``threads`` parts, each
+    starting where bisection puts its first key among the old ones: the rows of a one-part merge."""
+    rows = np.empty(len(new[0]), np.int64)
+    for part in prange(threads):
+        _merge(old, new, place, rows, span(0, len(rows), part, threads))
     return rows
+
+
+@njit(cache=True)
+def _merge(old, new, place, rows, part):
+    """:func:`previous_rows` of the new points ``part`` = (first, end)."""
+    oa, ob, of = old  # (the arrays out of their tuples before the loops: an item read in a loop costs a reference count)
+    na, nb, nf = new
+    first, end = part
+    count = len(oa)
+    lo, hi = 0, count
+    while lo < hi and first < end:  # the first old key not below the part's first
+        p = (lo + hi) // 2
+        if oa[p] < na[first] or (oa[p] == na[first] and (ob[p] < nb[first] or (
+                ob[p] == nb[first] and of[p] < nf[first]))):
+            lo = p + 1
+        else:
+            hi = p
+    p = lo
+    for k in range(first, end):
+        while p < count and (oa[p] < na[k] or (oa[p] == na[k] and (ob[p] < nb[k] or (
+                ob[p] == nb[k] and of[p] < nf[k])))):
+            p += 1
+        found = p < count and oa[p] == na[k] and ob[p] == nb[k] and of[p] == nf[k]
+        rows[k] = place[p] if found else -1

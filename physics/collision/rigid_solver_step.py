@@ -40,7 +40,7 @@ from .contact_colouring import colour_contacts, in_sorted_order
 from .events import CollisionLog, ImpactBlock, cancel_triggers
 from .manifolds import BOX, CAPSULE, SPHERE, check_shapes
 from .pairs import SweptSpheres
-from .rigid_columns import gather, in_sorted_rows, is_sorted, newly_pressed
+from .rigid_columns import first_impacts, gather, is_sorted
 from .solver_step import INTEGRATOR
 from .step import ConstantField
 
@@ -113,27 +113,42 @@ def rotation_codes(rotation: str) -> tuple[int, int]:
     return rs.GYROSCOPIC[gyroscopic], rs.UPDATES[update]
 
 
-def world_inverse_inertia(orientation, inverse_principal) -> np.ndarray:
-    """R diag(1/I1, 1/I2, 1/I3) R^T for each body, (N, 3, 3); zeros for a body that does not rotate
-    (compiled: :func:`.rigid_solver.world_inverse_inertia`)."""
-    return rs.world_inverse_inertia(np.ascontiguousarray(orientation, dtype=float),
-                                    np.ascontiguousarray(inverse_principal, dtype=float))
+def contact_columns(count: int) -> rs.RigidContactColumns:
+    """Columns for ``count`` contacts, to be filled (:func:`.rigid_columns.gather`, :func:`.rigid_solver.prepare`)."""
+    return rs.RigidContactColumns(
+        np.empty(count, np.int64), np.empty(count, np.int64), *(np.empty((count, 3)) for _ in range(3)),
+        np.empty((count, 2, 3)), *(np.empty(count) for _ in range(3)), np.zeros((count, 3)),
+        *(np.empty(count) for _ in range(4)), np.empty(count), np.empty((count, 2)), np.empty((count, 3)),
+        np.empty(count), np.empty(count), np.zeros(count), np.zeros((count, 3)), np.zeros((count, 3)))
 
 
 @dataclasses.dataclass
 class Solved:
-    """A step's contact points and their impulses, for the next step's warm start and the log."""
+    """A step's contacts, for the next step's warm start and the log: the keys (a, b, feature) of
+    their points, int64, sorted, and the solver's columns in its sweep order, point i at row
+    ``place[i]`` (the columns are kept as they are, not copied back into the sorted order)."""
 
-    key: tuple  # the columns (a, b, feature), int64, sorted
-    normal: np.ndarray
-    pn: np.ndarray
-    pt: np.ndarray  # (C, 3) the tangential impulse as a world vector
-    pr: np.ndarray
-    total: np.ndarray
+    key: tuple
+    contacts: rs.RigidContactColumns
+    place: np.ndarray
+
+    @property
+    def pn(self) -> np.ndarray:
+        """The points' last substep's normal impulses, in the sorted order, N s."""
+        return self.contacts.pn[self.place]
+
+    @property
+    def total(self) -> np.ndarray:
+        """The points' normal impulses of the step, in the sorted order, N s."""
+        return self.contacts.total[self.place]
+
+    @property
+    def normal(self) -> np.ndarray:
+        """The points' normals, (C, 3), in the sorted order."""
+        return self.contacts.normal[self.place]
 
 
-_NOTHING = Solved((np.zeros(0, np.int64),) * 3, np.zeros((0, 3)), np.zeros(0), np.zeros((0, 3)), np.zeros((0, 3)),
-                  np.zeros(0))
+_NOTHING = Solved((np.zeros(0, np.int64),) * 3, contact_columns(0), np.zeros(0, np.int64))
 
 
 @dataclasses.dataclass
@@ -263,29 +278,26 @@ class RigidSolverStep:
         s = self.world.solver
         h = dt / s.substeps
         n = len(q0)
-        bodies = rs.RigidBodyColumns(q0, v0, self.omega, self.orientation, np.zeros((n, 3)),
-                                     np.tile(quat.IDENTITY, (n, 1)).astype(float), self.inverse_masses,
-                                     world_inverse_inertia(self.orientation, self.inverse_principal),
-                                     self.inverse_principal, np.ascontiguousarray(a), self.rounding, np.zeros(n))
-        bodies.energy[:] = rs.kinetic_energies(bodies)
+        bodies = rs.RigidBodyColumns(q0, v0, self.omega, self.orientation, np.empty((n, 3)), np.empty((n, 4)),
+                                     self.inverse_masses, np.empty((n, 3, 3)), self.inverse_principal,
+                                     np.ascontiguousarray(a, dtype=float), self.rounding, np.empty(n))
+        rs.start_bodies(bodies, s.threads)
         count = len(points.a)
-        contacts = rs.RigidContactColumns(
-            np.empty(count, np.int64), np.empty(count, np.int64), *(np.empty((count, 3)) for _ in range(3)),
-            np.empty((count, 2, 3)), *(np.empty(count) for _ in range(3)), np.zeros((count, 3)),
-            *(np.empty(count) for _ in range(4)), np.empty(count), np.empty((count, 2)), np.empty((count, 3)),
-            np.empty(count), np.empty(count), np.zeros(count), np.zeros((count, 3)), np.zeros((count, 3)))
+        contacts = contact_columns(count)
         # the points arrive sorted by (a, b, feature), the order the last step's are matched in; the
         # solver takes them in its sweep order
         key = (points.a, points.b, points.feature)
         old = self._previous
-        rows = rs.previous_rows(old.key, key)
+        rows = rs.previous_rows(old.key, key, old.place, s.threads)
         if n >= COLOURED_BODIES:  # coloured, on the solver's threads (the same bytes on any number of them)
             order, colours = colour_contacts(points.a, points.b, n, s.threads)
         else:
             order, colours = in_sorted_order(points.a, points.b)
-        self._sorted_key, self._order, self._rows = key, order, rows
-        gather(points, order, (q0, np.ascontiguousarray(a, dtype=float), self.rolling), self.materials,
-               (rows, old.pn, old.pt, old.pr), (float(self.world.rest_speed), float(dt)), contacts, s.threads)
+        place = np.empty(count, np.int64)
+        self._sorted_key, self._order, self._rows, self._place = key, order, rows, place
+        o = old.contacts
+        gather(points, (order, place), (q0, bodies.accel, self.rolling), self.materials,
+               (rows, o.pn, o.pt, o.tangent, o.pr), (float(self.world.rest_speed), float(dt)), contacts, s.threads)
         rs.prepare(bodies, contacts, colours)
         bias_rate, mass_scale, impulse_scale = s.softness(h)
         sub = rs.RigidSubstep(h, s.iterations, bias_rate, mass_scale, impulse_scale, s.push_speed, s.slop,
@@ -295,21 +307,16 @@ class RigidSolverStep:
     def _conclude(self, t, dt, contacts, residual):
         """The log (impacts, residual) and what the next step warm-starts from (in the sorted order)."""
         c = contacts
-        new = newly_pressed(c.total, self._order, self._rows, self._previous.total)
-        # one impact per pair: its first point newly hit (the pairs as one code, increasing in (a, b):
-        # NumPy's unique of rows sorts structured rows, many times slower than of numbers)
-        statics = len(self.world.shapes)
-        b = self._sorted_key[1][self._order[new]]  # c.b holds -1 for every static shape
-        code = c.a[new] * (len(self.inverse_masses) + statics) + (b + statics)
-        keep = np.unique(code, return_index=True)[1] if len(new) else new
-        first, b = new[keep], b[keep]
+        # one impact per pair: its first point newly hit
+        first = first_impacts(self._sorted_key, self._place, self._rows, self._previous.contacts.total, c.total)
+        b = self._sorted_key[1][self._order[first]]  # c.b holds -1 for every static shape
         self.log.add_impacts(ImpactBlock(
             np.full(len(first), float(t)), c.a[first], b, c.normal[first],
             -c.hit[first], c.restitution[first], c.friction[first], c.total[first], (float(t), float(t + dt)),
             self.model.names, self.world.shapes))
         self.log.most_impacts_in_a_step = max(self.log.most_impacts_in_a_step, len(first))
         self.log.largest_residual = max(self.log.largest_residual, float(residual))
-        self._previous = Solved(self._sorted_key, *in_sorted_rows(c, self._order, self.world.solver.threads))
+        self._previous = Solved(self._sorted_key, c, self._place)
 
     def rotation_at(self, steps: np.ndarray):
         """(orientations (K, N, 4), angular velocities (K, N, 3)) after each of ``steps`` steps (recorded ones)."""
