@@ -32,6 +32,7 @@ from typing import NamedTuple
 
 import numpy as np
 from numba import njit
+from numba.cpython.unsafe.numbers import trailing_zeros
 
 #: colours a body's 64-bit mask can hold; a manifold finding them all taken goes to the overflow
 COLOURS = 64
@@ -79,51 +80,59 @@ def colour_contacts(a, b, n, threads):
 
     ``order`` (C,) lists the rows colour by colour, the manifolds of one colour in their sorted
     order and the points of one manifold together, in theirs; the colours' rows and manifolds are
-    those of the contacts taken in that order, which the sweep streams through."""
+    those of the contacts taken in that order, which the sweep streams through.
+
+    Two passes: one over the points, which finds the manifolds and colours each (its colour the
+    lowest bit clear in its bodies' masks, one count of trailing zeros), and one over the
+    manifolds, which lays each out after those of its colour before it (a counting sort: stable,
+    so each colour keeps the sorted order)."""
     count = len(a)
-    rows = manifold_rows(a, b)
-    blocks = len(rows) - 1
     used = np.zeros(n, np.uint64)  # the colours each body has, as bits
-    colour = np.empty(blocks, np.int64)
-    sizes = np.zeros(COLOURS + 1, np.int64)
-    one = np.uint64(1)
-    for m in range(blocks):
-        i, j = a[rows[m]], b[rows[m]]
-        taken = used[i] | used[j] if j >= 0 else used[i]
-        c = 0
-        while c < COLOURS and (taken >> np.uint64(c)) & one:
-            c += 1
-        if c < COLOURS:
-            used[i] |= one << np.uint64(c)
-            if j >= 0:
-                used[j] |= one << np.uint64(c)
-        colour[m] = c  # COLOURS: the overflow
-        sizes[c] += 1
+    colour = np.empty(count, np.int64)  # of each manifold (at most one per point)
+    start = np.empty(count + 1, np.int64)  # each manifold's first point
+    sizes = np.zeros(COLOURS + 1, np.int64)  # manifolds of each colour (COLOURS: the overflow)
+    points = np.zeros(COLOURS + 1, np.int64)  # and their points
+    blocks, c, one = 0, 0, np.uint64(1)
+    for k in range(count):
+        if k == 0 or a[k] != a[k - 1] or b[k] != b[k - 1]:
+            i, j = a[k], b[k]
+            free = ~(used[i] | used[j] if j >= 0 else used[i])
+            if free:
+                c = np.int64(trailing_zeros(free))
+                bit = one << np.uint64(c)  # the lowest bit clear in both masks, taken
+                used[i] |= bit
+                if j >= 0:
+                    used[j] |= bit
+            else:
+                c = COLOURS
+            colour[blocks], start[blocks] = c, k
+            sizes[c] += 1
+            blocks += 1
+        points[c] += 1
+    start[blocks] = count
     groups, parallel = 0, 0
-    first = np.zeros(COLOURS + 1, np.int64)  # each colour's first place among the manifolds
+    first = np.zeros(COLOURS + 1, np.int64)  # each colour's next place among the manifolds
+    row = np.zeros(COLOURS + 1, np.int64)  # and its next row
     colour_start = np.zeros(COLOURS + 2, np.int64)
+    rows = 0
     for c in range(COLOURS + 1):
         if sizes[c] > 0:
-            first[c] = colour_start[groups]
+            first[c], row[c] = colour_start[groups], rows
             colour_start[groups + 1] = colour_start[groups] + sizes[c]
+            rows += points[c]
             groups += 1
             if c < COLOURS:
                 parallel = groups
-    place = np.empty(blocks, np.int64)
-    for m in range(blocks):  # a counting sort: stable, so each colour keeps the sorted order
-        place[m] = first[colour[m]]
-        first[colour[m]] += 1
-    length = np.empty(blocks, np.int64)
-    for m in range(blocks):
-        length[place[m]] = rows[m + 1] - rows[m]
     laid = np.empty(blocks + 1, np.int64)
-    laid[0] = 0
-    for m in range(blocks):
-        laid[m + 1] = laid[m] + length[m]
+    laid[blocks] = count
     order = np.empty(count, np.int64)
     for m in range(blocks):
-        for k in range(rows[m + 1] - rows[m]):
-            order[laid[place[m]] + k] = rows[m] + k
+        c = colour[m]
+        laid[first[c]] = row[c]
+        first[c] += 1
+        for k in range(start[m], start[m + 1]):
+            order[row[c]] = k
+            row[c] += 1
     return order, Colours(laid, colour_start[:groups + 1], parallel, max(threads, 1), SERIAL_MANIFOLDS)
 
 

@@ -646,9 +646,10 @@ def _island(parent, body):
     return body
 
 
-@njit(cache=True)
-def _restitution(bodies, contacts, sub):
-    """The restitution pass's extra normal impulses, applied; returns them, (C,).
+@njit(cache=True, parallel=True)
+def _restitution(bodies, contacts, sub, colours):
+    """The restitution pass's extra normal impulses, applied; returns them, (C,), and whether each
+    body was given one (N,) (if only a zero).
 
     v_n is driven to -eps v_n- for the contacts hit in the step (an impulse in some substep) whose
     approach v_n- is faster than their threshold, the accumulated impulse kept >= 0. v_n- is the
@@ -656,31 +657,47 @@ def _restitution(bodies, contacts, sub):
     (``hit``): the first alone is wrong for a tumbling box's corner, which strikes at another
     speed than it had at the step's start; the second alone is wrong in a chain (a cradle), where
     the speed just before a contact's first impulse was raised by its neighbour's impulse in the
-    same step: bouncing that back too gave the cradle 1.31 times its energy."""
+    same step: bouncing that back too gave the cradle 1.31 times its energy.
+
+    One Gauss-Seidel pass per iteration in the sweep's order, colour by colour as :func:`_sweep`
+    (a colour's manifolds share no body: on all threads at once, the same bytes as on one)."""
+    extra, touched = np.zeros(len(contacts.a)), np.zeros(len(bodies.v), np.bool_)
+    for _ in range(sub.iterations):
+        group = 0
+        while group < len(colours.colour_start) - 1:
+            (first, end), parts, group = next_groups(colours, group)
+            for part in prange(parts):
+                _restitution_blocks(bodies, contacts, (extra, touched), colours, span(first, end, part, parts))
+    return extra, touched
+
+
+@njit(cache=True)
+def _restitution_blocks(bodies, contacts, given, colours, blocks):
+    """:func:`_restitution` over the manifolds ``blocks`` = (first, end); ``given`` = (extra, touched)."""
     state = _state(bodies)
     v, omega = bodies.v, bodies.omega
     a_, b_, normal, lever_a, lever_b = contacts.a, contacts.b, contacts.normal, contacts.la, contacts.lb
     vn0, hit, threshold, mass, restitution, pn = (contacts.vn0, contacts.hit, contacts.threshold, contacts.mass,
                                                   contacts.restitution, contacts.pn)
-    count = len(a_)
-    extra = np.zeros(count)
-    for _ in range(sub.iterations):
-        for k in range(count):
-            approach = max(vn0[k], hit[k])  # +inf: never hit in the step
-            if approach >= -threshold[k]:
-                continue
-            a, b, n, la, lb = a_[k], b_[k], _row(normal, k), _row(lever_a, k), _row(lever_b, k)
-            vn = dot3(_relative_velocity(v, omega, a, b, la, lb), n)
-            dp = -mass[k, 0] * (vn + restitution[k] * approach)
-            accumulated = max(pn[k] + extra[k] + dp, 0.0)
-            dp = accumulated - pn[k] - extra[k]
-            extra[k] += dp
-            _apply(state, a, b, la, lb, (dp * n[0], dp * n[1], dp * n[2]))
-    return extra
+    extra, touched = given
+    for k in range(colours.rows[blocks[0]], colours.rows[blocks[1]]):
+        approach = max(vn0[k], hit[k])  # +inf: never hit in the step
+        if approach >= -threshold[k]:
+            continue
+        a, b, n, la, lb = a_[k], b_[k], _row(normal, k), _row(lever_a, k), _row(lever_b, k)
+        vn = dot3(_relative_velocity(v, omega, a, b, la, lb), n)
+        dp = -mass[k, 0] * (vn + restitution[k] * approach)
+        accumulated = max(pn[k] + extra[k] + dp, 0.0)
+        dp = accumulated - pn[k] - extra[k]
+        extra[k] += dp
+        _apply(state, a, b, la, lb, (dp * n[0], dp * n[1], dp * n[2]))
+        touched[a] = True
+        if b >= 0:
+            touched[b] = True
 
 
-@njit(cache=True)
-def _limit_to_the_energy_taken(bodies, contacts, extra, v1, w1):
+@njit(cache=True, parallel=True)
+def _limit_to_the_energy_taken(bodies, contacts, given, start, threads):
     """Each island's restitution impulses scaled by the largest a in [0, 1] that gives back no more
     kinetic energy than the step took from it.
 
@@ -696,71 +713,120 @@ def _limit_to_the_energy_taken(bodies, contacts, extra, v1, w1):
     floor gave back up to 2.6 % more than they took in a step (seeded piles, eps = 1). Limiting
     E(a) - E1 to max(D, 0) keeps E_end <= E0 + W, what eps <= 1 promises; where the pass stays
     within it (the cradle, a lone contact) a = 1 and nothing changes. Impulses scaled together
-    keep the island's momenta."""
-    v, omega, inverse_mass, accel, dq, energy = (bodies.v, bodies.omega, bodies.inverse_mass, bodies.accel, bodies.dq,
-                                                 bodies.energy)
-    inertias = (inverse_mass, bodies.inverse_principal, bodies.orientation)
+    keep the island's momenta.
+
+    ``given`` = (the pass's impulses, whether each body was given one); ``start`` = (v, omega) before
+    the pass. An island none of whose bodies was given an impulse has E(a) = E1 for every a (its
+    velocities did not change: G = C = 0), so a = 1: its energies are not computed. The others'
+    bodies' terms are computed on ``threads`` threads, and summed per island in the bodies' order.
+    """
+    v, omega, v1, w1 = bodies.v, bodies.omega, start[0], start[1]
+    extra, touched = given
     a_, b_ = contacts.a, contacts.b
     n = len(v)
     parent = np.arange(n)
     for k in range(len(extra)):
         if extra[k] != 0.0 and b_[k] >= 0:
             parent[_island(parent, a_[k])] = _island(parent, b_[k])
+    root, live = np.empty(n, np.int64), np.zeros(n, np.bool_)
+    for body in range(n):
+        root[body] = _island(parent, body)
+        live[root[body]] |= touched[body]
+    terms = np.empty((n, 3))  # each body's part of its island's budget D, slope G and curvature C
+    for part in prange(threads):
+        _energy_terms(bodies, (v1, w1), (root, live), terms, span(0, n, part, threads))
     budget, slope, curve = np.zeros(n), np.zeros(n), np.zeros(n)
     for body in range(n):
-        vb, wb = _row(v1, body), _row(w1, body)
-        dv = (v[body, 0] - vb[0], v[body, 1] - vb[1], v[body, 2] - vb[2])
-        dw = (omega[body, 0] - wb[0], omega[body, 1] - wb[1], omega[body, 2] - wb[2])
-        e1, g, c = _energy_line(inertias, body, vb, wb, dv, dw)
-        m = 1.0 / inverse_mass[body] if inverse_mass[body] > 0.0 else 0.0
-        root = _island(parent, body)
-        budget[root] += energy[body] + m * dot3(_row(accel, body), _row(dq, body)) - e1
-        slope[root] += g
-        curve[root] += c
+        if live[root[body]]:
+            budget[root[body]] += terms[body, 0]
+            slope[root[body]] += terms[body, 1]
+            curve[root[body]] += terms[body, 2]
     scale = np.ones(n)
-    for root in range(n):
-        allowed = max(budget[root], 0.0)
-        if parent[root] != root or slope[root] + 0.5 * curve[root] <= allowed:
+    for r in range(n):
+        allowed = max(budget[r], 0.0)
+        if not live[r] or parent[r] != r or slope[r] + 0.5 * curve[r] <= allowed:
             continue
-        if curve[root] > 0.0:  # the positive root of a^2 C / 2 + a G - allowed
-            scale[root] = (-slope[root] + np.sqrt(slope[root] ** 2 + 2.0 * curve[root] * allowed)) / curve[root]
+        if curve[r] > 0.0:  # the positive root of a^2 C / 2 + a G - allowed
+            scale[r] = (-slope[r] + np.sqrt(slope[r] ** 2 + 2.0 * curve[r] * allowed)) / curve[r]
         else:
-            scale[root] = allowed / slope[root]
+            scale[r] = allowed / slope[r]
     for body in range(n):
-        f = scale[_island(parent, body)]
+        f = scale[root[body]]
         if f < 1.0:
             for x in range(3):
                 v[body, x] = v1[body, x] + f * (v[body, x] - v1[body, x])
                 omega[body, x] = w1[body, x] + f * (omega[body, x] - w1[body, x])
     for k in range(len(extra)):
-        extra[k] *= scale[_island(parent, a_[k])]
+        extra[k] *= scale[root[a_[k]]]
 
 
 @njit(cache=True)
-def finish(bodies, contacts, sub):
+def _energy_terms(bodies, start, islands, terms, span_):
+    """:func:`_limit_to_the_energy_taken`'s terms of the bodies ``span_`` = (first, end) in live
+    islands: E0 + W - E1, G and C of each."""
+    v, omega, inverse_mass, accel, dq, energy = (bodies.v, bodies.omega, bodies.inverse_mass, bodies.accel, bodies.dq,
+                                                 bodies.energy)
+    inertias = (inverse_mass, bodies.inverse_principal, bodies.orientation)
+    v1, w1 = start
+    root, live = islands
+    for body in range(span_[0], span_[1]):
+        if not live[root[body]]:
+            continue
+        vb, wb = _row(v1, body), _row(w1, body)
+        dv = (v[body, 0] - vb[0], v[body, 1] - vb[1], v[body, 2] - vb[2])
+        dw = (omega[body, 0] - wb[0], omega[body, 1] - wb[1], omega[body, 2] - wb[2])
+        e1, g, c = _energy_line(inertias, body, vb, wb, dv, dw)
+        m = 1.0 / inverse_mass[body] if inverse_mass[body] > 0.0 else 0.0
+        terms[body, 0] = energy[body] + m * dot3(_row(accel, body), _row(dq, body)) - e1
+        terms[body, 1], terms[body, 2] = g, c
+
+
+@njit(cache=True)
+def finish(bodies, contacts, sub, colours):
     """The end of a step: the largest residual, then the restitution pass; returns the residual.
 
     The residual of contact k is |min(v_n + max(s, 0) / h, P / m_n)| (m/s), the natural residual
-    of its complementarity condition, as in :func:`.sequential_impulses.finish`. The restitution
+    of its complementarity condition, as in :func:`.sequential_impulses.finish` (each contact its
+    own: ``colours.threads`` parts in parallel, the largest of theirs). The restitution
     pass (:func:`_restitution`) then bounces the contacts hit, each island's impulses limited to
     the energy the step took from it (:func:`_limit_to_the_energy_taken`): with eps <= 1 no
     island ends a step with more kinetic energy than it started with plus the forces' work.
     """
+    residual = _largest_residual(bodies, contacts, sub, colours.threads)
+    start = (bodies.v.copy(), bodies.omega.copy())
+    given = _restitution(bodies, contacts, sub, colours)
+    _limit_to_the_energy_taken(bodies, contacts, given, start, colours.threads)
+    total, extra = contacts.total, given[0]
+    for k in range(len(total)):
+        total[k] += extra[k]
+    return residual
+
+
+@njit(cache=True, parallel=True)
+def _largest_residual(bodies, contacts, sub, threads):
+    """The largest of :func:`finish`'s residuals, over ``threads`` parts of the contacts (the largest
+    of a set, whatever the parts)."""
+    largest = np.zeros(threads)
+    for part in prange(threads):
+        largest[part] = _residual_of(bodies, contacts, sub, span(0, len(contacts.a), part, threads))
+    residual = 0.0
+    for part in range(threads):
+        residual = max(residual, largest[part])
+    return residual
+
+
+@njit(cache=True)
+def _residual_of(bodies, contacts, sub, rows):
+    """The largest residual of the contacts ``rows`` = (first, end), or 0."""
     v, omega = bodies.v, bodies.omega
     a_, b_, normal, separation, lever_a, lever_b = (contacts.a, contacts.b, contacts.normal, contacts.s, contacts.la,
                                                     contacts.lb)
-    mass_, pn, total = contacts.mass, contacts.pn, contacts.total
-    count = len(a_)
+    mass_, pn = contacts.mass, contacts.pn
     residual = 0.0
-    for k in range(count):
+    for k in range(rows[0], rows[1]):
         vn = dot3(_relative_velocity(v, omega, a_[k], b_[k], _row(lever_a, k), _row(lever_b, k)), _row(normal, k))
         mass = mass_[k, 0]
         residual = max(residual, abs(min(vn + max(separation[k], 0.0) / sub.h, pn[k] / mass if mass > 0 else 0.0)))
-    v1, w1 = v.copy(), omega.copy()
-    extra = _restitution(bodies, contacts, sub)
-    _limit_to_the_energy_taken(bodies, contacts, extra, v1, w1)
-    for k in range(count):
-        total[k] += extra[k]
     return residual
 
 
@@ -769,7 +835,7 @@ def step(bodies, contacts, sub, substeps, colours):
     """A whole step under constant accelerations: ``substeps`` substeps, then :func:`finish`."""
     for _ in range(substeps):
         substep(bodies, contacts, sub, colours)
-    return finish(bodies, contacts, sub)
+    return finish(bodies, contacts, sub, colours)
 
 
 @njit(cache=True, parallel=True)
@@ -788,7 +854,7 @@ def previous_rows(old, new, place, threads):
 @njit(cache=True)
 def _merge(old, new, place, rows, part):
     """:func:`previous_rows` of the new points ``part`` = (first, end)."""
-    oa, ob, of = old  # (the arrays out of their tuples before the loops: an item read in a loop costs a reference count)
+    oa, ob, of = old  # the arrays out of their tuples first: an item read in a loop costs a reference count
     na, nb, nf = new
     first, end = part
     count = len(oa)

@@ -223,7 +223,8 @@ class RigidSolverStep:
             numba.set_num_threads(threads)
 
     def _advance(self, t, y, dt, carry):
-        q0, v0 = np.array(y[0], dtype=float), np.array(y[1], dtype=float)
+        state = np.array(y, dtype=float, order="C")  # (2, N, 3): q and v, stepped in place and returned
+        q0, v0 = state[0], state[1]
         a = self.field if self.field is not None else np.asarray(self.model.acceleration(t, q0, v0), dtype=float)
         points = self.contact_points(t, y, dt, a)
         bodies, contacts, sub, colours = self.columns(q0, v0, a, points, dt)
@@ -236,17 +237,20 @@ class RigidSolverStep:
                     bodies = bodies._replace(accel=np.ascontiguousarray(
                         self.model.acceleration(t + k * sub.h, bodies.q, bodies.v), dtype=float))
                 rs.substep(bodies, contacts, sub, colours)
-            residual = rs.finish(bodies, contacts, sub)
+            residual = rs.finish(bodies, contacts, sub, colours)
         self._conclude(t, dt, contacts, residual)
-        if not (np.all(np.isfinite(bodies.q)) and np.all(np.isfinite(bodies.v))
-                and np.all(np.isfinite(bodies.omega))):
+        if not (np.isfinite(state).all() and np.isfinite(bodies.omega).all()):
             raise FloatingPointError(f"the contact solver's state became non-finite in the step from t = {t:g} s "
                                      f"(largest residual {self.log.largest_residual:.3g} m/s)")
         self._steps += 1
         if (self._steps - 1) % self.record_every:  # the last step's record was kept only while it was the last
-            self.history.pop(self._steps - 1)
-        self.history[self._steps] = (self.orientation.copy(), self.omega.copy())  # the last step always
-        return np.stack([bodies.q, bodies.v]), carry
+            orientation, omega = self.history.pop(self._steps - 1)  # its arrays take this step's
+            np.copyto(orientation, self.orientation)
+            np.copyto(omega, self.omega)
+        else:
+            orientation, omega = self.orientation.copy(), self.omega.copy()
+        self.history[self._steps] = (orientation, omega)  # the last step always
+        return state, carry
 
     # --- stages --------------------------------------------------------------------------
 
