@@ -108,31 +108,54 @@ def _gather_rows(source, movers, materials, previous, context, out, rows_):
                 pr[k, x] = 0.0
 
 
-@njit(cache=True)
-def first_impacts(key, place, rows, previous_total, total):
+@njit(cache=True, parallel=True)
+def first_impacts(key, place, rows, previous_total, total, threads):
     """The step's impacts: of each pair (a, b), its first point pressed in the step (``total`` > 0)
     that was not pressed in the last step, as its row of the sweep order; the pairs in their sorted
     order. ``key`` = (a, b, feature), the sorted points, point i at row ``place[i]``; ``rows[i]``
     its row among the last step's contacts, or -1 (:func:`.rigid_solver.previous_rows`),
     ``previous_total`` their impulses. (A pair's points are one manifold: consecutive in the sorted
-    order, and in the same order in the sweep.)"""
+    order, and in the same order in the sweep.) The points in ``threads`` parts in parallel, each
+    point looking back over its pair's points before it; the parts' impacts then one after another."""
+    count = len(place)
+    out, found = np.empty(count, np.int64), np.zeros(threads, np.int64)
+    for part in prange(threads):
+        found[part] = _first_impacts_of(key, (place, rows, previous_total, total), out, span(0, count, part, threads))
+    end = found[0]
+    for part in range(1, threads):
+        first = span(0, count, part, threads)[0]
+        for x in range(found[part]):  # forward: end <= first
+            out[end + x] = out[first + x]
+        end += found[part]
+    return out[:end]
+
+
+@njit(cache=True)
+def _first_impacts_of(key, columns, out, points):
+    """:func:`first_impacts` of the points ``points`` = (first, end), written from ``out[first]`` on;
+    returns their number."""
     a, b, _ = key
-    out = np.empty(len(a), np.int64)
-    found = 0
-    taken = False  # whether the pair of the point before already has its impact
-    for i in range(len(a)):
-        if i == 0 or a[i] != a[i - 1] or b[i] != b[i - 1]:
-            taken = False
-        if taken:
+    place, rows, previous_total, total = columns
+    found = points[0]
+    for i in range(points[0], points[1]):
+        if not _newly_pressed(place, rows, previous_total, total, i):
             continue
-        k = place[i]
-        if total[k] > 0:
-            row = rows[i]
-            if row < 0 or not previous_total[row] > 0:
-                out[found] = k
-                found += 1
-                taken = True
-    return out[:found]
+        j = i - 1
+        while j >= 0 and a[j] == a[i] and b[j] == b[i] and not _newly_pressed(place, rows, previous_total, total, j):
+            j -= 1
+        if j < 0 or a[j] != a[i] or b[j] != b[i]:  # none before it in its pair
+            out[found] = place[i]
+            found += 1
+    return found - points[0]
+
+
+@njit(cache=True, inline="always")
+def _newly_pressed(place, rows, previous_total, total, i):
+    """Whether point i was pressed in the step and not in the last one."""
+    if not total[place[i]] > 0:
+        return False
+    row = rows[i]
+    return row < 0 or not previous_total[row] > 0
 
 
 @njit(cache=True)

@@ -321,9 +321,10 @@ def prepare(bodies, contacts, colours):
     """Each contact's effective masses along n, t1, t2 (into ``contacts.mass``), v_n at the start,
     and its separation and levers (:func:`update_geometry`); each contact's own, in parallel."""
     threads = colours.threads
-    for part in prange(threads):
-        _prepare_rows(bodies, contacts, span(0, len(contacts.a), part, threads))
-    update_geometry(bodies, contacts, colours)
+    for part in prange(threads):  # one parallel region for both
+        rows = span(0, len(contacts.a), part, threads)
+        _prepare_rows(bodies, contacts, rows)
+        _geometry_rows(bodies, contacts, rows)
 
 
 @njit(cache=True)

@@ -312,7 +312,8 @@ class RigidSolverStep:
         """The log (impacts, residual) and what the next step warm-starts from (in the sorted order)."""
         c = contacts
         # one impact per pair: its first point newly hit
-        first = first_impacts(self._sorted_key, self._place, self._rows, self._previous.contacts.total, c.total)
+        first = first_impacts(self._sorted_key, self._place, self._rows, self._previous.contacts.total, c.total,
+                              self.world.solver.threads)
         b = self._sorted_key[1][self._order[first]]  # c.b holds -1 for every static shape
         self.log.add_impacts(ImpactBlock(
             np.full(len(first), float(t)), c.a[first], b, c.normal[first],
