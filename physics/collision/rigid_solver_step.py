@@ -40,7 +40,7 @@ from .contact_colouring import colour_contacts, in_sorted_order
 from .events import CollisionLog, ImpactBlock, cancel_triggers
 from .manifolds import BOX, CAPSULE, SPHERE, check_shapes
 from .pairs import SweptSpheres
-from .rigid_columns import first_impacts, gather, is_sorted
+from .rigid_columns import first_impacts, gather, inverse, is_sorted
 from .solver_step import INTEGRATOR
 from .step import ConstantField
 
@@ -297,10 +297,9 @@ class RigidSolverStep:
             order, colours = colour_contacts(points.a, points.b, n, s.threads)
         else:
             order, colours = in_sorted_order(points.a, points.b)
-        place = np.empty(count, np.int64)
-        self._sorted_key, self._order, self._rows, self._place = key, order, rows, place
+        self._sorted_key, self._order, self._rows, self._place = key, order, rows, inverse(order)
         o = old.contacts
-        gather(points, (order, place), (q0, bodies.accel, self.rolling), self.materials,
+        gather(points, order, (q0, bodies.accel, self.rolling), self.materials,
                (rows, o.pn, o.pt, o.tangent, o.pr), (float(self.world.rest_speed), float(dt)), contacts, s.threads)
         rs.prepare(bodies, contacts, colours)
         bias_rate, mass_scale, impulse_scale = s.softness(h)
