@@ -244,7 +244,7 @@ class RigidSolverStep:
                                      f"(largest residual {self.log.largest_residual:.3g} m/s)")
         self._steps += 1
         if (self._steps - 1) % self.record_every:  # the last step's record was kept only while it was the last
-            orientation, omega = self.history.pop(self._steps - 1)  # its arrays take this step's
+            orientation, omega = self.history.pop(self._steps - 1)  # its arrays (no one's now) take this step's
             np.copyto(orientation, self.orientation)
             np.copyto(omega, self.omega)
         else:
@@ -308,7 +308,8 @@ class RigidSolverStep:
         return bodies, contacts, sub, colours
 
     def _conclude(self, t, dt, contacts, residual):
-        """The log (impacts, residual) and what the next step warm-starts from (in the sorted order)."""
+        """The log (impacts, residual) and what the next step warm-starts from: the contacts as the
+        solver left them, in its sweep order, and each sorted point's row among them."""
         c = contacts
         # one impact per pair: its first point newly hit
         first = first_impacts(self._sorted_key, self._place, self._rows, self._previous.contacts.total, c.total,
