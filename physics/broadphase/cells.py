@@ -37,7 +37,6 @@ from __future__ import annotations
 
 from typing import NamedTuple
 
-import numba
 import numpy as np
 from numba import njit, prange
 
@@ -55,8 +54,8 @@ ONE_LEVEL_SPREAD = 2.0
 #: bodies with wide speculative margins has more than 4 (the 10^4 box pit: 5.3 in its first 30
 #: steps, so every step ran the grid twice), and the room costs nothing until it is written
 PAIRS_PER_BODY = 8
-#: the one-level grid searches the spheres on Numba's threads from this many spheres on (fewer: on
-#: the calling thread, where waking the others costs more than they save)
+#: the one-level grid searches the spheres on the threads it is given from this many spheres on (fewer:
+#: on the calling thread, where waking the others costs more than they save)
 PARALLEL_BODIES = 2048
 #: the level-0 cell edge uses the median radius of at most about this many evenly strided spheres
 MEDIAN_SAMPLE = 1024
@@ -88,8 +87,9 @@ class Cells(NamedTuple):
     bits: int
 
 
-def hierarchy_pairs(c: np.ndarray, r: np.ndarray, hashed: bool) -> np.ndarray:
-    """Overlapping pairs through the grid hierarchy, dense (``hashed=False``) or hashed."""
+def hierarchy_pairs(c: np.ndarray, r: np.ndarray, hashed: bool, threads: int = 1) -> np.ndarray:
+    """Overlapping pairs through the grid hierarchy, dense (``hashed=False``) or hashed; the dense
+    grid's one level searched on ``threads`` of Numba's threads from :data:`PARALLEL_BODIES` spheres."""
     n = len(c)
     if n < 2:
         return no_pairs()
@@ -110,8 +110,7 @@ def hierarchy_pairs(c: np.ndarray, r: np.ndarray, hashed: bool) -> np.ndarray:
         while np.prod(np.floor(extent / h) + 1) > max_cells:
             h *= 1.25
         dims = (np.floor(extent / h) + 1).astype(np.int64)
-        threads = numba.get_num_threads() if n >= PARALLEL_BODIES else 1
-        return _column_pairs(c, r, pad, (origin, h, dims), threads)
+        return _column_pairs(c, r, pad, (origin, h, dims), threads if n >= PARALLEL_BODIES else 1)
     # enough levels that the last one holds everything in one or two cells per axis
     n_levels = 1
     while h0 * 2.0 ** (n_levels - 1) < extent.max() + widest:
@@ -339,13 +338,6 @@ def _column_pairs(c, r, pad, cells, threads):
     else:
         _sort_partners(out, begin, (0, n))
     return out
-
-
-def load_parallel_kernels() -> None:
-    """Run the one-level grid's parallel kernels once on two spheres, so that a scene of
-    :data:`PARALLEL_BODIES` spheres or more does not load them from Numba's cache in its first step."""
-    c = np.array([[0.0, 0.0, 0.0], [0.1, 0.0, 0.0]])
-    _column_pairs(c, np.full(2, 0.1), 0.0, (c[0] - 0.1, 0.3, np.ones(3, np.int64)), 2)
 
 
 @njit(cache=True)

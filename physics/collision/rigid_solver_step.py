@@ -246,7 +246,7 @@ class RigidSolverStep:
         reach, margin = turning_bounds(q0, q1, np.ascontiguousarray(self.omega), self.bounding,
                                        (float(dt), MAX_ROTATION_REACH, float(self.margin)))
         swept = SweptSpheres.of(q0, q1, reach, self.inverse_masses, self.log.removed, self.margin)
-        pairs = swept.body_pairs(self.world.broadphase)
+        pairs = swept.body_pairs(self.world.broadphase, self.world.solver.threads)
         points = self.narrow_phase.manifolds(self.shapes, self.narrow_phase.Poses(q0, self.orientation),
                                              np.column_stack([pairs.i, pairs.j]), self.world.shapes, margin)
         points = type(points)(*(np.ascontiguousarray(column) for column in points))

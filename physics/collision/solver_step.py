@@ -34,7 +34,6 @@ import dataclasses
 
 import numpy as np
 
-from ..broadphase.cells import load_parallel_kernels
 from . import sequential_impulses as si
 from .contact_buffer import (
     BodyState,
@@ -237,8 +236,6 @@ def load_kernels(world, constant_forces: bool, integrator) -> None:
     y = np.array([[[0.0, 0.0, 0.1], [0.19, 0.0, 0.1]], [[0.0, 0.0, -1.0], [-1.0, 0.0, -1.0]]])
     step = SolverStep(world, model, integrator)
     step(0.0, step(0.0, y, 0.01, None)[0], 0.01, None)  # twice: the warm start's merge too
-    if broadphase == "grid":  # a scene of many balls searches the grid in parallel
-        load_parallel_kernels()
 
 
 def solve_members(starts, settings, bodies, inverse_mass, accel, parallel=False):
