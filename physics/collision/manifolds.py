@@ -161,9 +161,8 @@ def bounding_radius(shapes: RigidShapes) -> np.ndarray:
 
 
 def reach(shapes: RigidShapes) -> np.ndarray:
-    """:func:`bounding_radius` of checked shapes."""
-    corner = np.sqrt((shapes.half * shapes.half).sum(axis=1))
-    return np.where(shapes.kind == BOX, corner, shapes.radius + np.where(shapes.kind == CAPSULE, shapes.half[:, 2], 0))
+    """:func:`bounding_radius` of checked shapes: :func:`extents` with no margin (x + 0 = x)."""
+    return extents(shapes, np.zeros(len(shapes.kind)))
 
 
 def body_solids(shapes: RigidShapes, poses: Poses) -> Solids:
@@ -480,8 +479,8 @@ def extents(shapes: CheckedShapes, margin: np.ndarray) -> np.ndarray:
 
 @njit(cache=True)
 def _extents(kind, half, radius, margin):
-    """:func:`extents`, compiled, with :func:`reach`'s operations in its order (the same bytes; NumPy's
-    temporaries took 0.2 ms a step of 10^4 boxes)."""
+    """:func:`extents`, compiled: a box's reach is its corner, |half|; a sphere's its radius; a
+    capsule's its radius plus its half length. (NumPy's temporaries took 0.2 ms a step of 10^4 boxes.)"""
     out = np.empty(len(kind))
     for k in range(len(kind)):
         if kind[k] == BOX:
