@@ -157,13 +157,18 @@ def from_axis_angle(xp, axis, angle):
     return exp(xp, axis * xp.asarray(angle)[..., None])
 
 
+def matrix_components(w, x, y, z):
+    """The rotation matrix of the unit quaternion (w, x, y, z) as three rows of three (numbers or
+    arrays): :func:`to_matrix` and the compiled narrow phase."""
+    return ((1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)),
+            (2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)),
+            (2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)))
+
+
 def to_matrix(xp, q):
     """The rotation matrix R (..., 3, 3) of a unit quaternion: v_world = R v_body."""
-    w, x, y, z = q[..., 0], q[..., 1], q[..., 2], q[..., 3]
-    return xp.stack([
-        xp.stack([1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)], axis=-1),
-        xp.stack([2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)], axis=-1),
-        xp.stack([2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)], axis=-1)], axis=-2)
+    rows = matrix_components(q[..., 0], q[..., 1], q[..., 2], q[..., 3])
+    return xp.stack([xp.stack(row, axis=-1) for row in rows], axis=-2)
 
 
 def angle_between(xp, p, q):

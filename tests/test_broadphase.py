@@ -16,7 +16,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from hypothesis.extra.numpy import arrays
 from steplab.physics import find_pairs as physics_find_pairs
-from steplab.physics.broadphase import METHODS, BoundingVolumeHierarchy, CoherentSortAndSweep, find_pairs
+from steplab.physics.broadphase import METHODS, BoundingVolumeHierarchy, CoherentSortAndSweep, cells, find_pairs
 from steplab.physics.broadphase.common import MAX_COORDINATE
 
 FAST = [m for m in METHODS if m != "brute"]
@@ -126,6 +126,22 @@ def test_study_distributions_agree(distribution):
     assert len(expected) > 0
     for method in FAST:
         np.testing.assert_array_equal(find_pairs(c, r, method), expected, err_msg=method)
+
+
+@pytest.mark.parametrize("distribution", ["uniform", "clustered", "layer", "dense"])
+@pytest.mark.parametrize("threads", [2, 3])
+def test_the_grid_on_threads_finds_the_same_pairs_in_the_same_order(distribution, threads, rng):
+    """From PARALLEL_BODIES spheres the one-level grid searches in parts on Numba's threads, each part
+    into its own rows; "dense" overfills those rows (15 pairs a sphere against room for 8), so
+    the parts are searched again with room for all."""
+    if distribution == "dense":
+        c, r = rng.uniform(0, 3.0, (2500, 3)), rng.uniform(0.2, 0.25, 2500)
+    else:
+        c, r = scene_of(distribution, 3000, seed=7)
+    assert len(c) >= cells.PARALLEL_BODIES
+    expected = find_pairs(c, r, "brute")
+    np.testing.assert_array_equal(find_pairs(c, r, "grid", threads=threads), expected)
+    np.testing.assert_array_equal(find_pairs(c, r, "grid"), expected)
 
 
 @pytest.mark.parametrize("method", FAST)

@@ -358,7 +358,7 @@ from steplab.integrators import get_integrator
 from steplab.physics import Gravity, Model
 from steplab.physics.broadphase import cells
 from steplab.physics.collision import CollisionWorld, Plane, contact_buffer, sequential_impulses
-kernels = (cells._column_kernel, contact_buffer._pair_and_plane_contacts, contact_buffer.previous_rows,
+kernels = (cells._column_grid, contact_buffer._pair_and_plane_contacts, contact_buffer.previous_rows,
            contact_buffer.warm_start, contact_buffer.newly_hit, sequential_impulses.step_members)
 assert not any(k.signatures for k in kernels)
 world = CollisionWorld(shapes=(Plane(np.array([0.0, 0.0, 1.0])),), method="solver")

@@ -57,7 +57,7 @@ METHODS: Registry = Registry("steplab.broadphase", "broadphase method", [
 DEFAULT_METHOD = "grid"
 
 
-def find_pairs(centers, radii, method: str = DEFAULT_METHOD) -> np.ndarray:
+def find_pairs(centers, radii, method: str = DEFAULT_METHOD, threads: int = 1) -> np.ndarray:
     """The pairs of spheres that overlap or touch: |c_i - c_j| <= r_i + r_j.
 
     Parameters
@@ -69,6 +69,10 @@ def find_pairs(centers, radii, method: str = DEFAULT_METHOD) -> np.ndarray:
     method : str
         One of :data:`METHODS`: ``brute``, ``grid`` (default), ``hash``, ``sap``,
         ``sap-coherent``, ``bvh``, or a registered one.
+    threads : int
+        ``grid`` only: search on this many of Numba's threads (spheres alike in size, from
+        :data:`.cells.PARALLEL_BODIES` of them; the same pairs in the same order). The other
+        methods run on the calling thread.
 
     Returns
     -------
@@ -84,4 +88,4 @@ def find_pairs(centers, radii, method: str = DEFAULT_METHOD) -> np.ndarray:
     """
     pairs = METHODS.lookup(method)
     c, r = as_spheres(centers, radii)
-    return pairs(c, r)
+    return grid_pairs(c, r, threads) if pairs is grid_pairs and threads > 1 else pairs(c, r)

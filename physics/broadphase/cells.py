@@ -38,7 +38,7 @@ from __future__ import annotations
 from typing import NamedTuple
 
 import numpy as np
-from numba import njit
+from numba import njit, prange
 
 from .common import append_pair, no_pairs, padding, radix_argsort, sort_pairs, spheres_overlap
 
@@ -54,6 +54,9 @@ ONE_LEVEL_SPREAD = 2.0
 #: bodies with wide speculative margins has more than 4 (the 10^4 box pit: 5.3 in its first 30
 #: steps, so every step ran the grid twice), and the room costs nothing until it is written
 PAIRS_PER_BODY = 8
+#: the one-level grid searches the spheres on the threads it is given from this many spheres on (fewer:
+#: on the calling thread, where waking the others costs more than they save)
+PARALLEL_BODIES = 2048
 #: the level-0 cell edge uses the median radius of at most about this many evenly strided spheres
 MEDIAN_SAMPLE = 1024
 #: hash buckets per sphere (rounded up to a power of two)
@@ -84,8 +87,9 @@ class Cells(NamedTuple):
     bits: int
 
 
-def hierarchy_pairs(c: np.ndarray, r: np.ndarray, hashed: bool) -> np.ndarray:
-    """Overlapping pairs through the grid hierarchy, dense (``hashed=False``) or hashed."""
+def hierarchy_pairs(c: np.ndarray, r: np.ndarray, hashed: bool, threads: int = 1) -> np.ndarray:
+    """Overlapping pairs through the grid hierarchy, dense (``hashed=False``) or hashed; the dense
+    grid's one level searched on ``threads`` of Numba's threads from :data:`PARALLEL_BODIES` spheres."""
     n = len(c)
     if n < 2:
         return no_pairs()
@@ -106,10 +110,7 @@ def hierarchy_pairs(c: np.ndarray, r: np.ndarray, hashed: bool) -> np.ndarray:
         while np.prod(np.floor(extent / h) + 1) > max_cells:
             h *= 1.25
         dims = (np.floor(extent / h) + 1).astype(np.int64)
-        pairs, k = _column_kernel(c, r, pad, origin, h, dims, PAIRS_PER_BODY * n + 16)
-        if k > len(pairs):  # more pairs than the buffer held: once more, with room for all
-            pairs, k = _column_kernel(c, r, pad, origin, h, dims, k)
-        return sort_pairs(pairs, k, n)
+        return _column_pairs(c, r, pad, (origin, h, dims), threads if n >= PARALLEL_BODIES else 1)
     # enough levels that the last one holds everything in one or two cells per axis
     n_levels = 1
     while h0 * 2.0 ** (n_levels - 1) < extent.max() + widest:
@@ -310,11 +311,40 @@ def _near(x, y, z, radius, cs, rs, q):
     return dx * dx + dy * dy + dz * dz <= s * s
 
 
+def _column_pairs(c, r, pad, cells, threads):
+    """The dense grid with one level of cells ``cells`` = (origin, edge h >= every box's width, dims),
+    searched by columns (the module docstring): the pairs, sorted. The spheres are cut into
+    ``threads`` parts searched in parallel, each into its own rows of the buffer; the pairs are
+    then sorted by their first sphere (counting) and each sphere's partners by insertion: the same
+    pairs in the same order on any number of threads. (Three compiled calls from Python: the
+    parallel search called from inside a compiled function ran 4 times slower.)"""
+    grid = _column_grid(c, r, pad, cells)
+    n = len(c)
+    # part t's rows begin at first[t]: room for PAIRS_PER_BODY a sphere; more found, searched again with room for all
+    first = np.array([PAIRS_PER_BODY * (n * t // threads) + 16 * t for t in range(threads + 1)])
+    found = np.empty(threads, np.int64)
+    while True:
+        pairs = np.empty((first[threads], 2), dtype=np.int64)
+        if threads > 1:
+            _search_parts(grid, pairs, first, found)
+        else:
+            found[0] = _column_search(grid, (0, n), pairs, (0, first[1]))
+        if np.all(found <= np.diff(first)):
+            break
+        first = np.concatenate(([0], np.cumsum(found)))
+    out, begin = _by_first(pairs, (first, found), n)
+    if threads > 1:
+        _sort_partners_parts(out, begin, threads)
+    else:
+        _sort_partners(out, begin, (0, n))
+    return out
+
+
 @njit(cache=True)
-def _column_kernel(c, r, pad, origin, h, dims, capacity):
-    """The dense grid with one level of cells of edge ``h`` >= every box's width, by columns
-    (the module docstring). Returns (pairs, k): the first ``min(k, capacity)`` rows hold
-    pairs, ``k`` were found (a buffer grown inside the loop measured 25% slower)."""
+def _column_grid(c, r, pad, cells):
+    """The spheres sorted by their cells (``cells`` as :func:`_column_pairs`): (centres, radii, the
+    spheres' numbers, their cells, where each cell's run starts, the grid's dims)."""
+    origin, h, dims = cells
     n = c.shape[0]
     nx, ny, nz = dims[0], dims[1], dims[2]
     n_slots = nx * ny * nz
@@ -330,9 +360,28 @@ def _column_kernel(c, r, pad, origin, h, dims, capacity):
         i = order[p]
         cs[p, 0], cs[p, 1], cs[p, 2] = c[i, 0], c[i, 1], c[i, 2]
         rs[p] = r[i]
-    pairs = np.empty((capacity, 2), dtype=np.int64)
-    k = 0
-    for p in range(n):
+    return cs, rs, order, slots, start, dims
+
+
+@njit(cache=True, parallel=True)
+def _search_parts(grid, pairs, first, found):
+    """:func:`_column_search` of the ``len(found)`` parts of the spheres in parallel, part t into
+    the rows ``first[t]`` .. ``first[t + 1]`` of ``pairs``, its count into ``found[t]``."""
+    threads = len(found)
+    n = len(grid[0])
+    for t in prange(threads):
+        found[t] = _column_search(grid, (n * t // threads, n * (t + 1) // threads), pairs, (first[t], first[t + 1]))
+
+
+@njit(cache=True)
+def _column_search(grid, spheres, pairs, rows):
+    """The pairs of the sorted spheres ``spheres`` = (first, end) with their partners (the 13 forward
+    cells and their own), as (min, max) in ``pairs`` rows ``rows`` = (first, end) while they fit;
+    how many were found (a buffer grown inside the loop measured 25% slower)."""
+    cs, rs, order, slots, start, dims = grid
+    nx, ny, nz = dims[0], dims[1], dims[2]
+    k, capacity = rows[0], rows[1]
+    for p in range(spheres[0], spheres[1]):
         i = order[p]
         z0 = slots[p] % nz
         y0 = (slots[p] // nz) % ny
@@ -354,4 +403,48 @@ def _column_kernel(c, r, pad, origin, h, dims, capacity):
                         j = order[q]
                         pairs[k, 0], pairs[k, 1] = min(i, j), max(i, j)
                     k += 1
-    return pairs, k
+    return k - rows[0]
+
+
+@njit(cache=True)
+def _by_first(pairs, parts, n):
+    """The pairs of ``parts`` = (first rows, counts) of ``pairs`` (each (i, j), i < j < ``n``) laid out
+    by i (a counting sort), and where each i's begin (n + 1,). With each i's few j then sorted by
+    insertion (:func:`_sort_partners`), the pairs are in lexicographic order: one pass fewer than the
+    radix sort of the keys i n + j (:func:`.common.sort_pairs`), and the insertion in parallel."""
+    first, found = parts
+    begin = np.zeros(n + 1, np.int64)
+    for t in range(len(found)):
+        for row in range(first[t], first[t] + found[t]):
+            begin[pairs[row, 0] + 1] += 1
+    for i in range(n):
+        begin[i + 1] += begin[i]
+    out = np.empty((begin[n], 2), dtype=np.int64)
+    fill = begin[:n].copy()
+    for t in range(len(found)):
+        for row in range(first[t], first[t] + found[t]):
+            i = pairs[row, 0]
+            out[fill[i], 0], out[fill[i], 1] = i, pairs[row, 1]
+            fill[i] += 1
+    return out, begin
+
+
+@njit(cache=True, parallel=True)
+def _sort_partners_parts(out, begin, threads):
+    """:func:`_sort_partners` of all the spheres, in ``threads`` parts in parallel."""
+    n = len(begin) - 1
+    for t in prange(threads):
+        _sort_partners(out, begin, (n * t // threads, n * (t + 1) // threads))
+
+
+@njit(cache=True)
+def _sort_partners(out, begin, spheres):
+    """Each sphere i of ``spheres`` = (first, end): its partners ``out[begin[i]:begin[i + 1], 1]`` sorted
+    (insertion: a few each)."""
+    for i in range(spheres[0], spheres[1]):
+        for k in range(begin[i] + 1, begin[i + 1]):
+            j, m = out[k, 1], k
+            while m > begin[i] and out[m - 1, 1] > j:
+                out[m, 1] = out[m - 1, 1]
+                m -= 1
+            out[m, 1] = j

@@ -25,6 +25,9 @@ import numpy as np
 from .cells import hierarchy_pairs
 
 
-def grid_pairs(c: np.ndarray, r: np.ndarray) -> np.ndarray:
-    """Overlapping pairs by a uniform grid; ``c`` (n, 3), ``r`` (n,) checked. Sorted, int64 (k, 2)."""
-    return hierarchy_pairs(c, r, hashed=False)
+def grid_pairs(c: np.ndarray, r: np.ndarray, threads: int = 1) -> np.ndarray:
+    """Overlapping pairs by a uniform grid; ``c`` (n, 3), ``r`` (n,) checked. Sorted, int64 (k, 2).
+
+    Spheres alike in size, from :data:`~.cells.PARALLEL_BODIES` of them, are searched on ``threads``
+    of Numba's threads (the rigid solver's ``threads`` setting): the same pairs in the same order."""
+    return hierarchy_pairs(c, r, hashed=False, threads=threads)

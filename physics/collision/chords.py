@@ -153,3 +153,22 @@ def _restart(chords, now, bounds, bodies, t, y_rest, margin):
         t_from[b] = t
         _bound(centers, reach, b, (y_from[0, b, 0], y_from[0, b, 1], y_from[0, b, 2]),
                (y_rest[0, p, 0], y_rest[0, p, 1], y_rest[0, p, 2]), radii[b], margin)
+
+
+@njit(cache=True)
+def turning_bounds(q0, q1, omega, bounding, step):
+    """The rigid solver's bounds for a step: each body's reach (its bounding radius grown by the
+    most its rotation can move a point, ``bounding (1 + min(|omega| dt, cap))``) and its speculative
+    margin (that growth, plus the constant ``margin``, plus how far it moves on its chord ``q0 ->
+    q1``); ``step`` = (dt, cap, margin). NumPy's expressions element by element, in their order (the
+    same numbers; its norms and temporaries took 0.3 ms a step of 10^4 bodies)."""
+    dt, cap, margin = step
+    n = len(bounding)
+    reach, speculative = np.empty(n), np.empty(n)
+    for b in range(n):
+        speed = np.sqrt(omega[b, 0] * omega[b, 0] + omega[b, 1] * omega[b, 1] + omega[b, 2] * omega[b, 2])
+        reach[b] = bounding[b] * (1.0 + np.minimum(speed * dt, cap))
+        d0, d1, d2 = q1[b, 0] - q0[b, 0], q1[b, 1] - q0[b, 1], q1[b, 2] - q0[b, 2]
+        speculative[b] = reach[b] - bounding[b] + margin + np.sqrt(d0 * d0 + d1 * d1 + d2 * d2)
+    return reach, speculative
+

@@ -161,26 +161,61 @@ def bounding_radius(shapes: RigidShapes) -> np.ndarray:
 
 
 def reach(shapes: RigidShapes) -> np.ndarray:
-    """:func:`bounding_radius` of checked shapes."""
-    corner = np.sqrt((shapes.half * shapes.half).sum(axis=1))
-    return np.where(shapes.kind == BOX, corner, shapes.radius + np.where(shapes.kind == CAPSULE, shapes.half[:, 2], 0))
+    """:func:`bounding_radius` of checked shapes: :func:`extents` with no margin (x + 0 = x)."""
+    return extents(shapes, np.zeros(len(shapes.kind)))
 
 
 def body_solids(shapes: RigidShapes, poses: Poses) -> Solids:
     """The bodies placed by their poses (checked: finite positions, unit quaternions)."""
     n = len(shapes.kind)
-    position = np.asarray(poses.position, dtype=float)
-    orientation = np.asarray(poses.orientation, dtype=float)
+    position = np.ascontiguousarray(poses.position, dtype=float)
+    orientation = np.ascontiguousarray(poses.orientation, dtype=float)
     if position.shape != (n, 3) or orientation.shape != (n, 4):
         raise ValueError(f"poses must be positions (N, 3) and orientations (N, 4) for the N = {n} bodies, "
                          f"got {position.shape} and {orientation.shape}")
-    bad = ~(np.all(np.isfinite(position), axis=1) & (np.abs(quat.norm(np, orientation) - 1) <= UNIT_TOLERANCE))
-    if np.any(bad):
-        k = int(np.flatnonzero(bad)[0])
+    frame = np.empty((n, 3, 3))
+    if n >= PARALLEL_PAIRS and numba.get_num_threads() > 1:
+        k = placed_frames(position, orientation, frame, numba.get_num_threads())
+    else:
+        k = _frames_of(position, orientation, frame, (0, n))
+    if k < n:
         raise ValueError(f"body {k}: the pose needs a finite position and a unit quaternion [w, x, y, z], "
                          f"got {position[k].tolist()} and {orientation[k].tolist()}")
-    return Solids(shapes.kind, position, np.ascontiguousarray(quat.to_matrix(np, orientation)), shapes.half,
-                  shapes.radius, np.zeros(n))
+    return Solids(shapes.kind, position, frame, shapes.half, shapes.radius, np.zeros(n))
+
+
+_matrix = njit(inline="always")(quat.matrix_components)
+
+
+@njit(cache=True, parallel=True)
+def placed_frames(position, orientation, frame, threads):
+    """Each body's frame, the rotation matrix of its quaternion, into ``frame`` (N, 3, 3); the first
+    body whose pose is none (see :func:`_frames_of`), or N; ``threads`` parts in parallel (the NumPy
+    matrix and checks took 0.5 ms a step of 10^4 boxes, on one thread)."""
+    n = len(position)
+    first_bad = np.full(threads, n)
+    for part in prange(threads):
+        first_bad[part] = _frames_of(position, orientation, frame, span(0, n, part, threads))
+    return first_bad.min()
+
+
+@njit(cache=True)
+def _frames_of(position, orientation, frame, rows):
+    """:func:`placed_frames` of the bodies ``rows`` = (first, end): the first of them whose position is
+    not finite or whose |q| differs from 1 by more than :data:`UNIT_TOLERANCE`, or N."""
+    n = len(position)
+    bad = n
+    for k in range(rows[0], rows[1]):
+        w, x, y, z = orientation[k, 0], orientation[k, 1], orientation[k, 2], orientation[k, 3]
+        matrix = _matrix(w, x, y, z)
+        for r in range(3):
+            for c in range(3):
+                frame[k, r, c] = matrix[r][c]
+        unit = abs(np.sqrt(w * w + x * x + y * y + z * z) - 1) <= UNIT_TOLERANCE
+        finite = np.isfinite(position[k, 0]) and np.isfinite(position[k, 1]) and np.isfinite(position[k, 2])
+        if bad == n and not (unit and finite):
+            bad = k
+    return bad
 
 
 def static_solids(statics) -> Solids:
@@ -210,6 +245,13 @@ def static_solids(statics) -> Solids:
 def solid(solids, k):
     """Shape k of ``solids`` (a :class:`Solids`, or a plain tuple of its columns) as a :class:`Solid`."""
     kind, c, f, h, radius, offset = solids
+    return solid_of(kind, c, f, h, radius, offset, k)
+
+
+@njit(cache=True, inline="always")
+def solid_of(kind, c, f, h, radius, offset, k):
+    """:func:`solid` of the columns passed one by one: in a loop, the columns taken out of their
+    tuple once before it (see :func:`_slots_of_chunk`)."""
     return Solid(kind[k], (c[k, 0], c[k, 1], c[k, 2]),
                  ((f[k, 0, 0], f[k, 1, 0], f[k, 2, 0]), (f[k, 0, 1], f[k, 1, 1], f[k, 2, 1]),
                   (f[k, 0, 2], f[k, 1, 2], f[k, 2, 2])),
@@ -307,12 +349,26 @@ def _slots_of_chunk(solids_, pairs_, margins, slots, counts, span):
     passed over before their shapes are read (one distance instead of the 15 axes; a broadphase
     on swept and widened bounds hands over such pairs, though the 10^4 box pit's separated pairs
     lie within their extents: the margins are wide). (A kernel of its own, not the body of the
-    parallel loop: Numba's parallel pass cannot analyse the inlined pair table.)"""
+    parallel loop: Numba's parallel pass cannot analyse the inlined pair table.)
+
+    Every binding of an array, or of a tuple of arrays, in the loop (a NamedTuple's field, a tuple
+    unpacked, an inlined function's argument) counts a reference up and down: an atomic operation,
+    which the threads contend for on the arrays they share. So the columns are taken out of their
+    tuples before the loop, and a pair of boxes calls :func:`.manifold_box.box_box` directly rather
+    than through the two inlined levels of the pair table, each of which bound the scratch's six
+    arrays again (the same call with the same arguments: the same bytes); so does a box against a
+    static box or plane (:func:`.manifold_box.box_plane`). On the 10^4 pit's step 30
+    (40,755 pairs) this took the loop from 13.3 to 10.0 ms on one thread; a perf profile still puts
+    30 % of it in ``NRT_incref`` and ``NRT_decref``, called from this loop and from
+    :func:`.manifold_box.face_contact` (its scratch's arrays)."""
     bodies, statics = solids_
     pairs, static_pairs = pairs_
     margin, extent = margins
-    centre = bodies.centre
-    # the columns out of the NamedTuples before the loop (a field read in a loop costs a reference count)
+    # the columns out of the NamedTuples before the loop: a field read in the loop costs a reference
+    # count, an atomic operation on the array's count that the threads share (measured: a third of the
+    # narrow phase's time on one thread went to counting references)
+    kind, centre, frame, half, radius, offset = bodies
+    s_kind, s_centre, s_frame, s_half, s_radius, s_offset = statics
     a_out, b_out, normal, point, separation, feature = slots
     scratch = make_scratch()
     found_normal, found_point, found_separation, found_feature = (scratch.normal, scratch.point, scratch.separation,
@@ -324,11 +380,26 @@ def _slots_of_chunk(solids_, pairs_, margins, slots, counts, span):
             if dot3(d, d) >= (extent[i] + extent[j]) ** 2:
                 counts[p] = 0
                 continue
-            count = collide(solid(bodies, i), solid(bodies, j), margin[i] + margin[j], scratch)
+            first = solid_of(kind, centre, frame, half, radius, offset, i)
+            second = solid_of(kind, centre, frame, half, radius, offset, j)
+            if first.kind == BOX and second.kind == BOX:  # the table's entry called directly (the docstring)
+                count = box_box((first.centre, first.frame, first.half), (second.centre, second.frame, second.half),
+                                margin[i] + margin[j], scratch)
+            else:
+                count = collide(first, second, margin[i] + margin[j], scratch)
             b = j
         else:
             i, s = static_pairs[p - len(pairs), 0], static_pairs[p - len(pairs), 1]
-            count = collide(solid(bodies, i), solid(statics, s), margin[i], scratch)
+            first = solid_of(kind, centre, frame, half, radius, offset, i)
+            shape = solid_of(s_kind, s_centre, s_frame, s_half, s_radius, s_offset, s)
+            if first.kind == BOX and shape.kind == PLANE:  # the table's entries called directly, as above
+                count = box_plane(first.centre, first.frame, first.half, shape.frame[2], shape.offset, margin[i],
+                                  scratch)
+            elif first.kind == BOX and shape.kind == BOX:
+                count = box_box((first.centre, first.frame, first.half), (shape.centre, shape.frame, shape.half),
+                                margin[i], scratch)
+            else:
+                count = collide(first, shape, margin[i], scratch)
             b = -1 - s
         counts[p] = count
         for k in range(count):  # element by element: a row slice would be a view made and freed per point
@@ -340,76 +411,91 @@ def _slots_of_chunk(solids_, pairs_, margins, slots, counts, span):
 
 
 @njit(cache=True)
-def sorted_rows(pairs, static_pairs, found, n):
-    """The rows of :func:`manifold_slots`'s points in the order (a, b, feature): an index into ``slots``;
-    ``found`` = (counts, feature): each pair's point count and the points' features.
-
-    For each body a in turn: its static shapes (b = -1 - s, so s descending), then its partners
-    j > a ascending (``pairs`` and ``static_pairs`` are sorted); within a pair its points by
-    feature, equal features kept in the order found (as a stable sort of all the points would
-    put them, without sorting them all)."""
-    counts, feature = found
-    order = np.empty(MAX_POINTS * (len(pairs) + len(static_pairs)), np.int64)
+def sorted_starts(pairs, static_pairs, counts, n):
+    """Each pair's first row among :func:`manifold_slots`'s points in the order (a, b, feature), and
+    the number of points: for each body a in turn, its static shapes (b = -1 - s, so s descending),
+    then its partners j > a ascending (``pairs`` and ``static_pairs`` are sorted), each pair's
+    ``counts`` rows together."""
+    start = np.empty(len(counts), np.int64)
     rows, p, s = 0, 0, 0
     for a in range(n):
         first = s
         while s < len(static_pairs) and static_pairs[s, 0] == a:
             s += 1
         for q in range(s - 1, first - 1, -1):
-            rows = _append_pair(order, rows, len(pairs) + q, found)
+            start[len(pairs) + q] = rows
+            rows += counts[len(pairs) + q]
         while p < len(pairs) and pairs[p, 0] == a:
-            rows = _append_pair(order, rows, p, found)
+            start[p] = rows
+            rows += counts[p]
             p += 1
-    return order[:rows]
+    return start, rows
 
 
 @njit(cache=True, parallel=True)
-def take_rows(points, order, out, threads):
-    """``out`` row k = ``points`` row ``order[k]``, every column (one pass: NumPy's fancy indexing of
-    the six columns took a millisecond on 10^4 boxes' points); ``threads`` parts in parallel."""
+def take_sorted(slots, found, out, threads):
+    """Each pair's points of ``slots`` into its rows of ``out`` from its start, by feature; ``found`` =
+    (counts, starts) (:func:`sorted_starts`); ``threads`` parts of the pairs in parallel (one pass:
+    NumPy's fancy indexing of the six columns took a millisecond on 10^4 boxes' points)."""
     for part in prange(threads):
-        _take_rows_of(points, order, out, span(0, len(order), part, threads))
+        _take_sorted_of(slots, found, out, span(0, len(found[0]), part, threads))
 
 
 @njit(cache=True)
-def _take_rows_of(points, order, out, rows):
-    """:func:`take_rows` of the rows ``rows`` = (first, end)."""
-    a, b, normal, point, separation, feature = points
+def _take_sorted_of(slots, found, out, pairs):
+    """:func:`take_sorted` of the pairs ``pairs`` = (first, end). A pair's points by feature, equal
+    features in the order found (as a stable sort of all the points would put them), by insertion
+    (at most 4 points)."""
+    counts, starts = found
+    a, b, normal, point, separation, feature = slots
     a_out, b_out, normal_out, point_out, separation_out, feature_out = out
-    for k in range(rows[0], rows[1]):
-        i = order[k]
-        a_out[k], b_out[k], separation_out[k], feature_out[k] = a[i], b[i], separation[i], feature[i]
-        for m in range(3):
-            normal_out[k, m], point_out[k, m] = normal[i, m], point[i, m]
-
-
-@njit(cache=True, inline="always")
-def _append_pair(order, rows, pair, found):
-    """Pair ``pair``'s rows appended to ``order`` (the row numbers alone), sorted by feature
-    (insertion sort: a pair has at most 4 points; stable); the new length. ``found`` = (counts,
-    feature) as in :func:`sorted_rows`."""
-    counts, feature = found
-    start = rows
-    for k in range(counts[pair]):
-        x = MAX_POINTS * pair + k
-        j = rows
-        while j > start and feature[order[j - 1]] > feature[x]:
-            order[j] = order[j - 1]
-            j -= 1
-        order[j] = x
-        rows += 1
-    return rows
+    order = np.empty(MAX_POINTS, np.int64)
+    for p in range(pairs[0], pairs[1]):
+        for k in range(counts[p]):
+            x = MAX_POINTS * p + k
+            j = k
+            while j > 0 and feature[order[j - 1]] > feature[x]:
+                order[j] = order[j - 1]
+                j -= 1
+            order[j] = x
+        for k in range(counts[p]):
+            i, row = order[k], starts[p] + k
+            a_out[row], b_out[row], separation_out[row], feature_out[row] = a[i], b[i], separation[i], feature[i]
+            for m in range(3):
+                normal_out[row, m], point_out[row, m] = normal[i, m], point[i, m]
 
 
 @njit(cache=True)
-def _in_order(pairs):
-    """Whether each pair (i, j) has i < j and the pairs are strictly increasing (lexicographically)."""
+def _pairs_state(pairs, n):
+    """(the first pair that does not join two different bodies 0 .. n - 1, or -1; whether each pair
+    (i, j) has i < j and the pairs are strictly increasing, lexicographically), in one pass."""
+    in_order = True
     for p in range(len(pairs)):
-        if pairs[p, 0] >= pairs[p, 1]:
-            return False
-        if p and (pairs[p, 0] < pairs[p - 1, 0] or (pairs[p, 0] == pairs[p - 1, 0] and pairs[p, 1] <= pairs[p - 1, 1])):
-            return False
-    return True
+        i, j = pairs[p, 0], pairs[p, 1]
+        if min(i, j) < 0 or max(i, j) >= n or i == j:
+            return p, False
+        if i >= j or (p and (i < pairs[p - 1, 0] or (i == pairs[p - 1, 0] and j <= pairs[p - 1, 1]))):
+            in_order = False
+    return -1, in_order
+
+
+def extents(shapes: CheckedShapes, margin: np.ndarray) -> np.ndarray:
+    """(N,) m: each body's :func:`reach` plus its ``margin``, the distance from its centre within which
+    another shape can have a point with it."""
+    return _extents(shapes.kind, shapes.half, shapes.radius, np.ascontiguousarray(margin))
+
+
+@njit(cache=True)
+def _extents(kind, half, radius, margin):
+    """:func:`extents`, compiled: a box's reach is its corner, |half|; a sphere's its radius; a
+    capsule's its radius plus its half length. (NumPy's temporaries took 0.2 ms a step of 10^4 boxes.)"""
+    out = np.empty(len(kind))
+    for k in range(len(kind)):
+        if kind[k] == BOX:
+            out[k] = np.sqrt(half[k, 0] * half[k, 0] + half[k, 1] * half[k, 1] + half[k, 2] * half[k, 2]) + margin[k]
+        else:
+            out[k] = (radius[k] + (half[k, 2] if kind[k] == CAPSULE else 0.0)) + margin[k]
+    return out
 
 
 def manifolds(shapes: RigidShapes, poses: Poses, pairs, statics=(), margin=0.0) -> ManifoldPoints:
@@ -436,18 +522,17 @@ def manifolds(shapes: RigidShapes, poses: Poses, pairs, statics=(), margin=0.0) 
     margin = np.broadcast_to(np.asarray(margin, dtype=float), (n,))
     if not np.all(np.isfinite(margin) & (margin >= 0)):
         raise ValueError(f"margin must be finite and >= 0 m for every body, got {margin.min()} .. {margin.max()}")
-    pairs = np.asarray(pairs, dtype=np.int64).reshape(-1, 2)
-    lo, hi = np.minimum(pairs[:, 0], pairs[:, 1]), np.maximum(pairs[:, 0], pairs[:, 1])
-    bad = (lo < 0) | (hi >= n) | (lo == hi)
-    if np.any(bad):
-        raise ValueError(f"pair {int(np.argmax(bad))} must join two different bodies 0 .. {n - 1}, "
-                         f"got {pairs[np.argmax(bad)].tolist()}")
-    if not _in_order(pairs):  # a broadphase's pairs are (min, max), each once, sorted: kept as they are
+    pairs = np.ascontiguousarray(pairs, dtype=np.int64).reshape(-1, 2)
+    bad, in_order = _pairs_state(pairs, n)
+    if bad >= 0:
+        raise ValueError(f"pair {bad} must join two different bodies 0 .. {n - 1}, got {pairs[bad].tolist()}")
+    if not in_order:  # a broadphase's pairs are (min, max), each once, sorted: kept as they are
+        lo, hi = np.minimum(pairs[:, 0], pairs[:, 1]), np.maximum(pairs[:, 0], pairs[:, 1])
         key = np.sort(lo * n + hi)  # each pair once, as (min, max), in order
         key = key[np.diff(key, prepend=-1) != 0]
         pairs = np.column_stack([key // n, key % n])
     bodies, static = body_solids(shapes, poses), static_solids(statics)
-    extent = np.ascontiguousarray(reach(shapes) + margin)
+    extent = extents(shapes, margin)
     static_pairs = static_candidates(bodies, static, extent)
     capacity = MAX_POINTS * (len(pairs) + len(static_pairs))
     slots = ManifoldPoints(np.empty(capacity, np.int64), np.empty(capacity, np.int64), np.empty((capacity, 3)),
@@ -458,9 +543,11 @@ def manifolds(shapes: RigidShapes, poses: Poses, pairs, statics=(), margin=0.0) 
         manifold_slots(bodies, static, pairs, static_pairs, margins, slots, counts)
     else:  # the same rows on this thread alone (a parallel region costs more than a few pairs, or one thread)
         _slots_of_chunk((bodies, static), (pairs, static_pairs), margins, slots, counts, (0, len(counts)))
-    order = sorted_rows(pairs, static_pairs, (counts, slots.feature), n)
-    rows = len(order)
+    starts, rows = sorted_starts(pairs, static_pairs, counts, n)
     out = ManifoldPoints(np.empty(rows, np.int64), np.empty(rows, np.int64), np.empty((rows, 3)), np.empty((rows, 3)),
                          np.empty(rows), np.empty(rows, np.int64))
-    take_rows(slots, order, out, numba.get_num_threads())
+    if len(counts) >= PARALLEL_PAIRS and numba.get_num_threads() > 1:
+        take_sorted(slots, (counts, starts), out, numba.get_num_threads())
+    else:
+        _take_sorted_of(slots, (counts, starts), out, (0, len(counts)))
     return out

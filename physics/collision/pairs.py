@@ -132,15 +132,17 @@ class SweptSpheres(NamedTuple):
         """The active bodies that can move (not pinned), ascending."""
         return np.flatnonzero(self.active & (self.inverse_masses > 0))
 
-    def body_pairs(self, method: str) -> BodyPairs:
-        """The pairs whose swept spheres overlap, sorted, less pairs of two pinned bodies."""
+    def body_pairs(self, method: str, threads: int = 1) -> BodyPairs:
+        """The pairs whose swept spheres overlap, sorted, less pairs of two pinned bodies (the grid
+        searched on ``threads`` of Numba's threads, :func:`..broadphase.find_pairs`)."""
         if self.active.all():
-            pairs = find_pairs(self.centers, self.reach, method) if len(self.reach) > 1 else np.zeros((0, 2), int)
+            pairs = (find_pairs(self.centers, self.reach, method, threads) if len(self.reach) > 1
+                     else np.zeros((0, 2), int))
         else:
             index = np.flatnonzero(self.active)
             if len(index) < 2:
                 return BodyPairs(np.zeros(0, int), np.zeros(0, int))
-            pairs = index[find_pairs(self.centers[index], self.reach[index], method)]
+            pairs = index[find_pairs(self.centers[index], self.reach[index], method, threads)]
         movable = (self.inverse_masses[pairs[:, 0]] > 0) | (self.inverse_masses[pairs[:, 1]] > 0)
         return BodyPairs(pairs[movable, 0], pairs[movable, 1])
 

@@ -35,6 +35,7 @@ import numpy as np
 
 from .. import quaternion as quat
 from . import rigid_solver as rs
+from .chords import turning_bounds
 from .contact_buffer import Materials
 from .contact_colouring import colour_contacts, in_sorted_order
 from .events import CollisionLog, ImpactBlock, cancel_triggers
@@ -256,15 +257,15 @@ class RigidSolverStep:
 
     def contact_points(self, t, y, dt, a):
         """Broadphase over the swept bounds, then the narrow phase's manifolds, sorted by (a, b, feature)."""
-        q0 = np.asarray(y[0], dtype=float)
+        q0 = np.ascontiguousarray(y[0], dtype=float)
         y_forces, _ = self.integrator.step(ConstantField(a), t, np.asarray(y, dtype=float), dt, None)
-        speed = np.linalg.norm(self.omega, axis=1)
-        reach = self.bounding * (1.0 + np.minimum(speed * dt, MAX_ROTATION_REACH))
-        swept = SweptSpheres.of(q0, np.asarray(y_forces[0]), reach, self.inverse_masses, self.log.removed,
-                                self.margin)
-        pairs = swept.body_pairs(self.world.broadphase)
-        # every point up to as far apart as the two bodies can close in the step: speculative ones included
-        margin = reach - self.bounding + self.margin + np.linalg.norm(np.asarray(y_forces[0]) - q0, axis=1)
+        q1 = np.ascontiguousarray(y_forces[0], dtype=float)
+        # the reach grows by what the rotation can move a point; the margin: every point up to as far
+        # apart as the two bodies can close in the step, speculative ones included
+        reach, margin = turning_bounds(q0, q1, np.ascontiguousarray(self.omega), self.bounding,
+                                       (float(dt), MAX_ROTATION_REACH, float(self.margin)))
+        swept = SweptSpheres.of(q0, q1, reach, self.inverse_masses, self.log.removed, self.margin)
+        pairs = swept.body_pairs(self.world.broadphase, self.world.solver.threads)
         points = self.narrow_phase.manifolds(self.shapes, self.narrow_phase.Poses(q0, self.orientation),
                                              np.column_stack([pairs.i, pairs.j]), self.world.shapes, margin)
         points = type(points)(*(np.ascontiguousarray(column) for column in points))
