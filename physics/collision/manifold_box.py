@@ -55,7 +55,7 @@ EDGE_FEATURE = 2 * 6 * 6 * 64
 
 
 # inlined into the narrow phase's loop: a call costs more than the 15 axes (300 ns a pair against 20)
-@njit(cache=True, inline="always")
+@njit(cache=True, inline="always", error_model="numpy")
 def box_box(box_a, box_b, margin, out):
     """The manifold of box a and box b (up to 4 points with separation < margin) into ``out``: its count.
 
@@ -114,7 +114,7 @@ def box_box(box_a, box_b, margin, out):
     return face_contact(box_a, face_a, box_b, 0, margin, out)
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def face_contact(box1, axis, box2, reference, margin, out):
     """Box 1's face on ``axis`` (the side facing box 2) clips box 2's most opposed face: the points below margin.
 
@@ -172,7 +172,7 @@ def face_contact(box1, axis, box2, reference, margin, out):
     return kept
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True, inline="always", error_model="numpy")
 def clip(buffers, source, cut):
     """Sutherland–Hodgman: the part of the polygon ``buffers`` = (vertices, labels) [now] with
     sense * x_along <= limit, ``source`` = (now, its vertex count), ``cut`` = (along, sense, limit,
@@ -212,7 +212,7 @@ def clip(buffers, source, cut):
     return kept
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True, inline="always", error_model="numpy")
 def support_edge(box, axis, normal, sense):
     """The edge of a box (centre, frame, half) along ``axis`` farthest along sense * normal: (its start, its
     direction, its id 0..11)."""
@@ -226,7 +226,7 @@ def support_edge(box, axis, normal, sense):
     return madd3(middle, -half[axis], frame[axis]), scale3(frame[axis], 2.0 * half[axis]), axis * 4 + bits
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True, inline="always", error_model="numpy")
 def edge_contact(edge_a, edge_b, separation, margin, out):
     """Edge a_i of box a against edge b_j of box b, ``edge_a`` = (box a, i) and ``edge_b`` = (box b, j):
     the closest points of the two support edges, one point.
@@ -257,7 +257,7 @@ def edge_contact(edge_a, edge_b, separation, margin, out):
     return 1
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def box_plane(c, frame, half, plane_normal, offset, margin, out):
     """A box against the half-space n . x <= offset: the corners of its face most opposed to n below the margin.
 

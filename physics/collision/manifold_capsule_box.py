@@ -26,7 +26,7 @@ from .sphere_contacts import dot3, sub3
 EDGE_FEATURE, CORNER_FEATURE = 36, 48
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def excess2(y, half):
     """Squared distance of the box-frame point y to the box [-half, half]."""
     total = 0.0
@@ -36,7 +36,7 @@ def excess2(y, half):
     return total
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def segment_box_closest(p, d, half):
     """The parameter t in [0, 1] of the point of p + t d (box frame) closest to the box, and its squared distance.
 
@@ -79,7 +79,7 @@ def segment_box_closest(p, d, half):
     return best_t, best
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def face_points(box, face, segment, radius, margin, out):
     """The segment (box frame p + t d, ``segment`` = (p, d)) clipped to the prism over the box's face
     ``face`` = (axis, side): its ends below margin; ``box`` = (centre, frame, half).
@@ -122,7 +122,7 @@ def face_points(box, face, segment, radius, margin, out):
     return kept
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def box_capsule(box, capsule, margin, out):
     """The manifold of a box (centre, frame, half) and a capsule (centre, frame, half, radius): up to 2
     points, the normal from the box to the capsule."""

@@ -28,7 +28,7 @@ class Scratch(NamedTuple):
     label: np.ndarray       # (2, 8, 2) int64 the two lines meeting at each of its vertices
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def make_scratch() -> Scratch:
     """A quadrilateral clipped by 4 planes has at most 8 vertices: every buffer holds 8. (Compiled:
     each thread of the narrow phase makes its own.)"""
@@ -36,34 +36,34 @@ def make_scratch() -> Scratch:
                    np.empty((2, 8, 3)), np.empty((2, 8, 2), np.int64))
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True, inline="always", error_model="numpy")
 def add3(x, y):
     return x[0] + y[0], x[1] + y[1], x[2] + y[2]
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True, inline="always", error_model="numpy")
 def scale3(x, s):
     return x[0] * s, x[1] * s, x[2] * s
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True, inline="always", error_model="numpy")
 def madd3(x, s, y):
     """x + s y."""
     return x[0] + s * y[0], x[1] + s * y[1], x[2] + s * y[2]
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True, inline="always", error_model="numpy")
 def cross3(x, y):
     return x[1] * y[2] - x[2] * y[1], x[2] * y[0] - x[0] * y[2], x[0] * y[1] - x[1] * y[0]
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True, inline="always", error_model="numpy")
 def to_local(frame, v):
     """A world vector in the body's coordinates: (v . R0, v . R1, v . R2)."""
     return dot3(v, frame[0]), dot3(v, frame[1]), dot3(v, frame[2])
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True, inline="always", error_model="numpy")
 def to_world(frame, p):
     """A body-frame vector in world coordinates: p0 R0 + p1 R1 + p2 R2."""
     return (p[0] * frame[0][0] + p[1] * frame[1][0] + p[2] * frame[2][0],
@@ -71,18 +71,18 @@ def to_world(frame, p):
             p[0] * frame[0][2] + p[1] * frame[1][2] + p[2] * frame[2][2])
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True, inline="always", error_model="numpy")
 def sign_of(x):
     """+1 for x >= 0, else -1: a side, never 0, so that a tie picks one feature consistently."""
     return 1.0 if x >= 0 else -1.0
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True, inline="always", error_model="numpy")
 def clamp01(x):
     return min(max(x, 0.0), 1.0)
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def segment_segment(p, d, q, e):
     """Closest points of the segments p + s d and q + t e, s, t in [0, 1]: ``(s, t)``.
 
@@ -111,7 +111,7 @@ def segment_segment(p, d, q, e):
     return s, t
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True, inline="always", error_model="numpy")
 def round_contact(pa, radius_a, pb, radius_b):
     """Contact of the balls of ``radius_a`` around ``pa`` and ``radius_b`` around ``pb``: (normal, separation, point).
 
@@ -125,7 +125,7 @@ def round_contact(pa, radius_a, pb, radius_b):
     return normal, -depth, scale3(add3(surface_a, surface_b), 0.5)
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True, inline="always", error_model="numpy")
 def write_point(out, k, normal, separation, point, feature):
     """Point k of a manifold into ``out`` (a :class:`Scratch`)."""
     out.normal[k, 0], out.normal[k, 1], out.normal[k, 2] = normal
@@ -134,7 +134,7 @@ def write_point(out, k, normal, separation, point, feature):
     out.feature[k] = feature
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def reduce_to_four(point, separation, feature, count):
     """Keep 4 of ``count`` > 4 coplanar contact points, in place: those that hold the body best.
 
@@ -185,12 +185,12 @@ def reduce_to_four(point, separation, feature, count):
     return 4
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True, inline="always", error_model="numpy")
 def _point(point, k):
     return point[k, 0], point[k, 1], point[k, 2]
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True, inline="always", error_model="numpy")
 def _put(point, separation, feature, k, row):
     """Row k of the points := ``row`` = (point, separation, feature)."""
     (point[k, 0], point[k, 1], point[k, 2]), separation[k], feature[k] = row

@@ -29,13 +29,13 @@ from .manifold_geometry import (
 from .sphere_contacts import dot3, sphere_plane, sub3
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True, inline="always", error_model="numpy")
 def segment_of(centre, frame, half):
     """A capsule's core: (its -z end, the vector to its +z end)."""
     return madd3(centre, -half[2], frame[2]), scale3(frame[2], 2.0 * half[2])
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def round_points(pa, radius_a, pb, radius_b, margin, feature, out):
     """The one point of two round cores' closest points ``pa`` and ``pb``, if its separation < margin."""
     normal, separation, point = round_contact(pa, radius_a, pb, radius_b)
@@ -45,7 +45,7 @@ def round_points(pa, radius_a, pb, radius_b, margin, feature, out):
     return 1
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def sphere_capsule(ca, ra, cb, fb, hb, rb, margin, out):
     """A sphere against a capsule: the centre against the segment's closest point, t = (c - p) . d / |d|^2 clamped."""
     p, d = segment_of(cb, fb, hb)
@@ -54,7 +54,7 @@ def sphere_capsule(ca, ra, cb, fb, hb, rb, margin, out):
     return round_points(ca, ra, madd3(p, t, d), rb, margin, 0, out)
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def capsule_capsule(capsule_a, capsule_b, margin, out):
     """Two capsules, each (centre, frame, half, radius): the closest points of their segments; 2 points
     when they lie side by side.
@@ -93,7 +93,7 @@ def capsule_capsule(capsule_a, capsule_b, margin, out):
     return 1
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def sphere_box(ca, ra, cb, fb, hb, margin, out):
     """A sphere against a box: the closest point of the box to the centre, or the nearest face from inside.
 
@@ -120,7 +120,7 @@ def sphere_box(ca, ra, cb, fb, hb, margin, out):
     return 1
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def sphere_plane_points(c, radius, plane_normal, offset, margin, feature, out, row):
     """A sphere (or a capsule's end) against the half-space n . x <= offset (:func:`.sphere_contacts.sphere_plane`).
 
@@ -134,7 +134,7 @@ def sphere_plane_points(c, radius, plane_normal, offset, margin, feature, out, r
     return 1
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def capsule_plane(c, frame, half, radius, plane_normal, offset, margin, out):
     """A capsule against a plane: each end of its segment (ids 0 and 1) as a sphere; one end if its length is 0."""
     p, d = segment_of(c, frame, half)

@@ -187,7 +187,7 @@ def body_solids(shapes: RigidShapes, poses: Poses) -> Solids:
 _matrix = njit(inline="always")(quat.matrix_components)
 
 
-@njit(cache=True, parallel=True)
+@njit(cache=True, parallel=True, error_model="numpy")
 def placed_frames(position, orientation, frame, threads):
     """Each body's frame, the rotation matrix of its quaternion, into ``frame`` (N, 3, 3); the first
     body whose pose is none (see :func:`_frames_of`), or N; ``threads`` parts in parallel (the NumPy
@@ -199,7 +199,7 @@ def placed_frames(position, orientation, frame, threads):
     return first_bad.min()
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def _frames_of(position, orientation, frame, rows):
     """:func:`placed_frames` of the bodies ``rows`` = (first, end): the first of them whose position is
     not finite or whose |q| differs from 1 by more than :data:`UNIT_TOLERANCE`, or N."""
@@ -241,14 +241,14 @@ def static_solids(statics) -> Solids:
                   np.array([r[4] for r in rows], dtype=float))
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True, inline="always", error_model="numpy")
 def solid(solids, k):
     """Shape k of ``solids`` (a :class:`Solids`, or a plain tuple of its columns) as a :class:`Solid`."""
     kind, c, f, h, radius, offset = solids
     return solid_of(kind, c, f, h, radius, offset, k)
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True, inline="always", error_model="numpy")
 def solid_of(kind, c, f, h, radius, offset, k):
     """:func:`solid` of the columns passed one by one: in a loop, the columns taken out of their
     tuple once before it (see :func:`_slots_of_chunk`)."""
@@ -260,7 +260,7 @@ def solid_of(kind, c, f, h, radius, offset, k):
 
 # The table is inlined into its caller: a call passing a Solid by value costs 2 us a pair (10^4 boxes'
 # pairs: 95 ms called, 15 ms inlined)
-@njit(cache=True, inline="always")
+@njit(cache=True, inline="always", error_model="numpy")
 def collide_ordered(a, b, margin, out):
     """The kernel of a's and b's kinds, for a.kind <= b.kind: its points into ``out``, their count."""
     if a.kind == SPHERE:
@@ -283,7 +283,7 @@ def collide_ordered(a, b, margin, out):
     return capsule_plane(a.centre, a.frame, a.half, a.radius, b.frame[2], b.offset, margin, out)
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True, inline="always", error_model="numpy")
 def collide(a, b, margin, out):
     """The pair table: the manifold of shapes a and b, normals from a to b, whichever order their kinds come in."""
     if a.kind <= b.kind:
@@ -295,7 +295,7 @@ def collide(a, b, margin, out):
     return count
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def static_candidates(bodies, statics, reach):
     """(K, 2) [body, static] whose bounding sphere (radius ``reach``, margin included) reaches the static shape."""
     found = np.empty((len(bodies.kind) * len(statics.kind), 2), dtype=np.int64)
@@ -327,7 +327,7 @@ CHUNKS = 64
 PARALLEL_PAIRS = 2048
 
 
-@njit(cache=True, parallel=True)
+@njit(cache=True, parallel=True, error_model="numpy")
 def manifold_slots(bodies, statics, pairs, static_pairs, margins, slots, counts):
     """Every pair's manifold into its own 4 rows of ``slots`` (a ManifoldPoints of 4 rows per pair, the
     body pairs first, then the static pairs), its count into ``counts``; the pairs in parallel.
@@ -341,7 +341,7 @@ def manifold_slots(bodies, statics, pairs, static_pairs, margins, slots, counts)
                         (chunk * total // CHUNKS, (chunk + 1) * total // CHUNKS))
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def _slots_of_chunk(solids_, pairs_, margins, slots, counts, span):
     """:func:`manifold_slots` for the pairs ``span`` = (first, end), with a scratch of its own.
 
@@ -410,7 +410,7 @@ def _slots_of_chunk(solids_, pairs_, margins, slots, counts, span):
             separation[row], feature[row] = found_separation[k], found_feature[k]
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def sorted_starts(pairs, static_pairs, counts, n):
     """Each pair's first row among :func:`manifold_slots`'s points in the order (a, b, feature), and
     the number of points: for each body a in turn, its static shapes (b = -1 - s, so s descending),
@@ -432,7 +432,7 @@ def sorted_starts(pairs, static_pairs, counts, n):
     return start, rows
 
 
-@njit(cache=True, parallel=True)
+@njit(cache=True, parallel=True, error_model="numpy")
 def take_sorted(slots, found, out, threads):
     """Each pair's points of ``slots`` into its rows of ``out`` from its start, by feature; ``found`` =
     (counts, starts) (:func:`sorted_starts`); ``threads`` parts of the pairs in parallel (one pass:
@@ -441,7 +441,7 @@ def take_sorted(slots, found, out, threads):
         _take_sorted_of(slots, found, out, span(0, len(found[0]), part, threads))
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def _take_sorted_of(slots, found, out, pairs):
     """:func:`take_sorted` of the pairs ``pairs`` = (first, end). A pair's points by feature, equal
     features in the order found (as a stable sort of all the points would put them), by insertion
@@ -465,7 +465,7 @@ def _take_sorted_of(slots, found, out, pairs):
                 normal_out[row, m], point_out[row, m] = normal[i, m], point[i, m]
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def _pairs_state(pairs, n):
     """(the first pair that does not join two different bodies 0 .. n - 1, or -1; whether each pair
     (i, j) has i < j and the pairs are strictly increasing, lexicographically), in one pass."""
@@ -485,7 +485,7 @@ def extents(shapes: CheckedShapes, margin: np.ndarray) -> np.ndarray:
     return _extents(shapes.kind, shapes.half, shapes.radius, np.ascontiguousarray(margin))
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def _extents(kind, half, radius, margin):
     """:func:`extents`, compiled: a box's reach is its corner, |half|; a sphere's its radius; a
     capsule's its radius plus its half length. (NumPy's temporaries took 0.2 ms a step of 10^4 boxes.)"""
