@@ -171,4 +171,3 @@ def turning_bounds(q0, q1, omega, bounding, step):
         d0, d1, d2 = q1[b, 0] - q0[b, 0], q1[b, 1] - q0[b, 1], q1[b, 2] - q0[b, 2]
         speculative[b] = reach[b] - bounding[b] + margin + np.sqrt(d0 * d0 + d1 * d1 + d2 * d2)
     return reach, speculative
-

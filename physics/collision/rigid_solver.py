@@ -860,6 +860,8 @@ def _merge(old, new, place, rows, part):
     first, end = part
     count = len(oa)
     lo, hi = 0, count
+    # the key comparison is written out in both loops: as a helper (inlined or not, its columns passed
+    # together or one by one) the merge of 65,000 points took 2.6 to 2.9 ms against 0.8
     while lo < hi and first < end:  # the first old key not below the part's first
         p = (lo + hi) // 2
         if oa[p] < na[first] or (oa[p] == na[first] and (ob[p] < nb[first] or (
