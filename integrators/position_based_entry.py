@@ -15,9 +15,9 @@ sizes, the substeps and the addresses of the arrays, which it views again in pla
 from __future__ import annotations
 
 import numpy as np
-from llvmlite import ir
-from numba import carray, njit, types
-from numba.extending import intrinsic
+from numba import njit
+
+from steplab.physics.unowned import unowned
 
 from .constraint_projection import Substeps, Sweep, Workspace, advance
 
@@ -52,22 +52,10 @@ def table(external, inverse_mass, sweep: Sweep, steps: Substeps, work: Workspace
     return t
 
 
-@intrinsic
-def _pointer(typingctx, address):
-    """The int64 ``address`` as a pointer (LLVM's inttoptr), for ``numba.carray``."""
-    if not isinstance(address, types.Integer):
-        return None
-
-    def codegen(context, builder, signature, args):
-        return builder.inttoptr(args[0], ir.IntType(8).as_pointer())
-
-    return types.voidptr(address), codegen
-
-
 @njit(inline="always")
 def _at(t, slot, shape, dtype):
     """The array of ``shape`` and ``dtype`` at the address in slot ``slot`` of ``t`` (a view, no copy)."""
-    return carray(_pointer(t[slot]), shape, dtype)
+    return unowned(t[slot], shape, dtype)
 
 
 @njit(cache=True, error_model="numpy")

@@ -14,6 +14,7 @@ from typing import NamedTuple
 import numpy as np
 from numba import njit
 
+from ..unowned import unowned
 from .sphere_contacts import dot3, sphere_sphere, sub3
 
 
@@ -28,12 +29,20 @@ class Scratch(NamedTuple):
     label: np.ndarray       # (2, 8, 2) int64 the two lines meeting at each of its vertices
 
 
-@njit(cache=True, error_model="numpy")
-def make_scratch() -> Scratch:
-    """A quadrilateral clipped by 4 planes has at most 8 vertices: every buffer holds 8. (Compiled:
-    each thread of the narrow phase makes its own.)"""
-    return Scratch(np.empty((8, 3)), np.empty((8, 3)), np.empty(8), np.empty(8, np.int64),
-                   np.empty((2, 8, 3)), np.empty((2, 8, 2), np.int64))
+#: one :class:`Scratch`'s 8-byte words: normal, point, separation, feature, polygon, label
+SCRATCH_WORDS = 24 + 24 + 8 + 8 + 48 + 32
+
+
+@njit(cache=True, inline="always", error_model="numpy")
+def scratch_in(store):
+    """A :class:`Scratch` over ``store``, an int64 array of :data:`SCRATCH_WORDS` words, whose views have
+    no owner (:mod:`steplab.physics.unowned`): the narrow phase's loop binds them at every pair, which
+    counted references on arrays of their own. A quadrilateral clipped by 4 planes has at most 8
+    vertices: every buffer holds 8. The caller keeps ``store``."""
+    at = store.ctypes.data
+    return Scratch(unowned(at, (8, 3), np.float64), unowned(at + 8 * 24, (8, 3), np.float64),
+                   unowned(at + 8 * 48, 8, np.float64), unowned(at + 8 * 56, 8, np.int64),
+                   unowned(at + 8 * 64, (2, 8, 3), np.float64), unowned(at + 8 * 112, (2, 8, 2), np.int64))
 
 
 @njit(cache=True, inline="always", error_model="numpy")

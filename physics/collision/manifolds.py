@@ -43,7 +43,7 @@ from .. import quaternion as quat
 from .contact_colouring import span
 from .manifold_box import box_box, box_plane
 from .manifold_capsule_box import box_capsule
-from .manifold_geometry import make_scratch, to_local
+from .manifold_geometry import SCRATCH_WORDS, scratch_in, to_local
 from .manifold_round import (
     capsule_capsule,
     capsule_plane,
@@ -370,7 +370,8 @@ def _slots_of_chunk(solids_, pairs_, margins, slots, counts, span):
     kind, centre, frame, half, radius, offset = bodies
     s_kind, s_centre, s_frame, s_half, s_radius, s_offset = statics
     a_out, b_out, normal, point, separation, feature = slots
-    scratch = make_scratch()
+    store = np.empty(SCRATCH_WORDS, np.int64)
+    scratch = scratch_in(store)
     found_normal, found_point, found_separation, found_feature = (scratch.normal, scratch.point, scratch.separation,
                                                                   scratch.feature)
     for p in range(span[0], span[1]):
@@ -408,6 +409,7 @@ def _slots_of_chunk(solids_, pairs_, margins, slots, counts, span):
             for m in range(3):
                 normal[row, m], point[row, m] = found_normal[k, m], found_point[k, m]
             separation[row], feature[row] = found_separation[k], found_feature[k]
+    store[0] = 0  # the scratch's memory kept to here
 
 
 @njit(cache=True, error_model="numpy")
