@@ -16,7 +16,6 @@ from __future__ import annotations
 
 import numpy as np
 from numba import njit
-
 from steplab.physics.unowned import unowned
 
 from .constraint_projection import Substeps, Sweep, Workspace, advance

@@ -39,6 +39,7 @@ from .chords import turning_bounds
 from .contact_buffer import Materials
 from .contact_colouring import colour_contacts, in_sorted_order
 from .events import CollisionLog, ImpactBlock, cancel_triggers
+from .heap import keep_freed_memory
 from .manifolds import BOX, CAPSULE, SPHERE, check_shapes
 from .pairs import SweptSpheres
 from .rigid_columns import first_impacts, gather, inverse, is_sorted
@@ -210,6 +211,7 @@ class RigidSolverStep:
         self._previous = _NOTHING
         self._steps = 0
         self.history = {0: (self.orientation.copy(), self.omega.copy())}
+        keep_freed_memory()  # each step's columns reuse the last one's memory (:mod:`.heap`)
 
     def __call__(self, t, y, dt, carry):
         """Advance ``y`` (2, N, 3) and the rotation from ``t`` by ``dt``; returns ``(y, carry)``.
