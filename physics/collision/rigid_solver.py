@@ -106,7 +106,7 @@ class RigidContactColumns(NamedTuple):
     pr: np.ndarray  # (C, 3) rolling resistance's angular impulse, N m s
     total: np.ndarray  # the step's normal impulse, N s
     most: np.ndarray  # the largest substep impulse of the step, N s
-    s: np.ndarray  # the separation now, m (:func:`update_geometry`)
+    s: np.ndarray  # the separation now, m (:func:`_geometry`)
     la: np.ndarray  # (C, 3) the lever from a's centre to the point now, m
     lb: np.ndarray  # (C, 3) the lever from b's centre to the point now, m
 
@@ -246,24 +246,11 @@ def _geometry(moves, a, b, n, ra, rb, s0):
     return s, la, (la[0] - d[0], la[1] - d[1], la[2] - d[2])
 
 
-@njit(cache=True, parallel=True)
-def update_geometry(bodies, contacts, colours):
-    """Each contact's separation and levers now (:func:`_geometry`) into ``s``, ``la``, ``lb``.
-
-    They depend on the bodies' moves alone, which change only in the position stage: computed
-    once after it, they serve the relax sweeps of that substep, the warm start and the biased
-    sweeps of the next, and the end of the step (the numbers of computing them in every sweep).
-    Each contact's own: the rows in parallel (``colours.threads`` parts), the same bytes on any
-    number of threads.
-    """
-    threads = colours.threads
-    for part in prange(threads):
-        _geometry_rows(bodies, contacts, span(0, len(contacts.a), part, threads))
-
-
 @njit(cache=True)
 def _geometry_rows(bodies, contacts, rows):
-    """:func:`update_geometry` of the contacts ``rows`` = (first, end)."""
+    """Each contact's separation and levers now (:func:`_geometry`) into ``s``, ``la``, ``lb``, for the
+    contacts ``rows`` = (first, end) (at the start of the step: :func:`prepare`; after each position
+    stage the first relax sweep computes them, :func:`_sweep_blocks`)."""
     moves = (bodies.q, bodies.dq, bodies.turn, bodies.rounding)
     a_, b_, normal, ra, rb, s0 = contacts.a, contacts.b, contacts.normal, contacts.ra, contacts.rb, contacts.s0
     separation, lever_a, lever_b = contacts.s, contacts.la, contacts.lb
@@ -342,7 +329,7 @@ def _apply_angular(pair, state, a, b, m):
 @njit(cache=True, parallel=True)
 def prepare(bodies, contacts, colours):
     """Each contact's effective masses along n, t1, t2 (into ``contacts.mass``), v_n at the start,
-    and its separation and levers (:func:`update_geometry`); each contact's own, in parallel."""
+    and its separation and levers (:func:`_geometry_rows`); each contact's own, in parallel."""
     threads = colours.threads
     for part in prange(threads):  # one parallel region for both
         rows = span(0, len(contacts.a), part, threads)
@@ -522,7 +509,7 @@ def _holds_nothing(pt, pr, k):
 
 
 @njit(cache=True, parallel=True)
-def _sweep(bodies, contacts, sub, use_bias, colours):
+def _sweep(bodies, contacts, sub, use_bias, colours, geometry):
     """One Gauss-Seidel sweep over the contacts, colour by colour (:mod:`.contact_colouring`): each
     contact's normal impulse, then friction and rolling. A colour's manifolds share no body: they are
     solved on all threads at once, the same bytes as on one; small colours and the overflow one after
@@ -531,13 +518,20 @@ def _sweep(bodies, contacts, sub, use_bias, colours):
     while group < len(colours.colour_start) - 1:
         (first, end), parts, group = next_groups(colours, group)
         for part in prange(parts):
-            _sweep_blocks(bodies, contacts, (sub, use_bias), colours, span(first, end, part, parts))
+            _sweep_blocks(bodies, contacts, (sub, use_bias, geometry), colours, span(first, end, part, parts))
 
 
 @njit(cache=True)
 def _sweep_blocks(bodies, contacts, how, colours, blocks):
     """:func:`_sweep` over the manifolds ``blocks`` = (first, end) (their rows are consecutive);
-    ``how`` = (the substep, whether the bias pushes).
+    ``how`` = (the substep, whether the bias pushes, whether to compute each point's separation and
+    levers first).
+
+    The separation and levers depend on the bodies' moves alone, which change only in the position
+    stage: the first relax sweep after it computes them (:func:`_geometry`) and keeps them for the
+    other relax sweeps of that substep, the warm start and the biased sweeps of the next, and the end
+    of the step. (A pass of their own over the contacts took 1.3 ms of the 10^4 box pit's step on 2
+    threads, most of it reading the contacts' columns that the sweep then reads again.)
 
     Each point reads its two bodies' velocities into registers, applies its impulses there and
     writes them back once: the same arithmetic in the same order as changing the arrays impulse by
@@ -551,8 +545,10 @@ def _sweep_blocks(bodies, contacts, how, colours, blocks):
     the step is the same numbers without them (a zero impulse can at most turn a velocity of -0.0
     into +0.0). Most points of a falling pile are such, speculative points that are never pressed:
     75 to 100 % of the 10^4 box pit's in its first 30 steps, which made the skip halve its sweeps."""
-    sub, use_bias = how
+    sub, use_bias, geometry = how
     state, rows = _state(bodies), colours.rows
+    moves = (bodies.q, bodies.dq, bodies.turn, bodies.rounding)
+    ra, rb, s0 = contacts.ra, contacts.rb, contacts.s0
     a_, b_, normal, separation = contacts.a, contacts.b, contacts.normal, contacts.s
     lever_a, lever_b, pn, mass, hit = contacts.la, contacts.lb, contacts.pn, contacts.mass, contacts.hit
     friction, rolling, pt, pr = contacts.friction, contacts.rolling, contacts.pt, contacts.pr
@@ -561,8 +557,13 @@ def _sweep_blocks(bodies, contacts, how, colours, blocks):
     for k in range(rows[blocks[0]], rows[blocks[1]]):
         a, b = a_[k], b_[k]
         n = _row(normal, k)
-        la = _row(lever_a, k)
-        lb = _row(lever_b, k)
+        if geometry:
+            separation[k], la, lb = _geometry(moves, a, b, n, _row(ra, k), _row(rb, k), s0[k])
+            for x in range(3):
+                lever_a[k, x], lever_b[k, x] = la[x], lb[x]
+        else:
+            la = _row(lever_a, k)
+            lb = _row(lever_b, k)
         pair, moved = _bodies(state, a, b), False
         vn = dot3(_relative(pair[0], pair[1], b, la, lb), n)
         bias, scale, leak = _bias(sub, separation[k], use_bias)
@@ -630,11 +631,10 @@ def substep(bodies, contacts, sub, colours):
     integrate_velocities(bodies, sub, colours.threads)
     warm_start(bodies, contacts, colours)
     for _ in range(sub.iterations):
-        _sweep(bodies, contacts, sub, True, colours)
+        _sweep(bodies, contacts, sub, True, colours, False)
     integrate_positions(bodies, sub, colours.threads)
-    update_geometry(bodies, contacts, colours)
-    for _ in range(sub.iterations):
-        _sweep(bodies, contacts, sub, False, colours)
+    for iteration in range(sub.iterations):  # the first computes the separations and levers now
+        _sweep(bodies, contacts, sub, False, colours, iteration == 0)
     pn, total, most = contacts.pn, contacts.total, contacts.most
     for k in range(len(pn)):
         total[k] += pn[k]
