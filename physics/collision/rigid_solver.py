@@ -280,7 +280,7 @@ def _store(state, i, body):
 @njit(cache=True, inline="always")
 def _relative(ba, bb, b, la, lb):
     """(v_b + omega_b x l_b) - (v_a + omega_a x l_a) at a contact of bodies ``ba`` and ``bb``
-    (:func:`_body`; b < 0: a static shape)."""
+    (:func:`_bodies`; b < 0: a static shape)."""
     va, wa = ba[0], cross3(ba[1], la)
     ua = (va[0] + wa[0], va[1] + wa[1], va[2] + wa[2])
     if b < 0:
