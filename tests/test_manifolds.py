@@ -428,3 +428,40 @@ def test_bounding_radius_holds_each_shape():
     shapes = RigidShapes(np.array([SPHERE, BOX, CAPSULE], np.int8), np.array([0.3, 0.0, 0.2]),
                          np.array([[0, 0, 0], [1.0, 2.0, 2.0], [0, 0, 0.5]]))
     np.testing.assert_allclose(bounding_radius(shapes), [0.3, 3.0, 0.7])
+
+
+def test_many_pairs_on_threads_give_each_pairs_own_manifold_in_sorted_order(monkeypatch):
+    """From PARALLEL_PAIRS pairs the narrow phase runs in chunks on Numba's threads, each chunk packing
+    its points one after another, and lays them out sorted: the result must be every pair's manifold
+    computed on its own (two bodies, or one body and the statics), in the order (a, b, feature), equal
+    features in the order found. Two parts are asked for whatever the cores (Numba runs the parts on
+    the threads it has)."""
+    from steplab.physics.collision import manifolds as narrow
+
+    rng = np.random.default_rng(11)
+    n = 800
+    kinds = rng.choice([SPHERE, BOX, CAPSULE], n)
+    radii = np.where(kinds == BOX, 0.0, rng.uniform(0.05, 0.12, n))
+    halves = np.where(kinds[:, None] == BOX, rng.uniform(0.05, 0.12, (n, 3)),
+                      np.where(kinds[:, None] == CAPSULE, [0.0, 0.0, 0.08], 0.0))
+    positions = np.column_stack([np.arange(n) * 0.09, rng.uniform(-0.05, 0.05, n), rng.uniform(0.0, 0.2, n)])
+    turns = rng.normal(size=(n, 4))
+    shapes, poses = scene(kinds, radii, halves, positions, turns / np.linalg.norm(turns, axis=1, keepdims=True))
+    pairs = np.array([(i, j) for i in range(n) for j in range(i + 1, min(i + 4, n))])
+    statics = [Plane(UP), Box(np.array([10.0, -1, -1]), np.array([20.0, 1, 0.1]))]
+    assert len(pairs) >= narrow.PARALLEL_PAIRS
+    monkeypatch.setattr(narrow.numba, "get_num_threads", lambda: 2)
+    got = manifolds(shapes, poses, pairs, statics, margin=0.02)
+    monkeypatch.undo()
+
+    def alone(bodies, pair_list, shape_list):  # the manifolds of a subset of the bodies, renumbered back
+        sub = scene(kinds[bodies], radii[bodies], halves[bodies], positions[bodies], poses.orientation[bodies])
+        m = manifolds(*sub, pair_list, shape_list, margin=0.02)
+        return m._replace(a=np.asarray(bodies)[m.a], b=np.where(m.b >= 0, np.asarray(bodies)[np.maximum(m.b, 0)], m.b))
+
+    parts = [alone([i, j], [[0, 1]], ()) for i, j in pairs] + [alone([i], [], statics) for i in range(n)]
+    expected = type(got)(*(np.concatenate(column) for column in zip(*parts)))
+    order = np.lexsort((expected.feature, expected.b, expected.a))  # stable: equal features as found
+    assert len(got.a) > len(pairs)  # most pairs touch: the chunks' packing is exercised
+    for name, column in zip(got._fields, got):
+        np.testing.assert_array_equal(column, getattr(expected, name)[order], err_msg=name)

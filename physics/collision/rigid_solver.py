@@ -557,7 +557,8 @@ def _sweep_blocks(bodies, contacts, how, colours, blocks):
     for k in range(rows[blocks[0]], rows[blocks[1]]):
         a, b = a_[k], b_[k]
         n = _row(normal, k)
-        if geometry:
+        if geometry:  # as _geometry_rows; written out: a helper taking the columns as a tuple made the
+            # solver 3 % slower (in one process, alternating with the separate pass it replaces)
             separation[k], la, lb = _geometry(moves, a, b, n, _row(ra, k), _row(rb, k), s0[k])
             for x in range(3):
                 lever_a[k, x], lever_b[k, x] = la[x], lb[x]
