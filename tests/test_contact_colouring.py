@@ -19,7 +19,7 @@ from steplab.integrators import get_integrator
 from steplab.physics import Gravity, Model
 from steplab.physics import quaternion as quat
 from steplab.physics.collision import CollisionWorld, PairProperties, Plane, rigid_solver_step
-from steplab.physics.collision.contact_colouring import COLOURS, Colours, colour_contacts, next_groups
+from steplab.physics.collision.contact_colouring import COLOURS, Colours, colour_contacts, next_groups, piece, sides
 from steplab.physics.collision.rigid_solver_step import RigidScene, RigidSolverStep
 from steplab.physics.collision.solver_settings import ContactSolver
 from steplab.physics.rigid_body import RigidBodies, principal_inertia
@@ -34,33 +34,63 @@ manifolds = importlib.import_module("steplab.physics.collision.manifolds")
 
 @settings(max_examples=60, deadline=None)
 @given(st.lists(st.tuples(st.integers(0, 11), st.integers(-3, 11), st.integers(1, 4)), min_size=0, max_size=60),
-       st.integers(1, 4))
-def test_the_colours_are_a_proper_colouring_of_the_manifolds(manifolds_, threads):
-    """Random manifolds (a, b, points) among 12 bodies and 3 static shapes: each colour's manifolds share
-    no body (statics excepted), every row is listed once, each manifold's rows together and in order."""
+       st.lists(st.integers(0, 1), min_size=12, max_size=12), st.integers(1, 4))
+def test_the_colours_are_a_proper_colouring_of_the_manifolds(manifolds_, side, threads):
+    """Random manifolds (a, b, points) among 12 bodies on random sides and 3 static shapes: each colour's
+    manifolds share no body (statics excepted), those of side 0 (their body a's) before side 1's, each
+    side in the sorted order; every row is listed once, each manifold's rows together and in order; the
+    bodies listed side by side, each side ascending."""
     pairs = sorted({(a, b): p for a, b, p in manifolds_ if a != b}.items())
     a = np.array([x for (i, _), p in pairs for x in [i] * p], np.int64)
     b = np.array([x for (_, j), p in pairs for x in [j] * p], np.int64)
-    order, colours = colour_contacts(a, b, 12, threads)
+    side = np.array(side, np.int64)
+    order, colours = colour_contacts(a, b, side, threads)
     assert sorted(order.tolist()) == list(range(len(a)))
     assert colours.threads == threads and colours.rows[-1] == len(a)
     groups = len(colours.colour_start) - 1
     assert colours.parallel == groups  # 12 bodies: never the overflow
     for g in range(groups):
-        bodies = []
+        bodies, keys = [], []
         for m in range(colours.colour_start[g], colours.colour_start[g + 1]):
             rows = order[colours.rows[m]:colours.rows[m + 1]]
             assert len(set(zip(a[rows].tolist(), b[rows].tolist()))) == 1  # one manifold
             assert np.all(np.diff(rows) == 1)  # its points in their order
+            assert side[a[rows[0]]] == (m >= colours.side_start[g])
+            keys.append((side[a[rows[0]]], rows[0]))
             bodies += [a[rows[0]]] + ([b[rows[0]]] if b[rows[0]] >= 0 else [])
         assert len(bodies) == len(set(bodies))  # a colour's manifolds share no body
+        assert keys == sorted(keys)
+    expected = [body for s in (0, 1) for body in range(12) if side[body] == s]
+    assert colours.bodies.tolist() == expected and colours.body_cut == np.sum(side == 0)
+
+
+@pytest.mark.parametrize("parts, expected", [
+    (1, [(0, 10)]), (2, [(0, 4), (4, 10)]), (3, [(0, 3), (3, 6), (6, 10)]), (4, [(0, 2), (2, 4), (4, 7), (7, 10)])])
+def test_an_even_number_of_parts_takes_half_of_them_from_each_side(parts, expected):
+    """Manifolds 0 to 9, side 1's from 4: 2 parts are the two sides, 4 parts two of each, and an odd number
+    of parts nearly equal spans whatever the sides."""
+    assert [tuple(piece((0, 4, 10), part, parts)) for part in range(parts)] == expected
+
+
+def test_the_sides_halve_the_moving_bodies_across_their_widest_extent():
+    """Centres spread 10 m along y and 1 m along x: the cut is across y at the moving bodies' median;
+    a pinned body far out does not move it."""
+    rng = np.random.default_rng(4)
+    q = np.column_stack([rng.uniform(0, 1, 101), rng.uniform(0, 10, 101), rng.uniform(0, 1, 101)])
+    q[-1] = [0.0, 100.0, 0.0]
+    movable = np.ones(101, bool)
+    movable[-1] = False
+    side = sides(q, movable)
+    assert np.sum(side[:-1] == 0) == 50 and side[-1] == 1
+    assert np.all((side[:-1] == 1) == (q[:-1, 1] >= np.median(q[:-1, 1])))
+    assert not sides(q, np.zeros(101, bool)).any()
 
 
 def test_a_body_in_more_manifolds_than_colours_goes_to_the_overflow():
     """Body 0 touching COLOURS + 2 others: the last two manifolds find every colour taken."""
     a = np.zeros(COLOURS + 2, np.int64)
     b = np.arange(1, COLOURS + 3, dtype=np.int64)
-    order, colours = colour_contacts(a, b, COLOURS + 3, 2)
+    order, colours = colour_contacts(a, b, np.zeros(COLOURS + 3, np.int64), 2)
     assert colours.parallel == COLOURS and len(colours.colour_start) - 1 == COLOURS + 1
     assert colours.colour_start[-1] - colours.colour_start[-2] == 2
     assert order[-2:].tolist() == [COLOURS, COLOURS + 1]
@@ -111,11 +141,11 @@ def test_small_colours_and_the_overflow_are_swept_in_runs_on_one_thread(threads)
     in 2 parts and the others in runs on one thread, on 1 thread all of them in one run."""
     sizes = [600, 500, 20, 700, 3]
     start = np.concatenate([[0], np.cumsum(sizes)]).astype(np.int64)
-    colours = Colours(np.arange(start[-1] + 1, dtype=np.int64), start, 4, threads, 512)
+    colours = Colours(np.arange(start[-1] + 1, dtype=np.int64), start, start[1:], 4, threads, 512, np.arange(4), 4)
     runs, group = [], 0
     while group < len(sizes):
         span_, parts, group = next_groups(colours, group)
-        runs.append((int(span_[0]), int(span_[1]), parts))
+        runs.append((int(span_[0]), int(span_[2]), parts))
     if threads == 2:
         assert runs == [(0, 600, 2), (600, 1120, 1), (1120, 1820, 2), (1820, 1823, 1)]
     else:

@@ -84,7 +84,7 @@ def test_the_colours_are_the_plain_greedy_colouring(seed, bodies, count, hub):
     ends = starts[1:] + [len(a)]
     expected = [k for c in sorted(set(colour)) for m, (s, e) in enumerate(zip(starts, ends)) if colour[m] == c
                 for k in range(s, e)]
-    order, colours = colour_contacts(a, b, bodies, 2)
+    order, colours = colour_contacts(a, b, np.zeros(bodies, np.int64), 2)
     assert order.tolist() == expected
     sizes = [colour.count(c) for c in sorted(set(colour))]
     assert np.diff(colours.colour_start).tolist() == sizes

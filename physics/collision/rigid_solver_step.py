@@ -37,7 +37,7 @@ from .. import quaternion as quat
 from . import rigid_solver as rs
 from .chords import turning_bounds
 from .contact_buffer import Materials
-from .contact_colouring import colour_contacts, in_sorted_order
+from .contact_colouring import colour_contacts, in_sorted_order, sides
 from .events import CollisionLog, ImpactBlock, cancel_triggers
 from .heap import keep_freed_memory
 from .manifolds import BOX, CAPSULE, SPHERE, check_shapes
@@ -288,7 +288,6 @@ class RigidSolverStep:
         bodies = rs.RigidBodyColumns(q0, v0, self.omega, self.orientation, np.empty((n, 3)), np.empty((n, 4)),
                                      self.inverse_masses, np.empty((n, 3, 3)), self.inverse_principal,
                                      np.ascontiguousarray(a, dtype=float), self.rounding, np.empty(n))
-        rs.start_bodies(bodies, s.threads)
         count = len(points.a)
         contacts = contact_columns(count)
         # the points arrive sorted by (a, b, feature), the order the last step's are matched in; the
@@ -297,9 +296,10 @@ class RigidSolverStep:
         old = self._previous
         rows = rs.previous_rows(old.key, key, old.place, s.threads)
         if n >= COLOURED_BODIES:  # coloured, on the solver's threads (the same bytes on any number of them)
-            order, colours = colour_contacts(points.a, points.b, n, s.threads)
+            order, colours = colour_contacts(points.a, points.b, sides(q0, self.inverse_masses > 0), s.threads)
         else:
-            order, colours = in_sorted_order(points.a, points.b)
+            order, colours = in_sorted_order(points.a, points.b, n)
+        rs.start_bodies(bodies, colours)
         self._sorted_key, self._order, self._rows, self._place = key, order, rows, inverse(order)
         o = old.contacts
         gather(points, order, (q0, bodies.accel, self.rolling), self.materials,
@@ -307,7 +307,7 @@ class RigidSolverStep:
         rs.prepare(bodies, contacts, colours)
         bias_rate, mass_scale, impulse_scale = s.softness(h)
         sub = rs.RigidSubstep(h, s.iterations, bias_rate, mass_scale, impulse_scale, s.push_speed, s.slop,
-                              *self.codes)
+                              *self.codes, bool(np.any(self.rolling > 0.0)))
         return bodies, contacts, sub, colours
 
     def _conclude(self, t, dt, contacts, residual):
