@@ -217,6 +217,16 @@ def piece(bounds, part, parts):
 
 
 @njit(cache=True, inline="always")
+def rows_of(colours, group, part, parts):
+    """(first, end) rows of part ``part`` of ``parts`` of group ``group``'s manifolds (:func:`piece`): the
+    rows that part's thread sweeps when the group is cut into parts, for the passes over each
+    contact alone (gathering, effective masses) to leave each row in that thread's cache."""
+    start = colours.colour_start
+    first, end = piece((start[group], colours.side_start[group], start[group + 1]), part, parts)
+    return colours.rows[first], colours.rows[end]
+
+
+@njit(cache=True, inline="always")
 def next_groups(colours, group):
     """((first, side 1's first, end) manifolds, parts, the group after them) of the sweep from group
     ``group`` of ``colours`` on: a colour of at least ``colours.serial_below`` manifolds alone, cut into

@@ -50,7 +50,7 @@ from typing import NamedTuple
 import numpy as np
 from numba import njit, prange
 
-from .contact_colouring import next_groups, piece, span
+from .contact_colouring import next_groups, piece, rows_of, span
 from .manifold_geometry import cross3
 from .sphere_contacts import dot3
 
@@ -332,10 +332,11 @@ def prepare(bodies, contacts, colours):
     """Each contact's effective masses along n, t1, t2 (into ``contacts.mass``), v_n at the start,
     and its separation and levers (:func:`_geometry_rows`); each contact's own, in parallel."""
     threads = colours.threads
-    for part in prange(threads):  # one parallel region for both
-        rows = span(0, len(contacts.a), part, threads)
-        _prepare_rows(bodies, contacts, rows)
-        _geometry_rows(bodies, contacts, rows)
+    for part in prange(threads):  # one parallel region for both; each group's rows by its sweep's parts
+        for group in range(len(colours.colour_start) - 1):
+            rows = rows_of(colours, group, part, threads)
+            _prepare_rows(bodies, contacts, rows)
+            _geometry_rows(bodies, contacts, rows)
 
 
 @njit(cache=True)

@@ -303,7 +303,7 @@ class RigidSolverStep:
         self._sorted_key, self._order, self._rows, self._place = key, order, rows, inverse(order)
         o = old.contacts
         gather(points, order, (q0, bodies.accel, self.rolling), self.materials,
-               (rows, o.pn, o.pt, o.tangent, o.pr), (float(self.world.rest_speed), float(dt)), contacts, s.threads)
+               (rows, o.pn, o.pt, o.tangent, o.pr), (float(self.world.rest_speed), float(dt)), contacts, colours)
         rs.prepare(bodies, contacts, colours)
         bias_rate, mass_scale, impulse_scale = s.softness(h)
         sub = rs.RigidSubstep(h, s.iterations, bias_rate, mass_scale, impulse_scale, s.push_speed, s.slop,
