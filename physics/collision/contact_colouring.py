@@ -182,7 +182,9 @@ def sides(q, movable):
     if not movable.any():
         return np.zeros(len(q), np.int64)
     moving = q[movable]
-    axis = int(np.argmax(moving.max(axis=0) - moving.min(axis=0)))
+    # a column at a time: NumPy's reductions along the first axis of an (N, 3) array took 0.43 ms of
+    # the 10^4 pit's step, against 0.13 ms for the whole of this
+    axis = int(np.argmax([np.ptp(moving[:, k]) for k in range(3)]))
     return (q[:, axis] >= np.median(moving[:, axis])).astype(np.int64)
 
 
