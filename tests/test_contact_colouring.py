@@ -19,7 +19,15 @@ from steplab.integrators import get_integrator
 from steplab.physics import Gravity, Model
 from steplab.physics import quaternion as quat
 from steplab.physics.collision import CollisionWorld, PairProperties, Plane, rigid_solver_step
-from steplab.physics.collision.contact_colouring import COLOURS, Colours, colour_contacts, next_groups, piece, sides
+from steplab.physics.collision.contact_colouring import (
+    COLOURS,
+    Colours,
+    colour_contacts,
+    next_groups,
+    piece,
+    rows_of,
+    sides,
+)
 from steplab.physics.collision.rigid_solver_step import RigidScene, RigidSolverStep
 from steplab.physics.collision.solver_settings import ContactSolver
 from steplab.physics.rigid_body import RigidBodies, principal_inertia
@@ -62,6 +70,9 @@ def test_the_colours_are_a_proper_colouring_of_the_manifolds(manifolds_, side, t
         assert keys == sorted(keys)
     expected = [body for s in (0, 1) for body in range(12) if side[body] == s]
     assert colours.bodies.tolist() == expected and colours.body_cut == np.sum(side == 0)
+    for parts in range(1, 5):  # the passes by the sweep's parts (gather, masses) take every row once
+        rows = [k for g in range(groups) for part in range(parts) for k in range(*rows_of(colours, g, part, parts))]
+        assert sorted(rows) == list(range(len(a)))
 
 
 @pytest.mark.parametrize("parts, expected", [

@@ -53,7 +53,7 @@ class Colours(NamedTuple):
     rows ``rows[m] .. rows[m + 1] - 1``; colour c is manifolds ``colour_start[c] .. colour_start[c + 1] - 1``,
     those of the bodies on side 0 of the step's cut first, side 1's from ``side_start[c]``; the groups
     from ``parallel`` on (the overflow, if any) are swept on one thread, the colours cut into ``threads``
-    parts. The bodies, side 0's then side 1's from ``body_cut``, are ``bodies`` (:func:`body_parts`).
+    parts. The bodies, side 0's then side 1's from ``body_cut``, are ``bodies``.
     (The thread count is handed in, not read in the kernels: a kernel that calls
     ``numba.get_num_threads`` cannot be cached.)"""
 
@@ -151,27 +151,9 @@ def colour_contacts(a, b, side, threads):
         for k in range(start[m], start[m + 1]):
             order[row[c]] = k
             row[c] += 1
-    bodies, body_cut = body_parts(side)
+    bodies = np.argsort(side, kind="mergesort")  # stable: side 0's bodies, then side 1's, each ascending
     return order, Colours(laid, colour_start[:groups + 1], side_start[:groups], parallel, max(threads, 1),
-                          SERIAL_MANIFOLDS, bodies, body_cut)
-
-
-@njit(cache=True)
-def body_parts(side):
-    """(the bodies, side 0's then side 1's, each side ascending; where side 1's start)."""
-    n = len(side)
-    bodies = np.empty(n, np.int64)
-    cut = 0
-    for body in range(n):
-        if side[body] == 0:
-            bodies[cut] = body
-            cut += 1
-    k = cut
-    for body in range(n):
-        if side[body] != 0:
-            bodies[k] = body
-            k += 1
-    return bodies, cut
+                          SERIAL_MANIFOLDS, bodies, n - np.sum(side))
 
 
 def sides(q, movable):
