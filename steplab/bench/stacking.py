@@ -13,9 +13,9 @@
   ``box_pit_peer_max`` boxes (MuJoCo's compiler and PGS grow quickly with the bodies). The
   target: 10^4 boxes at >= 1x real time on 2 cores. The bench itself runs on one core with one
   thread per side (:mod:`.timing`), the fair footing for its ratios; so steplab's 10^4 box pit is
-  also timed in a child process given ``BOX_PIT_CORES`` cores and as many Numba threads
-  (:func:`on_cores`) with the solver's ``threads`` = cores, and the target is judged on that run, its
-  cores and threads in the record.
+  also timed in a child process (:mod:`.pit_child`) given ``BOX_PIT_CORES`` cores and as many
+  Numba threads (:func:`on_cores`) with the solver's ``threads`` = cores, and the target is judged
+  on that run, its cores and threads in the record.
 
 Each comparison keeps both sides' spread over the rounds (min, median, max) and, as a check
 that the contenders computed the same scene, where each one's top box is at the end.
@@ -218,39 +218,9 @@ def on_cores(boxes: int, steps: int, repeats: int, cores: int) -> dict:
     first ``steps`` steps), the cores and threads it ran with, and the load average; or
     ``{"error": line}``. The child leaves the bench's one core for ``cores`` of those the machine has."""
     env = dict(os.environ, NUMBA_NUM_THREADS=str(cores), OMP_NUM_THREADS=str(cores))
-    command = [sys.executable, "-m", "steplab.bench.stacking", str(boxes), str(steps), str(repeats), str(cores)]
+    command = [sys.executable, "-m", "steplab.bench.pit_child", str(boxes), str(steps), str(repeats), str(cores)]
     done = subprocess.run(command, env=env, capture_output=True, text=True)
     if done.returncode:
         lines = done.stderr.strip().splitlines() or ["no output"]
         return {"error": f"the {cores}-core run of {boxes:,} boxes failed (status {done.returncode}): {lines[-1]}"}
     return json.loads(done.stdout.strip().splitlines()[-1])
-
-
-def _timed_on_cores(boxes: int, steps: int, repeats: int, cores: int) -> dict:
-    """The child of :func:`on_cores`: widen to ``cores`` cores, time, return the record."""
-    from steplab.core.timing import interleaved_samples
-
-    if hasattr(os, "sched_setaffinity"):  # the bench process gave it its one core
-        try:
-            os.sched_setaffinity(0, set(sorted(range(os.cpu_count() or 1))[:cores]))
-        except OSError:
-            pass
-    import numba
-
-    load = os.getloadavg()[0] if hasattr(os, "getloadavg") else None
-    runs, settings, _ = contenders(box_pit(boxes, threads=cores), {})
-    samples = interleaved_samples({"steplab": lambda: runs["steplab"](steps)}, repeats)["steplab"]
-    times = Times.of(samples)
-    per_step = {"median": times.median / steps, "minimum": times.minimum / steps}
-    if times.cpu is not None:
-        per_step |= {"cpu_median": times.cpu.median / steps, "cpu_minimum": times.cpu.minimum / steps}
-    return {"seconds_per_step": per_step, "steps": steps, "rounds": times.rounds, "settings": settings["steplab"],
-            "cores": len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else None,
-            "solver_threads": cores, "numba_threads": int(numba.get_num_threads()),
-            "threading_layer": numba.threading_layer(),
-            "cpu_per_wall": times.threads,
-            "load_average": [load, os.getloadavg()[0] if hasattr(os, "getloadavg") else None]}
-
-
-if __name__ == "__main__":  # the child of on_cores
-    print(json.dumps(_timed_on_cores(*(int(x) for x in sys.argv[1:5]))))
