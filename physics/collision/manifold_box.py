@@ -104,14 +104,17 @@ def box_box(box_a, box_b, margin, out):
         return 0
     if sep_e > max(sep_a, sep_b) + AXIS_TOLERANCE:
         return edge_contact((box_a, edge_a), (box_b, edge_b), sep_e, margin, out)
-    if sep_b > sep_a + AXIS_TOLERANCE:
-        count = face_contact(box_b, face_b, box_a, 1, margin, out)
+    # one call of face_contact for either reference face, its box number an int64 (a call with the literal
+    # 0 or 1 compiled face_contact once for each: Numba specialises a call on its literal arguments)
+    reference = np.int64(sep_b > sep_a + AXIS_TOLERANCE)
+    box1, axis, box2 = (box_b, face_b, box_a) if reference else (box_a, face_a, box_b)
+    count = face_contact(box1, axis, box2, reference, margin, out)
+    if reference:
         normal = out.normal
         for k in range(count):  # the reference normal points from b to a
             for m in range(3):
                 normal[k, m] = -normal[k, m]
-        return count
-    return face_contact(box_a, face_a, box_b, 0, margin, out)
+    return count
 
 
 @njit(cache=True, error_model="numpy")
