@@ -135,16 +135,25 @@ class SweptSpheres(NamedTuple):
     def body_pairs(self, method: str, threads: int = 1) -> BodyPairs:
         """The pairs whose swept spheres overlap, sorted, less pairs of two pinned bodies (the grid
         searched on ``threads`` of Numba's threads, :func:`..broadphase.find_pairs`)."""
+        pairs = self.pair_rows(method, threads)
+        return BodyPairs(np.ascontiguousarray(pairs[:, 0]), np.ascontiguousarray(pairs[:, 1]))
+
+    def pair_rows(self, method: str, threads: int = 1) -> np.ndarray:
+        """:meth:`body_pairs` as rows (i, j), (K, 2) int, C order: what the narrow phase reads. Where no
+        body is pinned, the broadphase's own array (the filter's indexing and a copy back to rows cost
+        0.3 ms a step of the 10^4 box pit's 40,000 pairs)."""
         if self.active.all():
             pairs = (find_pairs(self.centers, self.reach, method, threads) if len(self.reach) > 1
                      else np.zeros((0, 2), int))
         else:
             index = np.flatnonzero(self.active)
             if len(index) < 2:
-                return BodyPairs(np.zeros(0, int), np.zeros(0, int))
+                return np.zeros((0, 2), int)
             pairs = index[find_pairs(self.centers[index], self.reach[index], method, threads)]
+        if np.all(self.inverse_masses > 0):
+            return np.ascontiguousarray(pairs)
         movable = (self.inverse_masses[pairs[:, 0]] > 0) | (self.inverse_masses[pairs[:, 1]] > 0)
-        return BodyPairs(pairs[movable, 0], pairs[movable, 1])
+        return pairs[movable]
 
 
 def changed_candidates(shapes, chords, grid, inverse_masses, removed, changed) -> list:

@@ -267,9 +267,9 @@ class RigidSolverStep:
         reach, margin = turning_bounds(q0, q1, np.ascontiguousarray(self.omega), self.bounding,
                                        (float(dt), MAX_ROTATION_REACH, float(self.margin)))
         swept = SweptSpheres.of(q0, q1, reach, self.inverse_masses, self.log.removed, self.margin)
-        pairs = swept.body_pairs(self.world.broadphase, self.world.solver.threads)
-        points = self.narrow_phase.manifolds(self.shapes, self.narrow_phase.Poses(q0, self.orientation),
-                                             np.column_stack([pairs.i, pairs.j]), self.world.shapes, margin)
+        pairs = swept.pair_rows(self.world.broadphase, self.world.solver.threads)
+        points = self.narrow_phase.manifolds(self.shapes, self.narrow_phase.Poses(q0, self.orientation), pairs,
+                                             self.world.shapes, margin)
         points = type(points)(*(np.ascontiguousarray(column) for column in points))
         points = points._replace(a=points.a.astype(np.int64, copy=False), b=points.b.astype(np.int64, copy=False),
                                  feature=points.feature.astype(np.int64, copy=False))
