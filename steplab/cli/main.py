@@ -9,6 +9,7 @@ import sys
 import warnings
 from pathlib import Path
 
+from . import compile_notice
 from .args import Parser
 from .errors import BAD_INPUT, EXIT_BAD_INPUT, EXIT_DIVERGED, EXIT_INTERRUPTED, FAILED_RUN, fail, raised
 from .interrupt import sticky_interrupt, stop_repeating
@@ -54,6 +55,7 @@ def _main(argv) -> int:
     try:  # Ctrl-C anywhere from here on ends with one line and status 130, never a traceback
         args = build_parser().parse_args(argv)
         command = args.command
+        compile_notice.arm()  # a line on a terminal when a first run compiles for long
         import numpy as np
 
         from steplab.core.registry import PluginWarning
