@@ -76,3 +76,14 @@ def test_the_watch_waits_for_numbas_import_and_then_hears_its_compiles():
     done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120)
     assert done.returncode == 0, done.stderr
     assert done.stdout.strip() == repr(MESSAGE + "\n")
+
+
+def test_arming_again_watches_with_the_first_notice(monkeypatch):
+    """``main`` called twice from Python, on a terminal: one notice, one listener."""
+    import numba  # noqa: F401  (imported: the notice registers at once, no import hook is left behind)
+
+    monkeypatch.setattr(compile_notice, "_armed", [])
+    registered = []
+    monkeypatch.setattr(CompileNotice, "register", lambda self: registered.append(self) or self)
+    first, second = compile_notice.arm(Terminal()), compile_notice.arm(Terminal())
+    assert first is second and registered == [first]  # Numba is imported here: registered at once

@@ -94,12 +94,19 @@ class _AfterNumba(importlib.abc.MetaPathFinder):
         return spec
 
 
+#: the process's notice, once armed (``main`` called again from Python arms nothing more)
+_armed: list = []
+
+
 def arm(stream=None) -> CompileNotice | None:
     """Watch Numba's compiles when ``stream`` (default stderr) is a terminal: the notice, or None."""
     stream = sys.stderr if stream is None else stream
     if not getattr(stream, "isatty", lambda: False)():
         return None
+    if _armed:
+        return _armed[0]
     notice = CompileNotice(stream, AFTER)
+    _armed.append(notice)
     if "numba" in sys.modules:
         return notice.register()
     sys.meta_path.insert(0, _AfterNumba(notice))
