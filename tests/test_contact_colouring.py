@@ -22,6 +22,7 @@ from steplab.physics.collision import CollisionWorld, PairProperties, Plane, rig
 from steplab.physics.collision.contact_colouring import (
     COLOURS,
     Colours,
+    bodies_of,
     colour_contacts,
     next_groups,
     piece,
@@ -47,7 +48,7 @@ def test_the_colours_are_a_proper_colouring_of_the_manifolds(manifolds_, side, t
     """Random manifolds (a, b, points) among 12 bodies on random sides and 3 static shapes: each colour's
     manifolds share no body (statics excepted), those of side 0 (their body a's) before side 1's, each
     side in the sorted order; every row is listed once, each manifold's rows together and in order; the
-    bodies listed side by side, each side ascending."""
+    bodies listed side by side, each side ascending, and each thread's share of them on its side."""
     pairs = sorted({(a, b): p for a, b, p in manifolds_ if a != b}.items())
     a = np.array([x for (i, _), p in pairs for x in [i] * p], np.int64)
     b = np.array([x for (_, j), p in pairs for x in [j] * p], np.int64)
@@ -70,6 +71,12 @@ def test_the_colours_are_a_proper_colouring_of_the_manifolds(manifolds_, side, t
         assert keys == sorted(keys)
     expected = [body for s in (0, 1) for body in range(12) if side[body] == s]
     assert colours.bodies.tolist() == expected and colours.body_cut == np.sum(side == 0)
+    # the velocity and position stages: every body once, and on an even thread count each side's bodies
+    # on the threads that sweep that side
+    taken = [colours.bodies[slice(*bodies_of(colours, part))].tolist() for part in range(threads)]
+    assert sorted(sum(taken, [])) == list(range(12))
+    if threads % 2 == 0:
+        assert all(side[body] == (part >= threads // 2) for part, bodies in enumerate(taken) for body in bodies)
     for parts in range(1, 5):  # the passes by the sweep's parts (gather, masses) take every row once
         rows = [k for g in range(groups) for part in range(parts) for k in range(*rows_of(colours, g, part, parts))]
         assert sorted(rows) == list(range(len(a)))

@@ -211,6 +211,13 @@ def rows_of(colours, group, part, parts):
 
 
 @njit(cache=True, inline="always")
+def bodies_of(colours, part):
+    """(first, end) in ``colours.bodies`` of part ``part`` of ``colours.threads`` (:func:`piece`): the bodies
+    that part's thread integrates and starts, those of the side it sweeps."""
+    return piece((0, colours.body_cut, len(colours.bodies)), part, colours.threads)
+
+
+@njit(cache=True, inline="always")
 def next_groups(colours, group):
     """((first, side 1's first, end) manifolds, parts, the group after them) of the sweep from group
     ``group`` of ``colours`` on: a colour of at least ``colours.serial_below`` manifolds alone, cut into

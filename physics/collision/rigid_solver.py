@@ -50,7 +50,7 @@ from typing import NamedTuple
 import numpy as np
 from numba import njit, prange
 
-from .contact_colouring import next_groups, piece, rows_of, span
+from .contact_colouring import bodies_of, next_groups, piece, rows_of, span
 from .manifold_geometry import cross3
 from .sphere_contacts import dot3
 
@@ -399,9 +399,8 @@ def integrate_velocities(bodies, sub, colours):
     """v += h a for every movable body; the gyroscopic term for every rotating one (each body its
     own: ``colours.threads`` parts in parallel, each side's bodies on the threads that sweep that side,
     :func:`.contact_colouring.piece`)."""
-    threads, bounds = colours.threads, (0, colours.body_cut, len(bodies.v))
-    for part in prange(threads):
-        _velocities_of(bodies, sub, colours.bodies, piece(bounds, part, threads))
+    for part in prange(colours.threads):
+        _velocities_of(bodies, sub, colours.bodies, bodies_of(colours, part))
 
 
 @njit(cache=True)
@@ -424,9 +423,8 @@ def _velocities_of(bodies, sub, order, span_):
 def integrate_positions(bodies, sub, colours):
     """q += h v and the orientation turned by h omega; the move and the turn since the step's start
     kept (each body its own: ``colours.threads`` parts in parallel, as :func:`integrate_velocities`)."""
-    threads, bounds = colours.threads, (0, colours.body_cut, len(bodies.q))
-    for part in prange(threads):
-        _positions_of(bodies, sub, colours.bodies, piece(bounds, part, threads))
+    for part in prange(colours.threads):
+        _positions_of(bodies, sub, colours.bodies, bodies_of(colours, part))
 
 
 @njit(cache=True)
@@ -679,9 +677,8 @@ def start_bodies(bodies, colours):
     """The bodies at the start of a step: no move yet (``dq`` zero, ``turn`` the identity), each one's
     world inverse inertia R diag(1/I1, 1/I2, 1/I3) R^T and kinetic energy 1/2 m v^2 + 1/2 omega . I omega
     (J); each body its own, ``colours.threads`` parts in parallel, as :func:`integrate_velocities`."""
-    threads, bounds = colours.threads, (0, colours.body_cut, len(bodies.v))
-    for part in prange(threads):
-        _start_of(bodies, colours.bodies, piece(bounds, part, threads))
+    for part in prange(colours.threads):
+        _start_of(bodies, colours.bodies, bodies_of(colours, part))
 
 
 @njit(cache=True)
