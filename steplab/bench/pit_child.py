@@ -12,15 +12,13 @@ import json
 import os
 import sys
 
-from steplab.core.timing import Times
+from steplab.core.timing import Times, interleaved_samples
 
 from .stacking import box_pit, contenders
 
 
 def timed_on_cores(boxes: int, steps: int, repeats: int, cores: int) -> dict:
     """The child of :func:`.stacking.on_cores`: widen to ``cores`` cores, time, return the record."""
-    from steplab.core.timing import interleaved_samples
-
     if hasattr(os, "sched_setaffinity"):  # the bench process gave it its one core
         try:
             os.sched_setaffinity(0, set(sorted(range(os.cpu_count() or 1))[:cores]))
