@@ -346,6 +346,10 @@ def test_box_pits_print_their_real_time_and_the_target_on_the_run_that_judged_it
     judged = [r for r in rows if r["target"] is not None]
     assert [(r["contender"], r["cores"], r["real_time_factor"]) for r in judged] == [("steplab, 2 threads", 2, 0.5)]
     assert "| `box_pit_30` | 30 | 2 | steplab, 2 threads | 2 | 0.5 | ≥ 1x: missed |" in bench.format_markdown(record)
+    # the judged run is the median of several processes: each one's real-time factor beside it
+    pit["on_cores"]["processes"] = [{"median": 1 / 60 / f, "real_time_factor": f} for f in (0.6, 0.5, 0.4)]
+    contender = "steplab, 2 threads (the median of 3 processes: 0.6, 0.5, 0.4x real time)"
+    assert f"| `box_pit_30` | 30 | 2 | {contender} | 2 | 0.5 | ≥ 1x: missed |" in bench.format_markdown(record)
 
 
 def test_ball_pit_scene_files_are_the_generators():

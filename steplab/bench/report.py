@@ -57,8 +57,11 @@ def box_pit_rows(record: dict) -> list[dict]:
             continue
         target = record["targets"].get(f"real_time_{label}")
         settings = dict(pit["settings"])
-        if "settings" in pit.get("on_cores", {}):
-            settings[f"steplab_{pit['on_cores']['cores']}_cores"] = pit["on_cores"]["settings"]
+        child = pit.get("on_cores", {})
+        if "settings" in child:
+            each = [f"{run['real_time_factor']:.3g}" for run in child.get("processes", ()) if "real_time_factor" in run]
+            settings[f"steplab_{child['cores']}_cores"] = child["settings"] + (
+                f" (the median of {len(each)} processes: {', '.join(each)}x real time)" if len(each) > 1 else "")
         for name, factor in pit["real_time_factor"].items():
             cores = pit.get("cores", {}).get(name, 1)
             judged = target is not None and target.get("cores", 1) == cores and name.startswith("steplab")
