@@ -104,6 +104,18 @@ def test_the_sides_halve_the_moving_bodies_across_their_widest_extent():
     assert not sides(q, np.zeros(101, bool)).any()
 
 
+def test_of_two_wide_extents_the_sides_cut_the_numbering_into_fewer_runs():
+    """A 20 x 20 lattice numbered along x, then y (as the box pit's): cut across x, each row of 20 is two
+    runs (40 side changes along the numbering); cut across y, the numbering changes side once. Both
+    extents are wide, so the cut is across y; a lattice 3 times longer along x is cut across x."""
+    k = np.arange(400)
+    q = np.column_stack([k % 20, k // 20, np.zeros(400)]).astype(float)
+    side = sides(q, np.ones(400, bool))
+    assert np.all(side == (q[:, 1] >= 10)) and np.count_nonzero(np.diff(side)) == 1
+    q[:, 0] *= 3.0
+    assert np.all(sides(q, np.ones(400, bool)) == (q[:, 0] >= 30))
+
+
 def test_a_body_in_more_manifolds_than_colours_goes_to_the_overflow():
     """Body 0 touching COLOURS + 2 others: the last two manifolds find every colour taken."""
     a = np.zeros(COLOURS + 2, np.int64)

@@ -158,16 +158,37 @@ def colour_contacts(a, b, side, threads):
 
 def sides(q, movable):
     """Each body's side, 0 or 1 (int64), of a plane that halves the ``movable`` bodies' centres ``q``
-    (N, 3) across their widest extent: the two halves of a pile touch along the plane alone (the 10^4
-    box pit's step 30: 0.6 % of its manifolds join the two sides), so two threads that each take one
-    side hand few bodies to each other. Pinned bodies are on the side of their centre."""
+    (N, 3) across one of their wide extents: the two halves of a pile touch along the plane alone (the
+    10^4 box pit's step 30: 0.6 % of its manifolds join the two sides), so two threads that each take
+    one side hand few bodies to each other. Pinned bodies are on the side of their centre.
+
+    Of the extents at least :data:`WIDE` of the widest, the plane is across the one whose sides cut
+    the bodies' numbering into the fewest runs. A body's rows of v, omega and the other body columns
+    share cache lines with its neighbours in the numbering (a line holds 2.7 rows of v), and where
+    two neighbours are on two sides, the two threads write one line: each write takes the line
+    from the other core's cache. The 10^4 box pit is numbered along x, then y, then layer by layer;
+    across x (as wide as y) its sides changed 364 times along the numbering, 317 of v's 3,750 lines
+    written by both threads; across y 62 to 80 times. On the machine's slow moments, when a line
+    crosses between the cores more slowly, that took its 2-thread step from 16.7 to 18.1 ms to 14.7
+    to 15.9 ms (docs/performance.md); the bytes do not depend on the sides."""
     if not movable.any():
         return np.zeros(len(q), np.int64)
     moving = q[movable]
     # a column at a time: NumPy's reductions along the first axis of an (N, 3) array took 0.43 ms of
     # the 10^4 pit's step, against 0.13 ms for the whole of this
-    axis = int(np.argmax([np.ptp(moving[:, k]) for k in range(3)]))
-    return (q[:, axis] >= np.median(moving[:, axis])).astype(np.int64)
+    extent = [np.ptp(moving[:, k]) for k in range(3)]
+    chosen, fewest = None, -1
+    for axis in (k for k in range(3) if extent[k] >= WIDE * max(extent)):
+        side = (q[:, axis] >= np.median(moving[:, axis])).astype(np.int64)
+        runs = np.count_nonzero(side[1:] != side[:-1])
+        if chosen is None or runs < fewest:
+            chosen, fewest = side, runs
+    return chosen
+
+
+#: an extent of the pile this fraction of its widest is wide enough to be cut across (:func:`sides`): the
+#: plane's section, where the two sides' bodies touch, is then at most 1 / WIDE the narrowest possible
+WIDE = 0.75
 
 
 @njit(cache=True)
