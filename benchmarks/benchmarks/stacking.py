@@ -104,7 +104,8 @@ class StackingRatios:
 
 class BoxPitOnCores:
     """Real time per wall time of the first 10 steps of 10^4 boxes falling into a box, on 2 cores with 2 Numba
-    threads (:func:`steplab.bench.stacking.on_cores`: a child process, this one being pinned to one thread)."""
+    threads (:func:`steplab.bench.stacking.on_cores`: the median of three child processes, this one being pinned to
+    one thread)."""
 
     unit = "x real time"
     timeout = 900

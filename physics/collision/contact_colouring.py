@@ -168,9 +168,9 @@ def sides(q, movable):
     two neighbours are on two sides, the two threads write one line: each write takes the line
     from the other core's cache. The 10^4 box pit is numbered along x, then y, then layer by layer;
     across x (as wide as y) its sides changed 364 times along the numbering, 317 of v's 3,750 lines
-    written by both threads; across y 62 to 80 times. On the machine's slow moments, when a line
-    crosses between the cores more slowly, that took its 2-thread step from 16.7 to 18.1 ms to 14.7
-    to 15.9 ms (docs/performance.md); the bytes do not depend on the sides."""
+    written by both threads; across y 62 to 80 times. In the machine's slow state, which hands a line
+    between the cores more slowly, that took its 2-thread step from 16.7 to 18.1 ms to 14.7 to 16.7 ms
+    (medians 17.1 and 15.5; docs/performance.md); the bytes do not depend on the sides."""
     if not movable.any():
         return np.zeros(len(q), np.int64)
     moving = q[movable]
