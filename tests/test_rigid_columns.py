@@ -1,7 +1,7 @@
 """The rigid solver step's bookkeeping kernels against their definitions written plainly (issue 26).
 
-The warm start's match of each point with the last step's, the impacts the log records, and the
-greedy colouring are compiled and cut into parts on the solver's threads; each is checked here
+The warm start's match of each point with the last step's and the impacts the log records are
+compiled and cut into parts on the solver's threads; each is checked here
 against a few lines of Python that say what it must give, on random sorted points, on 1 to 3 threads.
 """
 
@@ -11,7 +11,6 @@ import numpy as np
 from hypothesis import given, settings
 from hypothesis import strategies as st
 from steplab.physics.collision import rigid_solver as rs
-from steplab.physics.collision.contact_colouring import COLOURS, colour_contacts
 from steplab.physics.collision.rigid_columns import first_impacts
 
 
@@ -57,35 +56,3 @@ def test_first_impacts_are_each_pairs_first_newly_pressed_point(seed, count, thr
             seen.add(pair)
             expected.append(int(place[i]))
     assert first_impacts(key, place, rows, previous_total, total, threads).tolist() == expected
-
-
-@settings(max_examples=60, deadline=None)
-@given(st.integers(0, 2**32 - 1), st.integers(1, 30), st.integers(0, 150), st.booleans())
-def test_the_colours_are_the_plain_greedy_colouring(seed, bodies, count, hub):
-    """Manifolds in their sorted order, each given the lowest colour neither of its bodies has (static
-    shapes none), or the overflow when all COLOURS are taken: the layout lists the colours in turn,
-    each colour's manifolds in their sorted order, the overflow last."""
-    rng = np.random.default_rng(seed)
-    a, b, _ = sorted_points(rng, bodies, count)
-    if hub:  # one body in more manifolds than there are colours
-        a, b = np.zeros(COLOURS + 5, np.int64), np.arange(1, COLOURS + 6, dtype=np.int64)
-        bodies = COLOURS + 6
-    starts = [k for k in range(len(a)) if k == 0 or (a[k], b[k]) != (a[k - 1], b[k - 1])]
-    has = [set() for _ in range(bodies)]
-    colour = []
-    for k in starts:
-        taken = has[a[k]] | (has[b[k]] if b[k] >= 0 else set())
-        c = min(set(range(COLOURS + 1)) - taken)
-        if c < COLOURS:
-            has[a[k]].add(c)
-            if b[k] >= 0:
-                has[b[k]].add(c)
-        colour.append(c)
-    ends = starts[1:] + [len(a)]
-    expected = [k for c in sorted(set(colour)) for m, (s, e) in enumerate(zip(starts, ends)) if colour[m] == c
-                for k in range(s, e)]
-    order, colours = colour_contacts(a, b, np.zeros(bodies, np.int64), 2)
-    assert order.tolist() == expected
-    sizes = [colour.count(c) for c in sorted(set(colour))]
-    assert np.diff(colours.colour_start).tolist() == sizes
-    assert colours.parallel == len([c for c in set(colour) if c < COLOURS])

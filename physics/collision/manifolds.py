@@ -40,7 +40,7 @@ import numpy as np
 from numba import njit, prange
 
 from .. import quaternion as quat
-from .contact_colouring import span
+from .contact_domains import span
 from .manifold_box import box_box, box_plane
 from .manifold_capsule_box import box_capsule
 from .manifold_geometry import SCRATCH_WORDS, scratch_in, to_local

@@ -14,7 +14,7 @@ import numpy as np
 from numba import njit, prange
 
 from .approach import AT_REST, approach_speed
-from .contact_colouring import rows_of, span
+from .contact_domains import rows_of, span
 from .resting import rest_speed
 from .sphere_contacts import dot3, row3
 
@@ -33,7 +33,7 @@ def tangent_basis(n):
 
 
 @njit(cache=True, parallel=True)
-def gather(points, order, movers, materials, previous, context, out, colours):
+def gather(points, order, movers, materials, previous, context, out, layout):
     """Fill ``out`` (a :class:`.rigid_solver.RigidContactColumns` of C rows): row k from point
     ``order[k]`` of ``points`` (:class:`.manifolds.ManifoldPoints`), so the points are taken in the
     solver's order without a permuted copy of them.
@@ -45,14 +45,14 @@ def gather(points, order, movers, materials, previous, context, out, colours):
     (:func:`.rigid_solver.previous_rows`), and those contacts' columns, whose impulses warm-start
     the new ones (the tangential one as a world vector, pt1 t1 + pt2 t2 of the last step's
     tangents, taken into the new contact plane); ``context`` = (the world's rest speed, dt). Each row its own:
-    ``colours.threads`` parts in parallel, each the rows its thread will sweep
-    (:func:`.contact_colouring.rows_of`), the same bytes on any number of threads.
+    group by group as the sweep takes them (:mod:`.contact_domains`), so each row is written by the
+    thread that will sweep it; the same bytes on any number of threads.
     """
-    threads = colours.threads
-    for part in prange(threads):  # (points and order apart: Numba's parallel loop takes no tuple of a NamedTuple)
-        for group in range(len(colours.colour_start) - 1):
-            _gather_rows((points, order), movers, materials, previous, context, out,
-                         rows_of(colours, group, part, threads))
+    start = layout.phase_start
+    for phase in range(len(start) - 1):
+        for g in prange(start[phase + 1] - start[phase]):
+            # (points and order apart: Numba's parallel loop takes no tuple of a NamedTuple)
+            _gather_rows((points, order), movers, materials, previous, context, out, rows_of(layout, start[phase] + g))
 
 
 @njit(cache=True)

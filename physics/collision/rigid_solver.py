@@ -50,7 +50,7 @@ from typing import NamedTuple
 import numpy as np
 from numba import njit, prange
 
-from .contact_colouring import bodies_of, next_groups, piece, rows_of, span
+from .contact_domains import bodies_of, rows_of, span
 from .manifold_geometry import cross3
 from .sphere_contacts import dot3
 
@@ -251,7 +251,7 @@ def _geometry(moves, a, b, n, ra, rb, s0):
 def _geometry_rows(bodies, contacts, rows):
     """Each contact's separation and levers now (:func:`_geometry`) into ``s``, ``la``, ``lb``, for the
     contacts ``rows`` = (first, end) (at the start of the step: :func:`prepare`; after each position
-    stage the first relax sweep computes them, :func:`_sweep_blocks`)."""
+    stage the first relax sweep computes them, :func:`_sweep_rows`)."""
     moves = (bodies.q, bodies.dq, bodies.turn, bodies.rounding)
     a_, b_, normal, ra, rb, s0 = contacts.a, contacts.b, contacts.normal, contacts.ra, contacts.rb, contacts.s0
     separation, lever_a, lever_b = contacts.s, contacts.la, contacts.lb
@@ -264,7 +264,7 @@ def _geometry_rows(bodies, contacts, rows):
 @njit(cache=True, inline="always")
 def _bodies(state, a, b):
     """Bodies a and b's (v, omega) as tuples, which a point's impulses then change in registers
-    (:func:`_sweep_blocks`); b < 0, a static shape: zeros. ``state`` = :func:`_state`."""
+    (:func:`_sweep_rows`); b < 0, a static shape: zeros. ``state`` = :func:`_state`."""
     v, omega = state[0], state[1]
     zero = (0.0, 0.0, 0.0)
     return (_row(v, a), _row(omega, a)), ((_row(v, b), _row(omega, b)) if b >= 0 else (zero, zero))
@@ -328,13 +328,14 @@ def _apply_angular(pair, state, a, b, m):
 # --- the stages -----------------------------------------------------------------------------
 
 @njit(cache=True, parallel=True)
-def prepare(bodies, contacts, colours):
+def prepare(bodies, contacts, layout):
     """Each contact's effective masses along n, t1, t2 (into ``contacts.mass``), v_n at the start,
-    and its separation and levers (:func:`_geometry_rows`); each contact's own, in parallel."""
-    threads = colours.threads
-    for part in prange(threads):  # one parallel region for both; each group's rows by its sweep's parts
-        for group in range(len(colours.colour_start) - 1):
-            rows = rows_of(colours, group, part, threads)
+    and its separation and levers (:func:`_geometry_rows`); each contact's own, group by group as the
+    sweep takes them (:func:`_sweep`), so each row is left in the cache of the thread that sweeps it."""
+    start = layout.phase_start
+    for phase in range(len(start) - 1):
+        for g in prange(start[phase + 1] - start[phase]):
+            rows = rows_of(layout, start[phase] + g)
             _prepare_rows(bodies, contacts, rows)
             _geometry_rows(bodies, contacts, rows)
 
@@ -395,12 +396,11 @@ def _gyroscopic(spin, body, h, kind):
 
 
 @njit(cache=True, parallel=True)
-def integrate_velocities(bodies, sub, colours):
+def integrate_velocities(bodies, sub, layout):
     """v += h a for every movable body; the gyroscopic term for every rotating one (each body its
-    own: ``colours.threads`` parts in parallel, each side's bodies on the threads that sweep that side,
-    :func:`.contact_colouring.piece`)."""
-    for part in prange(colours.threads):
-        _velocities_of(bodies, sub, colours.bodies, bodies_of(colours, part))
+    own: the domains in parallel, each on the thread that sweeps its contacts)."""
+    for domain in prange(len(layout.body_start) - 1):
+        _velocities_of(bodies, sub, layout.bodies, bodies_of(layout, domain))
 
 
 @njit(cache=True)
@@ -420,11 +420,11 @@ def _velocities_of(bodies, sub, order, span_):
 
 
 @njit(cache=True, parallel=True)
-def integrate_positions(bodies, sub, colours):
+def integrate_positions(bodies, sub, layout):
     """q += h v and the orientation turned by h omega; the move and the turn since the step's start
-    kept (each body its own: ``colours.threads`` parts in parallel, as :func:`integrate_velocities`)."""
-    for part in prange(colours.threads):
-        _positions_of(bodies, sub, colours.bodies, bodies_of(colours, part))
+    kept (each body its own: the domains in parallel, as :func:`integrate_velocities`)."""
+    for domain in prange(len(layout.body_start) - 1):
+        _positions_of(bodies, sub, layout.bodies, bodies_of(layout, domain))
 
 
 @njit(cache=True)
@@ -517,23 +517,22 @@ def _holds_nothing(pt, pr, k, any_rolling):
 
 
 @njit(cache=True, parallel=True)
-def _sweep(bodies, contacts, sub, use_bias, colours, geometry):
-    """One Gauss-Seidel sweep over the contacts, colour by colour (:mod:`.contact_colouring`): each
-    contact's normal impulse, then friction and rolling. A colour's manifolds share no body: they are
-    solved on all threads at once, the same bytes as on one; small colours and the overflow one after
-    the other on one thread, in one parallel region (:func:`.contact_colouring.next_groups`)."""
-    group = 0
-    while group < len(colours.colour_start) - 1:
-        bounds, parts, group = next_groups(colours, group)
-        for part in prange(parts):
-            _sweep_blocks(bodies, contacts, (sub, use_bias, geometry), colours, piece(bounds, part, parts))
+def _sweep(bodies, contacts, sub, use_bias, layout, geometry):
+    """One Gauss-Seidel sweep over the contacts, phase by phase (:mod:`.contact_domains`): each
+    contact's normal impulse, then friction and rolling. The groups of a phase share no body: each
+    is swept by one thread, all at once, the same bytes as one after the other. (Calling the sweep's
+    kernel outside a parallel region for a phase of one group made it 1.5 times slower: Numba's code
+    for a parallel loop's body is faster.)"""
+    start = layout.phase_start
+    for phase in range(len(start) - 1):
+        for g in prange(start[phase + 1] - start[phase]):
+            _sweep_rows(bodies, contacts, (sub, use_bias, geometry), rows_of(layout, start[phase] + g))
 
 
 @njit(cache=True)
-def _sweep_blocks(bodies, contacts, how, colours, blocks):
-    """:func:`_sweep` over the manifolds ``blocks`` = (first, end) (their rows are consecutive);
-    ``how`` = (the substep, whether the bias pushes, whether to compute each point's separation and
-    levers first).
+def _sweep_rows(bodies, contacts, how, rows_):
+    """:func:`_sweep` over the contacts ``rows_`` = (first, end); ``how`` = (the substep, whether the bias
+    pushes, whether to compute each point's separation and levers first).
 
     The separation and levers depend on the bodies' moves alone, which change only in the position
     stage: the first relax sweep after it computes them (:func:`_geometry`) and keeps them for the
@@ -554,7 +553,7 @@ def _sweep_blocks(bodies, contacts, how, colours, blocks):
     into +0.0). Most points of a falling pile are such, speculative points that are never pressed:
     75 to 100 % of the 10^4 box pit's in its first 30 steps, which made the skip halve its sweeps."""
     sub, use_bias, geometry = how
-    state, rows = _state(bodies), colours.rows
+    state = _state(bodies)
     moves = (bodies.q, bodies.dq, bodies.turn, bodies.rounding)
     ra, rb, s0 = contacts.ra, contacts.rb, contacts.s0
     a_, b_, normal, separation = contacts.a, contacts.b, contacts.normal, contacts.s
@@ -562,7 +561,7 @@ def _sweep_blocks(bodies, contacts, how, colours, blocks):
     friction, rolling, pt, pr = contacts.friction, contacts.rolling, contacts.pt, contacts.pr
     tangential = (contacts.tangent, pt, mass, friction, pn)
     rolls, any_rolling = (pr, rolling, pn), sub.any_rolling
-    for k in range(rows[blocks[0]], rows[blocks[1]]):
+    for k in range(rows_[0], rows_[1]):
         a, b = a_[k], b_[k]
         n = _row(normal, k)
         if geometry:  # as _geometry_rows; written out: a helper taking the columns as a tuple made the
@@ -603,26 +602,24 @@ def _store_pair(state, a, b, pair):
 
 
 @njit(cache=True, parallel=True)
-def warm_start(bodies, contacts, any_rolling, colours):
-    """Each contact's impulses of the last substep applied again: a good first guess. By colour, as
+def warm_start(bodies, contacts, any_rolling, layout):
+    """Each contact's impulses of the last substep applied again: a good first guess. Phase by phase, as
     :func:`_sweep`: a body's impulses are added in the one order, whatever the threads. ``any_rolling``: as
     :attr:`RigidSubstep.any_rolling`."""
-    group = 0
-    while group < len(colours.colour_start) - 1:
-        bounds, parts, group = next_groups(colours, group)
-        for part in prange(parts):
-            _warm_blocks(bodies, contacts, (colours, any_rolling), piece(bounds, part, parts))
+    start = layout.phase_start
+    for phase in range(len(start) - 1):
+        for g in prange(start[phase + 1] - start[phase]):
+            _warm_rows(bodies, contacts, any_rolling, rows_of(layout, start[phase] + g))
 
 
 @njit(cache=True)
-def _warm_blocks(bodies, contacts, order, blocks):
-    """:func:`warm_start` of the manifolds ``blocks`` = (first, end) (their rows are consecutive; each
-    point's bodies changed in registers, as in :func:`_sweep_blocks`); ``order`` = (colours, any_rolling)."""
-    colours, any_rolling = order
-    state, rows = _state(bodies), colours.rows
+def _warm_rows(bodies, contacts, any_rolling, rows_):
+    """:func:`warm_start` of the contacts ``rows_`` = (first, end) (each point's bodies changed in
+    registers, as in :func:`_sweep_rows`)."""
+    state = _state(bodies)
     a_, b_, n, t, lever_a, lever_b = contacts.a, contacts.b, contacts.normal, contacts.tangent, contacts.la, contacts.lb
     pn_, pt, pr, rolling = contacts.pn, contacts.pt, contacts.pr, contacts.rolling
-    for k in range(rows[blocks[0]], rows[blocks[1]]):
+    for k in range(rows_[0], rows_[1]):
         if pn_[k] == 0.0 and _holds_nothing(pt, pr, k, any_rolling):
             continue  # no impulse to apply again (a speculative point not yet pressed)
         a, b = a_[k], b_[k]
@@ -636,16 +633,16 @@ def _warm_blocks(bodies, contacts, order, blocks):
 
 
 @njit(cache=True)
-def substep(bodies, contacts, sub, colours):
+def substep(bodies, contacts, sub, layout):
     """One substep of ``sub.h``: velocities, warm start, solve, positions, relax; the contacts in
-    the order of ``colours`` (:func:`.contact_colouring.colour_contacts`)."""
-    integrate_velocities(bodies, sub, colours)
-    warm_start(bodies, contacts, sub.any_rolling, colours)
+    the order of ``layout`` (:func:`.contact_domains.lay_out`)."""
+    integrate_velocities(bodies, sub, layout)
+    warm_start(bodies, contacts, sub.any_rolling, layout)
     for _ in range(sub.iterations):
-        _sweep(bodies, contacts, sub, True, colours, False)
-    integrate_positions(bodies, sub, colours)
+        _sweep(bodies, contacts, sub, True, layout, False)
+    integrate_positions(bodies, sub, layout)
     for iteration in range(sub.iterations):  # the first computes the separations and levers now
-        _sweep(bodies, contacts, sub, False, colours, iteration == 0)
+        _sweep(bodies, contacts, sub, False, layout, iteration == 0)
     pn, total, most = contacts.pn, contacts.total, contacts.most
     for k in range(len(pn)):
         total[k] += pn[k]
@@ -673,12 +670,12 @@ def _energy_line(inertias, body, v, w, dv, dw):
 
 
 @njit(cache=True, parallel=True)
-def start_bodies(bodies, colours):
+def start_bodies(bodies, layout):
     """The bodies at the start of a step: no move yet (``dq`` zero, ``turn`` the identity), each one's
     world inverse inertia R diag(1/I1, 1/I2, 1/I3) R^T and kinetic energy 1/2 m v^2 + 1/2 omega . I omega
-    (J); each body its own, ``colours.threads`` parts in parallel, as :func:`integrate_velocities`."""
-    for part in prange(colours.threads):
-        _start_of(bodies, colours.bodies, bodies_of(colours, part))
+    (J); each body its own, the domains in parallel, as :func:`integrate_velocities`."""
+    for domain in prange(len(layout.body_start) - 1):
+        _start_of(bodies, layout.bodies, bodies_of(layout, domain))
 
 
 @njit(cache=True)
@@ -707,7 +704,7 @@ def _island(parent, body):
 
 
 @njit(cache=True, parallel=True)
-def _restitution(bodies, contacts, sub, colours):
+def _restitution(bodies, contacts, sub, layout):
     """The restitution pass's extra normal impulses, applied; returns them, (C,), and whether each
     body was given one (N,) (if only a zero).
 
@@ -719,28 +716,27 @@ def _restitution(bodies, contacts, sub, colours):
     the speed just before a contact's first impulse was raised by its neighbour's impulse in the
     same step: bouncing that back too gave the cradle 1.31 times its energy.
 
-    One Gauss-Seidel pass per iteration in the sweep's order, colour by colour as :func:`_sweep`
-    (a colour's manifolds share no body: on all threads at once, the same bytes as on one)."""
+    One Gauss-Seidel pass per iteration in the sweep's order, phase by phase as :func:`_sweep` (a
+    phase's groups share no body: each on one thread, all at once, the same bytes as on one)."""
     extra, touched = np.zeros(len(contacts.a)), np.zeros(len(bodies.v), np.bool_)
+    start = layout.phase_start
     for _ in range(sub.iterations):
-        group = 0
-        while group < len(colours.colour_start) - 1:
-            bounds, parts, group = next_groups(colours, group)
-            for part in prange(parts):
-                _restitution_blocks(bodies, contacts, (extra, touched), colours, piece(bounds, part, parts))
+        for phase in range(len(start) - 1):
+            for g in prange(start[phase + 1] - start[phase]):
+                _restitution_rows(bodies, contacts, (extra, touched), rows_of(layout, start[phase] + g))
     return extra, touched
 
 
 @njit(cache=True)
-def _restitution_blocks(bodies, contacts, given, colours, blocks):
-    """:func:`_restitution` over the manifolds ``blocks`` = (first, end); ``given`` = (extra, touched)
-    (each point's bodies changed in registers, as in :func:`_sweep_blocks`)."""
-    state, rows = _state(bodies), colours.rows
+def _restitution_rows(bodies, contacts, given, rows_):
+    """:func:`_restitution` over the contacts ``rows_`` = (first, end); ``given`` = (extra, touched)
+    (each point's bodies changed in registers, as in :func:`_sweep_rows`)."""
+    state = _state(bodies)
     a_, b_, normal, lever_a, lever_b = contacts.a, contacts.b, contacts.normal, contacts.la, contacts.lb
     vn0, hit, threshold, mass, restitution, pn = (contacts.vn0, contacts.hit, contacts.threshold, contacts.mass,
                                                   contacts.restitution, contacts.pn)
     extra, touched = given
-    for k in range(rows[blocks[0]], rows[blocks[1]]):
+    for k in range(rows_[0], rows_[1]):
         approach = max(vn0[k], hit[k])  # +inf: never hit in the step
         if approach >= -threshold[k]:
             continue
@@ -758,7 +754,7 @@ def _restitution_blocks(bodies, contacts, given, colours, blocks):
 
 
 @njit(cache=True, parallel=True)
-def _limit_to_the_energy_taken(bodies, contacts, given, start, threads):
+def _limit_to_the_energy_taken(bodies, contacts, given, start, layout):
     """Each island's restitution impulses scaled by the largest a in [0, 1] that gives back no more
     kinetic energy than the step took from it.
 
@@ -779,7 +775,7 @@ def _limit_to_the_energy_taken(bodies, contacts, given, start, threads):
     ``given`` = (the pass's impulses, whether each body was given one); ``start`` = (v, omega) before
     the pass. An island none of whose bodies was given an impulse has E(a) = E1 for every a (its
     velocities did not change: G = C = 0), so a = 1: its energies are not computed. The others'
-    bodies' terms are computed on ``threads`` threads, and summed per island in the bodies' order.
+    bodies' terms are computed domain by domain in parallel, and summed per island in the bodies' order.
     """
     v, omega, v1, w1 = bodies.v, bodies.omega, start[0], start[1]
     extra, touched = given
@@ -794,8 +790,8 @@ def _limit_to_the_energy_taken(bodies, contacts, given, start, threads):
         root[body] = _island(parent, body)
         live[root[body]] |= touched[body]
     terms = np.empty((n, 3))  # each body's part of its island's budget D, slope G and curvature C
-    for part in prange(threads):
-        _energy_terms(bodies, (v1, w1), (root, live), terms, span(0, n, part, threads))
+    for domain in prange(len(layout.body_start) - 1):
+        _energy_terms(bodies, (v1, w1), (root, live), terms, layout.bodies, bodies_of(layout, domain))
     budget, slope, curve = np.zeros(n), np.zeros(n), np.zeros(n)
     for body in range(n):
         if live[root[body]]:
@@ -822,15 +818,16 @@ def _limit_to_the_energy_taken(bodies, contacts, given, start, threads):
 
 
 @njit(cache=True)
-def _energy_terms(bodies, start, islands, terms, span_):
-    """:func:`_limit_to_the_energy_taken`'s terms of the bodies ``span_`` = (first, end) in live
+def _energy_terms(bodies, start, islands, terms, order, span_):
+    """:func:`_limit_to_the_energy_taken`'s terms of the bodies ``order[span_[0]:span_[1]]`` in live
     islands: E0 + W - E1, G and C of each."""
     v, omega, inverse_mass, accel, dq, energy = (bodies.v, bodies.omega, bodies.inverse_mass, bodies.accel, bodies.dq,
                                                  bodies.energy)
     inertias = (inverse_mass, bodies.inverse_principal, bodies.orientation)
     v1, w1 = start
     root, live = islands
-    for body in range(span_[0], span_[1]):
+    for i in range(span_[0], span_[1]):
+        body = order[i]
         if not live[root[body]]:
             continue
         vb, wb = _row(v1, body), _row(w1, body)
@@ -843,20 +840,20 @@ def _energy_terms(bodies, start, islands, terms, span_):
 
 
 @njit(cache=True)
-def finish(bodies, contacts, sub, colours):
+def finish(bodies, contacts, sub, layout):
     """The end of a step: the largest residual, then the restitution pass; returns the residual.
 
     The residual of contact k is |min(v_n + max(s, 0) / h, P / m_n)| (m/s), the natural residual
     of its complementarity condition, as in :func:`.sequential_impulses.finish` (each contact its
-    own: ``colours.threads`` parts in parallel, the largest of theirs). The restitution
+    own: group by group in parallel, the largest of theirs). The restitution
     pass (:func:`_restitution`) then bounces the contacts hit, each island's impulses limited to
     the energy the step took from it (:func:`_limit_to_the_energy_taken`): with eps <= 1 no
     island ends a step with more kinetic energy than it started with plus the forces' work.
     """
-    residual = _largest_residual(bodies, contacts, sub, colours)
+    residual = _largest_residual(bodies, contacts, sub, layout)
     start = (bodies.v.copy(), bodies.omega.copy())
-    given = _restitution(bodies, contacts, sub, colours)
-    _limit_to_the_energy_taken(bodies, contacts, given, start, colours.threads)
+    given = _restitution(bodies, contacts, sub, layout)
+    _limit_to_the_energy_taken(bodies, contacts, given, start, layout)
     total, extra = contacts.total, given[0]
     for k in range(len(total)):
         total[k] += extra[k]
@@ -864,20 +861,17 @@ def finish(bodies, contacts, sub, colours):
 
 
 @njit(cache=True, parallel=True)
-def _largest_residual(bodies, contacts, sub, colours):
-    """The largest of :func:`finish`'s residuals, each thread over the rows it swept (the largest of a
-    set, whatever the parts; threads that read a contiguous half of the rows each instead took half of
-    theirs, 4 MB of columns on the 10^4 box pit, from the other core's cache)."""
-    threads = colours.threads
-    largest = np.zeros(threads)
-    for part in prange(threads):
-        for group in range(len(colours.colour_start) - 1):
-            rows = rows_of(colours, group, part, threads)
-            largest[part] = max(largest[part], _residual_of(bodies, contacts, sub, rows))
-    residual = 0.0
-    for part in range(threads):
-        residual = max(residual, largest[part])
-    return residual
+def _largest_residual(bodies, contacts, sub, layout):
+    """The largest of :func:`finish`'s residuals, group by group as the sweep takes them (the largest of
+    a set, whatever the order; each thread reads the rows it swept: threads that read a contiguous
+    half of the rows each took half of theirs, 4 MB of columns on the 10^4 box pit, from the other
+    core's cache)."""
+    start = layout.phase_start
+    largest = np.zeros(start[-1])
+    for phase in range(len(start) - 1):
+        for g in prange(start[phase + 1] - start[phase]):
+            largest[start[phase] + g] = _residual_of(bodies, contacts, sub, rows_of(layout, start[phase] + g))
+    return largest.max()
 
 
 @njit(cache=True)
@@ -896,11 +890,11 @@ def _residual_of(bodies, contacts, sub, rows):
 
 
 @njit(cache=True)
-def step(bodies, contacts, sub, substeps, colours):
+def step(bodies, contacts, sub, substeps, layout):
     """A whole step under constant accelerations: ``substeps`` substeps, then :func:`finish`."""
     for _ in range(substeps):
-        substep(bodies, contacts, sub, colours)
-    return finish(bodies, contacts, sub, colours)
+        substep(bodies, contacts, sub, layout)
+    return finish(bodies, contacts, sub, layout)
 
 
 @njit(cache=True, parallel=True)

@@ -1,7 +1,7 @@
 """One physics step of the contact solver on rigid bodies that rotate, read as its stages.
 
-    forces -> bounds (speed and rotation) -> broadphase -> manifolds -> sweep order (sorted, or
-           colours) -> warm start by feature -> substeps (velocities and the gyroscopic term,
+    forces -> bounds (speed and rotation) -> broadphase -> manifolds -> sweep order (domains,
+           each sorted) -> warm start by feature -> substeps (velocities and the gyroscopic term,
               solve, positions and orientations, relax) -> restitution -> impacts
 
 ``[collisions] method = "solver"`` on a scene with boxes, capsules or spinning spheres runs this
@@ -37,7 +37,7 @@ from .. import quaternion as quat
 from . import rigid_solver as rs
 from .chords import turning_bounds
 from .contact_buffer import Materials
-from .contact_colouring import colour_contacts, in_sorted_order, sides
+from .contact_domains import cut_into_domains, domain_count, lay_out
 from .events import CollisionLog, ImpactBlock, cancel_triggers
 from .heap import keep_freed_memory
 from .manifolds import BOX, CAPSULE, SPHERE, check_shapes
@@ -69,13 +69,6 @@ MAX_ROTATION_REACH = 2.0
 #: steps 1 to 30 carried 51,000 points a step against 32,000, and the same 9,400 of them pressed
 #: (docs/performance.md); every study scene gives the same bytes at either width
 SPECULATIVE_OF_RADIUS = 1 / 16
-#: scenes of this many bodies or more are swept colour by colour on the solver's threads
-#: (:mod:`.contact_colouring`, which says why smaller ones keep the sorted order on one thread): a step
-#: makes about 12 parallel regions per colour, which cost more than a small scene's sweep, and on a
-#: loaded machine each waits for its slowest thread's time slice
-COLOURED_BODIES = 2048
-
-
 @dataclasses.dataclass(frozen=True)
 class RigidScene:
     """What the solver needs of a scene's rigid bodies besides the translational state.
@@ -230,17 +223,17 @@ class RigidSolverStep:
         q0, v0 = state[0], state[1]
         a = self.field if self.field is not None else np.asarray(self.model.acceleration(t, q0, v0), dtype=float)
         points = self.contact_points(t, y, dt, a)
-        bodies, contacts, sub, colours = self.columns(q0, v0, a, points, dt)
+        bodies, contacts, sub, layout = self.columns(q0, v0, a, points, dt)
         s = self.world.solver
         if self.field is not None:  # constant forces: the whole step in one compiled call
-            residual = rs.step(bodies, contacts, sub, s.substeps, colours)
+            residual = rs.step(bodies, contacts, sub, s.substeps, layout)
         else:
             for k in range(s.substeps):
                 if k:
                     bodies = bodies._replace(accel=np.ascontiguousarray(
                         self.model.acceleration(t + k * sub.h, bodies.q, bodies.v), dtype=float))
-                rs.substep(bodies, contacts, sub, colours)
-            residual = rs.finish(bodies, contacts, sub, colours)
+                rs.substep(bodies, contacts, sub, layout)
+            residual = rs.finish(bodies, contacts, sub, layout)
         self._conclude(t, dt, contacts, residual)
         if not (np.isfinite(state).all() and np.isfinite(bodies.omega).all()):
             raise FloatingPointError(f"the contact solver's state became non-finite in the step from t = {t:g} s "
@@ -280,8 +273,8 @@ class RigidSolverStep:
 
     def columns(self, q0, v0, a, points, dt):
         """The kernels' bodies, contacts (warm-started, effective masses, laid out in the sweep order:
-        sorted, or colour by colour from :data:`COLOURED_BODIES` bodies, :mod:`.contact_colouring`),
-        step context and that order's :class:`.contact_colouring.Colours`."""
+        domain by domain, each sorted, :mod:`.contact_domains`), step context and that order's
+        :class:`.contact_domains.SweepLayout`."""
         s = self.world.solver
         h = dt / s.substeps
         n = len(q0)
@@ -295,20 +288,18 @@ class RigidSolverStep:
         key = (points.a, points.b, points.feature)
         old = self._previous
         rows = rs.previous_rows(old.key, key, old.place, s.threads)
-        if n >= COLOURED_BODIES:  # coloured, on the solver's threads (the same bytes on any number of them)
-            order, colours = colour_contacts(points.a, points.b, sides(q0, self.inverse_masses > 0), s.threads)
-        else:
-            order, colours = in_sorted_order(points.a, points.b, n)
-        rs.start_bodies(bodies, colours)
+        count = domain_count(n)  # of the scene alone: the same bytes on any number of threads
+        order, layout = lay_out(points.a, points.b, cut_into_domains(q0, self.inverse_masses > 0, count), count)
+        rs.start_bodies(bodies, layout)
         self._sorted_key, self._order, self._rows, self._place = key, order, rows, inverse(order)
         o = old.contacts
         gather(points, order, (q0, bodies.accel, self.rolling), self.materials,
-               (rows, o.pn, o.pt, o.tangent, o.pr), (float(self.world.rest_speed), float(dt)), contacts, colours)
-        rs.prepare(bodies, contacts, colours)
+               (rows, o.pn, o.pt, o.tangent, o.pr), (float(self.world.rest_speed), float(dt)), contacts, layout)
+        rs.prepare(bodies, contacts, layout)
         bias_rate, mass_scale, impulse_scale = s.softness(h)
         sub = rs.RigidSubstep(h, s.iterations, bias_rate, mass_scale, impulse_scale, s.push_speed, s.slop,
                               *self.codes, bool(np.any(self.rolling > 0.0)))
-        return bodies, contacts, sub, colours
+        return bodies, contacts, sub, layout
 
     def _conclude(self, t, dt, contacts, residual):
         """The log (impacts, residual) and what the next step warm-starts from: the contacts as the
