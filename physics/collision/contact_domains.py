@@ -26,7 +26,8 @@ before, docs/performance.md): a colour is one parallel region per colour and pas
 wait for the slowest at each of its 6 to 21 colours, and the colouring itself ran on one thread
 (0.5 ms of the 10^4 box pit's step); colours also interleave a stack's rows, which moved the
 20-row pyramid's top box 15.6 mm against 7.2 in the sorted order. On the 10^4 box pit, 2 threads:
-12.6 to 12.9 ms a step coloured, 11.4 to 11.9 in two domains.
+12.5 to 13.3 ms a step coloured, 11.4 to 12.5 in two domains; in the machine's slower state 14.1 to
+14.9 against 12.5 to 13.1.
 """
 
 from __future__ import annotations
