@@ -79,9 +79,11 @@ def test_the_layout_is_nested_dissection_each_group_sorted(manifolds_, count, se
 
 
 def test_the_domain_count_is_a_power_of_two_of_the_bodies_alone():
-    """One domain per DOMAIN_BODIES bodies, rounded down to a power of two, at most MOST_DOMAINS."""
-    per = contact_domains.DOMAIN_BODIES
-    assert [domain_count(n) for n in (0, 1, 2 * per - 1, 2 * per, 10**4, 4 * per, 8 * per - 1)] == [1, 1, 1, 2, 2, 4, 4]
+    """One domain below CUT_BODIES bodies, two from there, then halved again while each domain keeps
+    DOMAIN_BODIES bodies, at most MOST_DOMAINS."""
+    cut, per = contact_domains.CUT_BODIES, contact_domains.DOMAIN_BODIES
+    sizes = (0, 1, cut - 1, cut, 10**4, 4 * per - 1, 4 * per, 8 * per, 16 * per - 1)
+    assert [domain_count(n) for n in sizes] == [1, 1, 1, 2, 2, 2, 4, 8, 8]
     assert domain_count(10**9) == contact_domains.MOST_DOMAINS
 
 
@@ -154,6 +156,7 @@ def pile_run(threads, steps=40):
 def several_domains(monkeypatch):
     """Every stage parallel however small the scene: the narrow phase's pairs in parts, and 40 boxes in
     4 domains (one per 10 bodies); returns the layouts the steps make, as they make them."""
+    monkeypatch.setattr(contact_domains, "CUT_BODIES", 10)
     monkeypatch.setattr(contact_domains, "DOMAIN_BODIES", 10)
     monkeypatch.setattr(manifolds, "PARALLEL_PAIRS", 0)
     layouts, lay = [], rigid_solver_step.lay_out

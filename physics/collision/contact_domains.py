@@ -19,10 +19,12 @@ Numer. Anal. 1973) applied to the sweep's order. Within a group the manifolds ke
 order (a, b), their points together, which sweeps a stack numbered from the bottom up from the
 bottom up; a small scene (one domain) is swept in exactly that order.
 
-D depends on the number of bodies alone (:func:`domain_count`), never on the threads, so the order
-and the bytes are the same on any number of them; threads beyond D wait in the sweep, not in the
-other stages. Why domains and not colours (Box2D v3's constraint graph, which this module used
-before, docs/performance.md): a colour is one parallel region per colour and pass, whose threads
+D depends on the number of bodies alone (:func:`domain_count`: 2 from 2,048 bodies, more from 32,768),
+never on the threads, so the order and the bytes are the same on any number of them; threads beyond D
+wait in the sweep, not in the other stages.
+
+Why domains and not colours (Box2D v3's constraint graph, which this module used before,
+docs/performance.md): a colour is one parallel region per colour and pass, whose threads
 wait for the slowest at each of its 6 to 21 colours, and the colouring itself ran on one thread
 (0.5 ms of the 10^4 box pit's step); colours also interleave a stack's rows, which moved the
 20-row pyramid's top box 15.6 mm against 7.2 in the sorted order. On the 10^4 box pit, 2 threads:
@@ -37,10 +39,14 @@ from typing import NamedTuple
 import numpy as np
 from numba import njit
 
-#: a scene is cut into the largest power of two of domains with at least this many bodies each, at
-#: most MOST_DOMAINS: the 10^4 box pit into 2 (0.6 % of its manifolds cross the cut, swept by one
-#: thread after the domains); fewer bodies are one domain, swept in the sorted order on one thread
-DOMAIN_BODIES = 4096
+#: a scene of this many bodies or more is cut in two (fewer: one domain, swept in the sorted order on
+#: one thread): a 2,500-box pit on 2 threads took 3.3 ms a step in two domains, 4.4 in one (3.5 coloured)
+CUT_BODIES = 2048
+#: and halved again while each domain keeps this many bodies, at most MOST_DOMAINS: the 10^4 box pit stays
+#: in 2 (0.6 % of its manifolds cross the cut), which on 2 threads was a step 5 to 10 % faster than 4 or 8
+#: domains (medians of four processes alternating: 12.8 against 14.1 and 13.8 ms); more domains are for
+#: more threads, which this 2-core machine cannot time
+DOMAIN_BODIES = 8192
 MOST_DOMAINS = 64
 #: an extent of a piece this fraction of its widest is wide enough to be cut across (:func:`halves`):
 #: the cut's section, where the two halves' bodies touch, is then at most 1 / WIDE the narrowest
@@ -61,8 +67,11 @@ class SweepLayout(NamedTuple):
 
 
 def domain_count(n: int) -> int:
-    """The number of domains of a scene of ``n`` bodies: a power of two (:data:`DOMAIN_BODIES`)."""
-    count = 1
+    """The number of domains of a scene of ``n`` bodies: a power of two (:data:`CUT_BODIES`,
+    :data:`DOMAIN_BODIES`)."""
+    if n < CUT_BODIES:
+        return 1
+    count = 2
     while 2 * count * DOMAIN_BODIES <= n and 2 * count <= MOST_DOMAINS:
         count *= 2
     return count

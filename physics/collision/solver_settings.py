@@ -80,8 +80,8 @@ class ContactSolver:
         sphere or capsule of radius r pressed with the impulse P (>= 0; 0, the default: none).
     threads : int
         Rigid bodies: the threads the step runs its parallel parts on (the narrow phase's
-        pairs, and the sweep's domains: one per :data:`.contact_domains.DOMAIN_BODIES` bodies, up
-        to a power of two), 1 to ``numba.config.NUMBA_NUM_THREADS``; 1, the default, as Box2D's
+        pairs, and the sweep's domains, :func:`.contact_domains.domain_count`: two from 2,048
+        bodies), 1 to ``numba.config.NUMBA_NUM_THREADS``; 1, the default, as Box2D's
         one worker. More threads change no byte of a run (:mod:`.contact_domains`), only its wall time, and
         on a machine whose cores are busy they cost more than they save: each of a step's
         parallel regions waits for its slowest thread's time slice (the 10^4 box pit took 58 to
