@@ -69,6 +69,8 @@ MAX_ROTATION_REACH = 2.0
 #: steps 1 to 30 carried 51,000 points a step against 32,000, and the same 9,400 of them pressed
 #: (docs/performance.md); every study scene gives the same bytes at either width
 SPECULATIVE_OF_RADIUS = 1 / 16
+
+
 @dataclasses.dataclass(frozen=True)
 class RigidScene:
     """What the solver needs of a scene's rigid bodies besides the translational state.
