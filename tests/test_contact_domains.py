@@ -24,8 +24,10 @@ from steplab.physics.collision.contact_domains import (
     bodies_of,
     cut_into_domains,
     domain_count,
+    groups_in,
     halves,
     lay_out,
+    phases,
     rows_of,
 )
 from steplab.physics.collision.rigid_solver_step import RigidScene, RigidSolverStep
@@ -65,12 +67,13 @@ def test_the_layout_is_nested_dissection_each_group_sorted(manifolds_, count, se
     keyed = sorted(range(len(a)), key=lambda k: (expected_group(a[k], b[k], domain, count), k))
     assert order.tolist() == keyed
     assert layout.phase_start.tolist() == [0] + list(np.cumsum([count >> p for p in range(count.bit_length())]))
-    for phase in range(len(layout.phase_start) - 1):
+    assert phases(layout) == count.bit_length()
+    for phase in range(phases(layout)):
         touched = []
-        for g in range(layout.phase_start[phase], layout.phase_start[phase + 1]):
-            rows = order[slice(*rows_of(layout, g))]
-            assert all(expected_group(a[k], b[k], domain, count) == (phase, g - layout.phase_start[phase])
-                       for k in rows)
+        assert groups_in(layout, phase) == count >> phase
+        for g in range(groups_in(layout, phase)):
+            rows = order[slice(*rows_of(layout, phase, g))]
+            assert all(expected_group(a[k], b[k], domain, count) == (phase, g) for k in rows)
             touched.append({int(x) for k in rows for x in (a[k], b[k]) if x >= 0})
         assert all(not (s & t) for m, s in enumerate(touched) for t in touched[m + 1:])
     assert layout.group_rows[-1] == len(a)

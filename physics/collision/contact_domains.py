@@ -176,8 +176,26 @@ def lay_out(a, b, domain, count):
 
 
 @njit(cache=True, inline="always")
-def rows_of(layout, group):
-    """(first, end) contact rows of group ``group`` of ``layout``."""
+def phases(layout):
+    """How many phases a pass over ``layout``'s contacts has (the domains', then each level's cuts')."""
+    return len(layout.phase_start) - 1
+
+
+@njit(cache=True, inline="always")
+def groups_in(layout, phase):
+    """How many groups phase ``phase`` of ``layout`` has: each swept by one thread, all at once."""
+    return layout.phase_start[phase + 1] - layout.phase_start[phase]
+
+
+@njit(cache=True, inline="always")
+def rows_of(layout, phase, g):
+    """(first, end) contact rows of group ``g`` of phase ``phase`` of ``layout``: a pass over the contacts is
+
+        for phase in range(phases(layout)):
+            for g in prange(groups_in(layout, phase)):
+                ... rows_of(layout, phase, g) ...
+    """
+    group = layout.phase_start[phase] + g
     return layout.group_rows[group], layout.group_rows[group + 1]
 
 

@@ -14,7 +14,7 @@ import numpy as np
 from numba import njit, prange
 
 from .approach import AT_REST, approach_speed
-from .contact_domains import rows_of, span
+from .contact_domains import groups_in, phases, rows_of, span
 from .resting import rest_speed
 from .sphere_contacts import dot3, row3
 
@@ -48,11 +48,10 @@ def gather(points, order, movers, materials, previous, context, out, layout):
     group by group as the sweep takes them (:mod:`.contact_domains`), so each row is written by the
     thread that will sweep it; the same bytes on any number of threads.
     """
-    start = layout.phase_start
-    for phase in range(len(start) - 1):
-        for g in prange(start[phase + 1] - start[phase]):
+    for phase in range(phases(layout)):
+        for g in prange(groups_in(layout, phase)):
             # (points and order apart: Numba's parallel loop takes no tuple of a NamedTuple)
-            _gather_rows((points, order), movers, materials, previous, context, out, rows_of(layout, start[phase] + g))
+            _gather_rows((points, order), movers, materials, previous, context, out, rows_of(layout, phase, g))
 
 
 @njit(cache=True)

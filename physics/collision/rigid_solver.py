@@ -50,7 +50,7 @@ from typing import NamedTuple
 import numpy as np
 from numba import njit, prange
 
-from .contact_domains import bodies_of, rows_of, span
+from .contact_domains import bodies_of, groups_in, phases, rows_of, span
 from .manifold_geometry import cross3
 from .sphere_contacts import dot3
 
@@ -332,10 +332,9 @@ def prepare(bodies, contacts, layout):
     """Each contact's effective masses along n, t1, t2 (into ``contacts.mass``), v_n at the start,
     and its separation and levers (:func:`_geometry_rows`); each contact's own, group by group as the
     sweep takes them (:func:`_sweep`), so each row is left in the cache of the thread that sweeps it."""
-    start = layout.phase_start
-    for phase in range(len(start) - 1):
-        for g in prange(start[phase + 1] - start[phase]):
-            rows = rows_of(layout, start[phase] + g)
+    for phase in range(phases(layout)):
+        for g in prange(groups_in(layout, phase)):
+            rows = rows_of(layout, phase, g)
             _prepare_rows(bodies, contacts, rows)
             _geometry_rows(bodies, contacts, rows)
 
@@ -523,10 +522,9 @@ def _sweep(bodies, contacts, sub, use_bias, layout, geometry):
     is swept by one thread, all at once, the same bytes as one after the other. (Calling the sweep's
     kernel outside a parallel region for a phase of one group made it 1.5 times slower: Numba's code
     for a parallel loop's body is faster.)"""
-    start = layout.phase_start
-    for phase in range(len(start) - 1):
-        for g in prange(start[phase + 1] - start[phase]):
-            _sweep_rows(bodies, contacts, (sub, use_bias, geometry), rows_of(layout, start[phase] + g))
+    for phase in range(phases(layout)):
+        for g in prange(groups_in(layout, phase)):
+            _sweep_rows(bodies, contacts, (sub, use_bias, geometry), rows_of(layout, phase, g))
 
 
 @njit(cache=True)
@@ -606,10 +604,9 @@ def warm_start(bodies, contacts, any_rolling, layout):
     """Each contact's impulses of the last substep applied again: a good first guess. Phase by phase, as
     :func:`_sweep`: a body's impulses are added in the one order, whatever the threads. ``any_rolling``: as
     :attr:`RigidSubstep.any_rolling`."""
-    start = layout.phase_start
-    for phase in range(len(start) - 1):
-        for g in prange(start[phase + 1] - start[phase]):
-            _warm_rows(bodies, contacts, any_rolling, rows_of(layout, start[phase] + g))
+    for phase in range(phases(layout)):
+        for g in prange(groups_in(layout, phase)):
+            _warm_rows(bodies, contacts, any_rolling, rows_of(layout, phase, g))
 
 
 @njit(cache=True)
@@ -719,11 +716,10 @@ def _restitution(bodies, contacts, sub, layout):
     One Gauss-Seidel pass per iteration in the sweep's order, phase by phase as :func:`_sweep` (a
     phase's groups share no body: each on one thread, all at once, the same bytes as on one)."""
     extra, touched = np.zeros(len(contacts.a)), np.zeros(len(bodies.v), np.bool_)
-    start = layout.phase_start
     for _ in range(sub.iterations):
-        for phase in range(len(start) - 1):
-            for g in prange(start[phase + 1] - start[phase]):
-                _restitution_rows(bodies, contacts, (extra, touched), rows_of(layout, start[phase] + g))
+        for phase in range(phases(layout)):
+            for g in prange(groups_in(layout, phase)):
+                _restitution_rows(bodies, contacts, (extra, touched), rows_of(layout, phase, g))
     return extra, touched
 
 
@@ -866,11 +862,10 @@ def _largest_residual(bodies, contacts, sub, layout):
     a set, whatever the order; each thread reads the rows it swept: threads that read a contiguous
     half of the rows each took half of theirs, 4 MB of columns on the 10^4 box pit, from the other
     core's cache)."""
-    start = layout.phase_start
-    largest = np.zeros(start[-1])
-    for phase in range(len(start) - 1):
-        for g in prange(start[phase + 1] - start[phase]):
-            largest[start[phase] + g] = _residual_of(bodies, contacts, sub, rows_of(layout, start[phase] + g))
+    largest = np.zeros(len(layout.group_rows) - 1)
+    for phase in range(phases(layout)):
+        for g in prange(groups_in(layout, phase)):
+            largest[layout.phase_start[phase] + g] = _residual_of(bodies, contacts, sub, rows_of(layout, phase, g))
     return largest.max()
 
 
