@@ -15,6 +15,12 @@ constraints k to k + LANES - 1 together, each in a lane of a vector of LANES flo
   row, reloaded from L1 (no constraint of the block touched it since its first load; holding
   all sixteen in registers across the solve spills them).
 
+Where the block's bodies lie at a stride s (i[k + l] = i[k] + s l, and so j: :func:`.constraint_projection.strides`,
+most blocks of a grid cloth), its code reads only i[k] and j[k] and finds the sixteen rows at constant
+offsets from two addresses; elsewhere it loads the eight pairs of indices and keeps sixteen row
+addresses, which on a 16-register AVX2 machine spill (on the bench's cloth, AMD Zen 3, the sweep
+11 to 13 % faster for the same bytes, docs/performance.md).
+
 Per constraint that is 6 row loads and 2 row stores, against the separate gather, solve and
 scatter loops' 7 row loads, 3 row stores and 3 stores and 3 to 4 loads of per-constraint
 scalars through scratch arrays. Each lane is the scalar operation it replaces (IEEE add, subtract,
@@ -45,10 +51,12 @@ _LANE_VECTOR = ir.VectorType(_DOUBLE, LANES)
 _ROW_VECTOR = ir.VectorType(_DOUBLE, _ROW)
 
 
-def project_block(d, x, inverse_mass, sweep, lam, carried, k):
+def project_block(d, x, inverse_mass, sweep, lam, carried, k, stride=0):
     """Constraints k to k + LANES - 1 of ``sweep`` (one segment) projected on the flat padded rows ``d`` (the
-    displacement, moved) and ``x`` (start positions); the multipliers ``lam`` when ``carried``. In Python,
-    one after another (:func:`project_one`): the same bytes."""
+    displacement, moved) and ``x`` (start positions); the multipliers ``lam`` when ``carried``. ``stride``, a
+    constant: 0, or the stride s at which the block's bodies lie (i[k + l] = i[k] + s l, and so j), whose
+    code then reads only i[k] and j[k] and finds the rows at fixed offsets from theirs. In Python, one after
+    another (:func:`project_one`), whatever the stride: the same bytes."""
     for p in range(k, k + LANES):
         project_one(p, d, x, inverse_mass, sweep, lam, carried)
 
@@ -160,16 +168,27 @@ class _Block(NamedTuple):
     k: ir.Value
 
 
-def _emit(builder, block: _Block, carried: bool) -> None:
-    """The block's code, for multipliers ``carried`` or held at 0 (each its own code: no branch inside)."""
+def _bodies(builder, block: _Block, stride: int) -> list:
+    """Each lane's bodies, [[a_0 .. a_7], [b_0 .. b_7]] (intp): the i and j columns' LANES entries from k; at a
+    ``stride`` s > 0, i[k] + s l and j[k] + s l, two loads and constant offsets (which the row addresses
+    absorb: no index is loaded, shifted or kept per lane)."""
+    i64 = ir.IntType(64)
+    if stride:
+        firsts = [builder.zext(builder.load(builder.gep(block.column[name], [block.k])), i64) for name in "ij"]
+        return [[builder.add(first, ir.Constant(i64, stride * lane)) for lane in range(LANES)] for first in firsts]
+    ends = [_load(builder, block.column[name], block.k, ir.VectorType(_INT32, LANES), align=4) for name in "ij"]
+    return [[builder.zext(builder.extract_element(end, ir.Constant(_INT32, lane)), i64) for lane in range(LANES)]
+            for end in ends]
+
+
+def _emit(builder, block: _Block, carried: bool, stride: int) -> None:
+    """The block's code, for multipliers ``carried`` or held at 0 (each its own code: no branch inside), its
+    bodies at ``stride`` (0: read from the i and j columns lane by lane)."""
     def lanes(name, data=None):
         return _load(builder, block.column[name] if data is None else data, block.k, _LANE_VECTOR)
 
-    i64 = ir.IntType(64)
     # gather: each lane's bodies, their rows, u = d_b - d_a and e = (x_b - x_a) + u, then transposed
-    ends = [_load(builder, block.column[name], block.k, ir.VectorType(_INT32, LANES), align=4) for name in "ij"]
-    bodies = [[builder.zext(builder.extract_element(end, ir.Constant(_INT32, lane)), i64) for lane in range(LANES)]
-              for end in ends]
+    bodies = _bodies(builder, block, stride)
     e_rows, u_rows = [], []
     for a, b in zip(*bodies):
         da, db = (builder.load(builder.gep(block.d, [body]), align=8) for body in (a, b))
@@ -209,31 +228,34 @@ def _emit(builder, block: _Block, carried: bool) -> None:
             builder.store(builder.fadd(builder.load(row, align=8), step), row, align=8)
 
 
-@intrinsic
-def _project_block(typingctx, d, x, inverse_mass, sweep, lam, carried, k):
+@intrinsic(prefer_literal=True)
+def _project_block(typingctx, d, x, inverse_mass, sweep, lam, carried, k, stride):
     floats = (d, x, inverse_mass, lam)
     if not (all(isinstance(a, types.Array) and a.dtype == types.float64 and a.layout == "C" for a in floats)
-            and isinstance(sweep, types.BaseNamedTuple) and isinstance(k, types.Integer)):
+            and isinstance(sweep, types.BaseNamedTuple) and isinstance(k, types.Integer)
+            and isinstance(stride, types.IntegerLiteral)):
         return None
 
     def codegen(context, builder, signature, args):
-        d_, x_, mass_, sweep_, lam_, carried_, k_ = args
+        d_, x_, mass_, sweep_, lam_, carried_, k_, _ = args
         data = [_data(context, builder, t, a) for t, a in zip(signature.args[:5], args[:5]) if t is not sweep]
         rows = [builder.bitcast(pointer, _ROW_VECTOR.as_pointer()) for pointer in data[:2]]
         column = {name: _data(context, builder, sweep.types[n], builder.extract_value(sweep_, n))
-                  for n, name in enumerate(sweep.fields) if name != "segments"}
+                  for n, name in enumerate(sweep.fields) if name not in ("segments", "strides")}
         block = _Block(*rows, data[2], data[3], column, context.cast(builder, k_, k, types.intp))
         with builder.if_else(carried_) as (carrying, holding):
             with carrying:
-                _emit(builder, block, True)
+                _emit(builder, block, True, stride.literal_value)
             with holding:
-                _emit(builder, block, False)
+                _emit(builder, block, False, stride.literal_value)
         return context.get_dummy_value()
 
-    return types.void(d, x, inverse_mass, sweep, lam, carried, k), codegen
+    return types.void(d, x, inverse_mass, sweep, lam, carried, k, stride), codegen
 
 
-@overload(project_block, inline="always")
-def _project_block_compiled(d, x, inverse_mass, sweep, lam, carried, k):
-    return lambda d, x, inverse_mass, sweep, lam, carried, k: _project_block(d, x, inverse_mass, sweep, lam,
-                                                                             carried, k)
+@overload(project_block, inline="always", prefer_literal=True)
+def _project_block_compiled(d, x, inverse_mass, sweep, lam, carried, k, stride):
+    if not isinstance(stride, types.IntegerLiteral):
+        return None
+    return lambda d, x, inverse_mass, sweep, lam, carried, k, stride: _project_block(
+        d, x, inverse_mass, sweep, lam, carried, k, stride)

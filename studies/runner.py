@@ -190,10 +190,23 @@ def provenance(cluster: dict | None = None) -> dict:
 
 
 def _cpu_name() -> str:
+    """The CPU's model name, with its family and model numbers and widest vector extension where
+    /proc/cpuinfo gives them: a virtual machine may call two generations alike ("AMD EPYC"),
+    and the compiled kernels' speed depends on which (AVX-512 or AVX2: docs/performance.md)."""
     try:
+        fields = {}
         for line in Path("/proc/cpuinfo").read_text().splitlines():
-            if line.startswith("model name"):
-                return line.split(":", 1)[1].strip()
+            name, _, value = line.partition(":")
+            if not line.strip():
+                break  # the first processor's block
+            fields[name.strip()] = value.strip()
     except OSError:
-        pass
-    return platform.processor() or platform.machine()
+        return platform.processor() or platform.machine()
+    if "model name" not in fields:
+        return platform.processor() or platform.machine()
+    flags = fields.get("flags", "").split()
+    vector = next((v for f, v in (("avx512f", "AVX-512"), ("avx2", "AVX2")) if f in flags), None)
+    about = [f"family {fields['cpu family']} model {fields['model']}" if "cpu family" in fields and "model" in fields
+             else None, vector]
+    about = [a for a in about if a]
+    return fields["model name"] + (f" ({', '.join(about)})" if about else "")

@@ -245,6 +245,7 @@ def test_check_says_a_position_based_method_has_no_dt_limit(capsys):
 
 def test_the_benchmark_step_is_the_integrators_step_in_place():
     from steplab.integrators.colouring import greedy_edge_colouring
+    from steplab.integrators.constraint_projection import LANES
     from steplab.integrators.position_based import cloth_benchmark_step
     from steplab.physics.soft_body import grid
 
@@ -262,7 +263,8 @@ def test_the_benchmark_step_is_the_integrators_step_in_place():
     segments = len(XPBD(1, 1).init(model, 0.0, y0).segments)
     assert greedy_edge_colouring(400, *model.distance_constraints()[:2]).max() + 1 <= segments - 1
     assert step.bytes_read_and_written == 2 * 400 * 3 * 8
-    assert step.bytes_read == springs * (2 * 4 + 3 * 8) + segments * 8 + 400 * 8 + 400 * 3 * 8
+    blocks = sum(np.diff(XPBD(1, 1).init(model, 0.0, y0).segments) // LANES)  # a byte each: its stride
+    assert step.bytes_read == springs * (2 * 4 + 3 * 8) + segments * 8 + blocks + 400 * 8 + 400 * 3 * 8
 
 
 def test_the_benchmark_steps_table_points_at_the_carry_with_multipliers_carried():
@@ -382,12 +384,50 @@ def test_the_sweep_in_bands_is_the_sweep_colour_by_colour(band, iterations):
     sequential_sweep(expected, q, inverse_mass, c, h, iterations, carried)
     sweep, work = sweep_columns(banded, segments, inverse_mass, h), workspace(model.n_bodies, len(c.i))
     assert np.diff(segments).mean() >= 2 * LANES  # mostly blocks, and a tail in most segments
+    assert set(np.unique(sweep.strides)) == {0, 1, 2}  # blocks read by index and at both strides
     project(dx, padded(q), inverse_mass, sweep, iterations, carried, work)
     assert dx[:, :3].tobytes() == expected.tobytes()
     y = work.state  # and the whole step, on the padded rows (x, y, z, 0) of q, v
     y[..., :3] = q, v
     advance(y[0], y[1], external, inverse_mass, sweep, method.substeps_of(h), work)
     assert y[..., :3].tobytes() == np.stack([q + expected, expected / h]).tobytes() and not y[..., 3].any()
+
+
+def plain_strides(i, j, segments, lanes):
+    """Each block's stride written out: the blocks of a segment from its start, lanes at a time."""
+    out = []
+    for lo, hi in zip(segments[:-1], segments[1:]):
+        for k in range(lo, hi - lanes + 1, lanes):
+            found = [s for s in (1, 2) if all(int(i[k + n]) - int(i[k]) == s * n == int(j[k + n]) - int(j[k])
+                                              for n in range(lanes))]
+            out.append(found[0] if found else 0)
+    return out
+
+
+def test_the_block_strides_are_the_runs_of_bodies():
+    # a block is read at stride s only where both ends' bodies advance by s from lane to lane;
+    # anything else (another stride, a broken run, different strides at the two ends) is read by index
+    from steplab.integrators.constraint_projection import LANES, strides
+
+    rng = np.random.default_rng(5)
+    run = lambda start, s: start + s * np.arange(LANES)
+    i = np.concatenate([run(0, 1), run(40, 2), run(100, 3), run(200, 1), rng.permutation(50)[:LANES],
+                        run(300, 2), [7, 9, 11]]).astype(np.uint32)
+    j = np.concatenate([run(20, 1), run(41, 2), run(120, 3), run(260, 2), rng.permutation(50)[:LANES] + 60,
+                        run(301, 2), [8, 10, 12]]).astype(np.uint32)
+    j[5 * LANES + 3] += 1  # a broken run at j
+    segments = np.array([0, 2 * LANES, 5 * LANES, 6 * LANES + 3], np.int64)
+    got = strides(i, j, segments)
+    assert got.dtype == np.uint8 and list(got) == [1, 2, 0, 0, 0, 0]
+    assert list(got) == plain_strides(i, j, segments, LANES)
+    # random segments of a random order: the same as written out
+    for seed in range(5):
+        r = np.random.default_rng(seed)
+        p = int(r.integers(0, 200))
+        i = (np.cumsum(r.integers(1, 3, p)) * r.integers(1, 3)).astype(np.uint32)  # runs of 1s and 2s
+        j = (i + r.integers(1, 3)).astype(np.uint32)
+        segments = np.unique(np.concatenate([[0, p], r.integers(0, p + 1, 6)])).astype(np.int64)
+        assert list(strides(i, j, segments)) == plain_strides(i, j, segments, LANES)
 
 
 @pytest.mark.parametrize("iterations", [1, 3])
