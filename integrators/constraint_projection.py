@@ -51,7 +51,7 @@ from typing import NamedTuple
 import numpy as np
 from numba import njit
 
-from .projection_block import LANES, project_block, project_one
+from .projection_block import EQUAL_MASSES, LANES, project_block, project_one
 from .projection_law import factors
 from .vector4 import prefetch
 
@@ -62,9 +62,9 @@ class Sweep(NamedTuple):
     ``i``, ``j`` (P,) uint32 the bodies; ``rest_length``, m; ``alpha_tilde`` = alpha / h^2;
     ``gamma`` = alpha beta / h; ``denominator`` = (1 + gamma) w + alpha_tilde, 0 for a pair of
     pinned bodies (skipped); ``segments`` (S + 1,) int64: segment s is ``[segments[s], segments[s + 1])``,
-    constraints of one colour (:func:`wavefront`), so no two of a segment share a body; ``strides``
+    constraints of one colour (:func:`wavefront`), so no two of a segment share a body; ``kinds``
     (B,) uint8, for each block of LANES the sweep projects at once, in the sweep's order (a segment's
-    constraints from its start, LANES at a time), the stride at which its bodies lie (:func:`strides`).
+    constraints from its start, LANES at a time), how its code may read it (:func:`block_kinds`).
     """
 
     i: np.ndarray
@@ -74,7 +74,7 @@ class Sweep(NamedTuple):
     gamma: np.ndarray
     denominator: np.ndarray
     segments: np.ndarray
-    strides: np.ndarray
+    kinds: np.ndarray
 
 
 class Substeps(NamedTuple):
@@ -151,32 +151,48 @@ def sweep_columns(constraints, segments, inverse_mass, h: float) -> Sweep:
     alpha_tilde, gamma, denominator = factors(constraints.compliance, constraints.damping, w, h)
     denominator = np.where(w == 0.0, 0.0, denominator)
     i, j = constraints.i.astype(np.uint32), constraints.j.astype(np.uint32)
-    return Sweep(i, j, constraints.rest_length, alpha_tilde, gamma, denominator, segments, strides(i, j, segments))
+    return Sweep(i, j, constraints.rest_length, alpha_tilde, gamma, denominator, segments,
+                 block_kinds(i, j, inverse_mass, segments))
 
 
 #: the strides a block's bodies may lie at and be read without their indices (:func:`strides`)
 STRIDES = (1, 2)
 
 
-def strides(i, j, segments) -> np.ndarray:
-    """For each block of LANES constraints the sweep projects at once (a segment's, from its start), the stride
-    s in :data:`STRIDES` at which both ends' bodies advance, i[k + l] = i[k] + s l and j[k + l] = j[k] + s l for
-    each lane l, or 0 where they do not: (B,) uint8, in the sweep's order.
-
-    On a grid cloth in its grid numbering most blocks are such runs (the bench's 160 x 160 cloth: 92 %, a
-    row's horizontal springs of one colour at stride 2, its vertical and shear springs at stride 1). The
-    sweep then finds the sixteen bodies' rows at fixed offsets from two (:mod:`.projection_block`), without
-    loading, shifting and keeping sixteen indices; the arithmetic, and so the bytes, are the same.
-    """
+def block_starts(segments) -> np.ndarray:
+    """The first constraint of each block of LANES the sweep projects at once: a segment's from its start."""
     counts = np.diff(segments) // LANES
     before = np.cumsum(counts) - counts  # blocks before each segment's
-    starts = np.repeat(segments[:-1], counts) + LANES * (np.arange(counts.sum()) - np.repeat(before, counts))
+    return np.repeat(segments[:-1], counts) + LANES * (np.arange(counts.sum()) - np.repeat(before, counts))
+
+
+def strides(i, j, segments) -> np.ndarray:
+    """For each block (:func:`block_starts`), the stride s in :data:`STRIDES` at which both ends' bodies
+    advance, i[k + l] = i[k] + s l and j[k + l] = j[k] + s l for each lane l, or 0 where they do not:
+    (B,) uint8, in the sweep's order."""
+    starts = block_starts(segments)
     i_, j_ = (e[starts[:, None] + np.arange(LANES)].astype(np.int64) for e in (i, j))
     out = np.zeros(len(starts), np.uint8)
     for s in STRIDES:
         step = s * np.arange(LANES)
         out[((i_ - i_[:, :1]) == step).all(axis=1) & ((j_ - j_[:, :1]) == step).all(axis=1)] = s
     return out
+
+
+def block_kinds(i, j, inverse_mass, segments) -> np.ndarray:
+    """How the sweep's code may read each block (:func:`block_starts`), (B,) uint8: its :func:`strides`, plus
+    EQUAL_MASSES where w_i = w_j in every lane.
+
+    On a grid cloth in its grid numbering most blocks are runs (the bench's 160 x 160 cloth: 92 %, a
+    row's horizontal springs of one colour at stride 2, its vertical and shear springs at stride 1), and
+    all but those at a pinned body join equal masses. At a stride the code reads two indices and finds
+    the sixteen rows at fixed offsets from two, instead of loading, shifting and keeping sixteen; with
+    equal masses, d_i + (-(w_i s)) e = d_i - (w s) e exactly, so one product a lane moves both ends.
+    The arithmetic, and so the bytes, are the same (:mod:`.projection_block`).
+    """
+    lanes = block_starts(segments)[:, None] + np.arange(LANES)
+    equal = (inverse_mass[i[lanes]] == inverse_mass[j[lanes]]).all(axis=1)
+    return strides(i, j, segments) | np.where(equal, EQUAL_MASSES, 0).astype(np.uint8)
 
 
 def workspace(n_bodies: int, n_constraints: int) -> Workspace:
@@ -224,10 +240,16 @@ def _segment(lo, hi, block, d_, x_, inverse_mass, sweep, carried, work):
         prefetch(sweep.rest_length, ahead)
         prefetch(sweep.gamma, ahead)
         prefetch(sweep.denominator, ahead)
-        stride = sweep.strides[block]
-        if stride == 1:
+        kind = sweep.kinds[block]  # each kind its own code (a constant argument)
+        if kind == 5:
+            project_block(d_, x_, inverse_mass, sweep, work.lam, carried, k, 5)
+        elif kind == 6:
+            project_block(d_, x_, inverse_mass, sweep, work.lam, carried, k, 6)
+        elif kind == 4:
+            project_block(d_, x_, inverse_mass, sweep, work.lam, carried, k, 4)
+        elif kind == 1:
             project_block(d_, x_, inverse_mass, sweep, work.lam, carried, k, 1)
-        elif stride == 2:
+        elif kind == 2:
             project_block(d_, x_, inverse_mass, sweep, work.lam, carried, k, 2)
         else:
             project_block(d_, x_, inverse_mass, sweep, work.lam, carried, k, 0)

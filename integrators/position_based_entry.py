@@ -23,8 +23,8 @@ from .constraint_projection import Substeps, Sweep, Workspace, advance
 #: the table's slots: sizes and settings, then one address per array (in this order)
 _BODIES, _CONSTRAINTS, _SEGMENTS, _BLOCKS, _SUBSTEPS, _ITERATIONS, _CARRIED, _H = range(8)
 _ARRAYS = ("state", "external", "inverse_mass", "i", "j", "rest_length", "alpha_tilde", "gamma", "denominator",
-           "segments", "strides", "lam")
-_STATE, _EXTERNAL, _INVERSE_MASS, _I, _J, _REST, _ALPHA, _GAMMA, _DENOMINATOR, _STARTS, _STRIDES, _LAM = range(
+           "segments", "kinds", "lam")
+_STATE, _EXTERNAL, _INVERSE_MASS, _I, _J, _REST, _ALPHA, _GAMMA, _DENOMINATOR, _STARTS, _KINDS, _LAM = range(
     8, 8 + len(_ARRAYS))
 
 
@@ -35,7 +35,7 @@ def table(external, inverse_mass, sweep: Sweep, steps: Substeps, work: Workspace
     arrays = {"state": work.state, "external": external, "inverse_mass": inverse_mass, "lam": work.lam,
               **{name: getattr(sweep, name) for name in Sweep._fields}}
     kinds = dict.fromkeys(_ARRAYS, np.float64) | {"i": np.uint32, "j": np.uint32, "segments": np.int64,
-                                                  "strides": np.uint8}
+                                                  "kinds": np.uint8}
     for name, a in arrays.items():
         if a.dtype != kinds[name] or not a.flags.c_contiguous:
             raise ValueError(f"advance_at: {name} must be C-contiguous {np.dtype(kinds[name])}, got {a.dtype}")
@@ -45,7 +45,7 @@ def table(external, inverse_mass, sweep: Sweep, steps: Substeps, work: Workspace
                          f"{work.lam.shape} do not fit {n} bodies and {p} constraints")
     t = np.zeros(8 + len(_ARRAYS), np.int64)
     t[[_BODIES, _CONSTRAINTS, _SEGMENTS, _BLOCKS, _SUBSTEPS, _ITERATIONS, _CARRIED]] = (
-        n, p, len(sweep.segments), len(sweep.strides), steps.substeps, steps.iterations, steps.carried)
+        n, p, len(sweep.segments), len(sweep.kinds), steps.substeps, steps.iterations, steps.carried)
     t[_H] = np.float64(steps.h).view(np.int64)
     for slot, name in enumerate(_ARRAYS, start=_STATE):
         t[slot] = arrays[name].ctypes.data
@@ -65,7 +65,7 @@ def advance_at(t):
     state = _at(t, _STATE, (2, n, 4), np.float64)
     sweep = Sweep(_at(t, _I, p, np.uint32), _at(t, _J, p, np.uint32), _at(t, _REST, p, np.float64),
                   _at(t, _ALPHA, p, np.float64), _at(t, _GAMMA, p, np.float64), _at(t, _DENOMINATOR, p, np.float64),
-                  _at(t, _STARTS, s, np.int64), _at(t, _STRIDES, b, np.uint8))
+                  _at(t, _STARTS, s, np.int64), _at(t, _KINDS, b, np.uint8))
     h = t[_H:_H + 1].view(np.float64)[0]
     steps = Substeps(h, t[_SUBSTEPS], t[_ITERATIONS], t[_CARRIED] != 0)
     advance(state[0], state[1], _at(t, _EXTERNAL, (n, 3), np.float64), _at(t, _INVERSE_MASS, n, np.float64), sweep,

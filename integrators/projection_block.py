@@ -15,11 +15,14 @@ constraints k to k + LANES - 1 together, each in a lane of a vector of LANES flo
   row, reloaded from L1 (no constraint of the block touched it since its first load; holding
   all sixteen in registers across the solve spills them).
 
-Where the block's bodies lie at a stride s (i[k + l] = i[k] + s l, and so j: :func:`.constraint_projection.strides`,
-most blocks of a grid cloth), its code reads only i[k] and j[k] and finds the sixteen rows at constant
-offsets from two addresses; elsewhere it loads the eight pairs of indices and keeps sixteen row
-addresses, which on a 16-register AVX2 machine spill (on the bench's cloth, AMD Zen 3, the sweep
-11 to 13 % faster for the same bytes, docs/performance.md).
+Blocks come in kinds (:func:`.constraint_projection.block_kinds`), each its own code: where the bodies
+lie at a stride s (i[k + l] = i[k] + s l, and so j; most blocks of a grid cloth), the code reads only
+i[k] and j[k] and finds the sixteen rows at constant offsets from two addresses; elsewhere it loads the
+eight pairs of indices and keeps sixteen row addresses, which on a 16-register AVX2 machine spill. Where
+the two ends' inverse masses are equal in every lane, one product (w s) e a lane moves both ends
+(subtracted at a, added at b: the same bytes as adding -(w_a s) e). The transpose is the 4 x 4 one of
+AVX (:func:`_transposed`). On the bench's cloth (AMD Zen 3, AVX2) these took the sweep from 5.7-5.9 to
+4.4-4.7 ns a constraint (docs/performance.md).
 
 Per constraint that is 6 row loads and 2 row stores, against the separate gather, solve and
 scatter loops' 7 row loads, 3 row stores and 3 stores and 3 to 4 loads of per-constraint
@@ -45,18 +48,23 @@ from .projection_law import _projection, projection
 
 #: constraints per block: a cache line of a float64 column, one AVX-512 register (two AVX2 ones)
 LANES = 8
+#: the flag in a block's kind (:func:`.constraint_projection.block_kinds`) for equal inverse masses at
+#: both ends in every lane; the kind's low bits are the stride its bodies lie at (0: none)
+EQUAL_MASSES = 4
 _ROW = 4  # a padded row (x, y, z, 0)
 _DOUBLE, _INT32 = ir.DoubleType(), ir.IntType(32)
 _LANE_VECTOR = ir.VectorType(_DOUBLE, LANES)
 _ROW_VECTOR = ir.VectorType(_DOUBLE, _ROW)
 
 
-def project_block(d, x, inverse_mass, sweep, lam, carried, k, stride=0):
+def project_block(d, x, inverse_mass, sweep, lam, carried, k, kind=0):
     """Constraints k to k + LANES - 1 of ``sweep`` (one segment) projected on the flat padded rows ``d`` (the
-    displacement, moved) and ``x`` (start positions); the multipliers ``lam`` when ``carried``. ``stride``, a
-    constant: 0, or the stride s at which the block's bodies lie (i[k + l] = i[k] + s l, and so j), whose
-    code then reads only i[k] and j[k] and finds the rows at fixed offsets from theirs. In Python, one after
-    another (:func:`project_one`), whatever the stride: the same bytes."""
+    displacement, moved) and ``x`` (start positions); the multipliers ``lam`` when ``carried``. ``kind``, a
+    constant (:func:`.constraint_projection.block_kinds`): its low bits 0, or the stride s at which the
+    block's bodies lie (i[k + l] = i[k] + s l, and so j), whose code then reads only i[k] and j[k] and finds
+    the rows at fixed offsets from theirs; EQUAL_MASSES where w_i = w_j in every lane, whose code makes one
+    product a lane for both moves. In Python, one after another (:func:`project_one`), whatever the kind:
+    the same bytes."""
     for p in range(k, k + LANES):
         project_one(p, d, x, inverse_mass, sweep, lam, carried)
 
@@ -128,20 +136,25 @@ def _store(builder, value, data, index):
     builder.store(value, builder.bitcast(builder.gep(data, [index]), value.type.as_pointer()), align=8)
 
 
-def _concatenated(builder, rows):
-    """The rows (each of n lanes) end to end, one vector of n * len(rows) lanes (a tree of shuffles)."""
-    while len(rows) > 1:
-        width = rows[0].type.count
-        mask = _constant(range(2 * width), 2 * width)
-        rows = [builder.shuffle_vector(rows[r], rows[r + 1], mask) for r in range(0, len(rows), 2)]
-    return rows[0]
+def _transposed(builder, rows):
+    """The x, y and z lanes of LANES padded rows, three vectors of LANES (the rows' transpose), four rows at a
+    time as a 4 x 4 transpose of float64 is done on AVX: pairs of rows interleaved within 128-bit halves
+    (unpcklpd, unpckhpd), then the halves joined (vperm2f128): seven shuffles per four rows."""
+    def shuffle(a, b, mask):
+        return builder.shuffle_vector(a, b, _constant(mask, len(mask)))
 
-
-def _column(builder, rows, lane):
-    """Lane ``lane`` of each of LANES padded rows, as one vector (the rows' transpose, one coordinate)."""
-    joined = _concatenated(builder, rows)
-    return builder.shuffle_vector(joined, ir.Constant(joined.type, None),
-                                  _constant([_ROW * r + lane for r in range(LANES)], LANES))
+    columns = [[], [], []]
+    for r in range(0, LANES, _ROW):
+        r0, r1, r2, r3 = rows[r:r + _ROW]
+        low01, high01 = shuffle(r0, r1, [0, 4, 2, 6]), shuffle(r0, r1, [1, 5, 3, 7])  # x0 x1 z0 z1, y0 y1 . .
+        low23, high23 = shuffle(r2, r3, [0, 4, 2, 6]), shuffle(r2, r3, [1, 5, 3, 7])
+        columns[0].append(shuffle(low01, low23, [0, 1, 4, 5]))
+        columns[1].append(shuffle(high01, high23, [0, 1, 4, 5]))
+        columns[2].append(shuffle(low01, low23, [2, 3, 6, 7]))
+    while len(columns[0]) > 1:  # the groups of four end to end (registers side by side: no instruction)
+        columns = [[shuffle(c[n], c[n + 1], list(range(2 * c[n].type.count))) for n in range(0, len(c), 2)]
+                   for c in columns]
+    return [c[0] for c in columns]
 
 
 def _dot3(builder, p, q):
@@ -181,9 +194,10 @@ def _bodies(builder, block: _Block, stride: int) -> list:
             for end in ends]
 
 
-def _emit(builder, block: _Block, carried: bool, stride: int) -> None:
+def _emit(builder, block: _Block, carried: bool, stride: int, equal: bool) -> None:
     """The block's code, for multipliers ``carried`` or held at 0 (each its own code: no branch inside), its
-    bodies at ``stride`` (0: read from the i and j columns lane by lane)."""
+    bodies at ``stride`` (0: read from the i and j columns lane by lane), its ends' inverse masses ``equal``
+    in every lane or not."""
     def lanes(name, data=None):
         return _load(builder, block.column[name] if data is None else data, block.k, _LANE_VECTOR)
 
@@ -196,8 +210,7 @@ def _emit(builder, block: _Block, carried: bool, stride: int) -> None:
         xa, xb = (builder.load(builder.gep(block.x, [body]), align=8) for body in (a, b))
         e_rows.append(builder.fadd(builder.fsub(xb, xa), u))
         u_rows.append(u)
-    e_lanes = [_column(builder, e_rows, c) for c in range(3)]
-    u_lanes = [_column(builder, u_rows, c) for c in range(3)]
+    e_lanes, u_lanes = _transposed(builder, e_rows), _transposed(builder, u_rows)
     squared, approach = _dot3(builder, e_lanes, e_lanes), _dot3(builder, e_lanes, u_lanes)
     # solve: the one projection, on the lanes
     sqrt = cgutils.get_or_insert_function(builder.module, ir.FunctionType(_LANE_VECTOR, [_LANE_VECTOR]),
@@ -213,6 +226,18 @@ def _emit(builder, block: _Block, carried: bool, stride: int) -> None:
         _store(builder, builder.fadd(lanes(None, block.lam), builder.fmul(s, length)), block.lam, block.k)
     # scatter: d_a += (-(w_a s)) e, d_b += (w_b s) e, reloading the rows (from L1: keeping all sixteen
     # in registers across the solve spills them)
+    if equal:  # w_a = w_b in every lane: d_a + (-(w_a s)) e = d_a - (w s) e exactly, one product a lane
+        masses = ir.Constant(_LANE_VECTOR, None)
+        for lane, body in enumerate(bodies[0]):
+            mass = builder.load(builder.gep(block.inverse_mass, [body]))
+            masses = builder.insert_element(masses, mass, ir.Constant(_INT32, lane))
+        weight = builder.fmul(masses, s)
+        for lane in range(LANES):
+            step = builder.fmul(_splat(builder, weight, lane), e_rows[lane])
+            for ends_, move in zip(bodies, (builder.fsub, builder.fadd)):
+                row = builder.gep(block.d, [ends_[lane]])
+                builder.store(move(builder.load(row, align=8), step), row, align=8)
+        return
     weights = []
     for ends_ in bodies:
         masses = ir.Constant(_LANE_VECTOR, None)
@@ -229,33 +254,34 @@ def _emit(builder, block: _Block, carried: bool, stride: int) -> None:
 
 
 @intrinsic(prefer_literal=True)
-def _project_block(typingctx, d, x, inverse_mass, sweep, lam, carried, k, stride):
+def _project_block(typingctx, d, x, inverse_mass, sweep, lam, carried, k, kind):
     floats = (d, x, inverse_mass, lam)
     if not (all(isinstance(a, types.Array) and a.dtype == types.float64 and a.layout == "C" for a in floats)
             and isinstance(sweep, types.BaseNamedTuple) and isinstance(k, types.Integer)
-            and isinstance(stride, types.IntegerLiteral)):
+            and isinstance(kind, types.IntegerLiteral)):
         return None
+    stride, equal = kind.literal_value & ~EQUAL_MASSES, bool(kind.literal_value & EQUAL_MASSES)
 
     def codegen(context, builder, signature, args):
         d_, x_, mass_, sweep_, lam_, carried_, k_, _ = args
         data = [_data(context, builder, t, a) for t, a in zip(signature.args[:5], args[:5]) if t is not sweep]
         rows = [builder.bitcast(pointer, _ROW_VECTOR.as_pointer()) for pointer in data[:2]]
         column = {name: _data(context, builder, sweep.types[n], builder.extract_value(sweep_, n))
-                  for n, name in enumerate(sweep.fields) if name not in ("segments", "strides")}
+                  for n, name in enumerate(sweep.fields) if name not in ("segments", "kinds")}
         block = _Block(*rows, data[2], data[3], column, context.cast(builder, k_, k, types.intp))
         with builder.if_else(carried_) as (carrying, holding):
             with carrying:
-                _emit(builder, block, True, stride.literal_value)
+                _emit(builder, block, True, stride, equal)
             with holding:
-                _emit(builder, block, False, stride.literal_value)
+                _emit(builder, block, False, stride, equal)
         return context.get_dummy_value()
 
-    return types.void(d, x, inverse_mass, sweep, lam, carried, k, stride), codegen
+    return types.void(d, x, inverse_mass, sweep, lam, carried, k, kind), codegen
 
 
 @overload(project_block, inline="always", prefer_literal=True)
-def _project_block_compiled(d, x, inverse_mass, sweep, lam, carried, k, stride):
-    if not isinstance(stride, types.IntegerLiteral):
+def _project_block_compiled(d, x, inverse_mass, sweep, lam, carried, k, kind=0):
+    if not isinstance(kind, types.IntegerLiteral):
         return None
-    return lambda d, x, inverse_mass, sweep, lam, carried, k, stride: _project_block(
-        d, x, inverse_mass, sweep, lam, carried, k, stride)
+    return lambda d, x, inverse_mass, sweep, lam, carried, k, kind=0: _project_block(
+        d, x, inverse_mass, sweep, lam, carried, k, kind)

@@ -355,6 +355,7 @@ def test_the_sweep_in_bands_is_the_sweep_colour_by_colour(band, iterations):
     # kernel projects eight constraints of a segment at once (projection_block), the rest one by one,
     # with the multipliers carried or held at 0
     from steplab.integrators.constraint_projection import (
+        EQUAL_MASSES,
         LANES,
         advance,
         ordered,
@@ -384,7 +385,9 @@ def test_the_sweep_in_bands_is_the_sweep_colour_by_colour(band, iterations):
     sequential_sweep(expected, q, inverse_mass, c, h, iterations, carried)
     sweep, work = sweep_columns(banded, segments, inverse_mass, h), workspace(model.n_bodies, len(c.i))
     assert np.diff(segments).mean() >= 2 * LANES  # mostly blocks, and a tail in most segments
-    assert set(np.unique(sweep.strides)) == {0, 1, 2}  # blocks read by index and at both strides
+    kinds = sweep.kinds
+    assert set(np.unique(kinds % EQUAL_MASSES)) == {0, 1, 2}  # blocks read by index and at both strides,
+    assert 0 < np.count_nonzero(kinds & EQUAL_MASSES) < len(kinds)  # with equal masses and not (pinned)
     project(dx, padded(q), inverse_mass, sweep, iterations, carried, work)
     assert dx[:, :3].tobytes() == expected.tobytes()
     y = work.state  # and the whole step, on the padded rows (x, y, z, 0) of q, v
@@ -404,10 +407,11 @@ def plain_strides(i, j, segments, lanes):
     return out
 
 
-def test_the_block_strides_are_the_runs_of_bodies():
+def test_the_block_kinds_are_the_runs_of_bodies_and_equal_masses():
     # a block is read at stride s only where both ends' bodies advance by s from lane to lane;
-    # anything else (another stride, a broken run, different strides at the two ends) is read by index
-    from steplab.integrators.constraint_projection import LANES, strides
+    # anything else (another stride, a broken run, different strides at the two ends) is read by index;
+    # its two ends move by one product only where their inverse masses are equal in every lane
+    from steplab.integrators.constraint_projection import EQUAL_MASSES, LANES, block_kinds, strides
 
     rng = np.random.default_rng(5)
     run = lambda start, s: start + s * np.arange(LANES)
@@ -428,6 +432,12 @@ def test_the_block_strides_are_the_runs_of_bodies():
         j = (i + r.integers(1, 3)).astype(np.uint32)
         segments = np.unique(np.concatenate([[0, p], r.integers(0, p + 1, 6)])).astype(np.int64)
         assert list(strides(i, j, segments)) == plain_strides(i, j, segments, LANES)
+        mass = r.choice([0.0, 0.5, 1.0], size=int(j.max(initial=0)) + 1, p=[0.05, 0.05, 0.9])
+        expected = [s | (EQUAL_MASSES if all(mass[i[k + n]] == mass[j[k + n]] for n in range(LANES)) else 0)
+                    for s, k in zip(plain_strides(i, j, segments, LANES),
+                                    [k for lo, hi in zip(segments[:-1], segments[1:])
+                                     for k in range(lo, hi - LANES + 1, LANES)])]
+        assert list(block_kinds(i, j, mass, segments)) == expected
 
 
 @pytest.mark.parametrize("iterations", [1, 3])
