@@ -224,11 +224,12 @@ PREFETCH_AHEAD = 128
 
 
 @njit(inline="always", error_model="numpy")
-def _segment(lo, hi, block, d_, x_, inverse_mass, sweep, carried, work):
-    """One segment's projections (constraints lo to hi, no two sharing a body; its first block of LANES the
-    sweep's ``block``-th) on the flat padded rows ``d_`` (dx) and ``x_`` (x_prev): LANES at a time
+def _segment(span, rows, inverse_mass, sweep, carried, work):
+    """One segment's projections (``span`` = (lo, hi, block): constraints lo to hi, no two sharing a body, its
+    first block of LANES the sweep's ``block``-th) on the flat padded rows ``rows`` = (dx, x_prev): LANES at a time
     (:func:`.projection_block.project_block`, its bodies found by their stride where they lie at one), the
     rest one by one."""
+    lo, hi, block = span
     k = lo
     while k + LANES <= hi:
         # ask for the columns PREFETCH_AHEAD constraints on (this segment's next blocks, the next
@@ -242,21 +243,21 @@ def _segment(lo, hi, block, d_, x_, inverse_mass, sweep, carried, work):
         prefetch(sweep.denominator, ahead)
         kind = sweep.kinds[block]  # each kind its own code (a constant argument)
         if kind == 5:
-            project_block(d_, x_, inverse_mass, sweep, work.lam, carried, k, 5)
+            project_block(rows, inverse_mass, sweep, work.lam, carried, k, 5)
         elif kind == 6:
-            project_block(d_, x_, inverse_mass, sweep, work.lam, carried, k, 6)
+            project_block(rows, inverse_mass, sweep, work.lam, carried, k, 6)
         elif kind == 4:
-            project_block(d_, x_, inverse_mass, sweep, work.lam, carried, k, 4)
+            project_block(rows, inverse_mass, sweep, work.lam, carried, k, 4)
         elif kind == 1:
-            project_block(d_, x_, inverse_mass, sweep, work.lam, carried, k, 1)
+            project_block(rows, inverse_mass, sweep, work.lam, carried, k, 1)
         elif kind == 2:
-            project_block(d_, x_, inverse_mass, sweep, work.lam, carried, k, 2)
+            project_block(rows, inverse_mass, sweep, work.lam, carried, k, 2)
         else:
-            project_block(d_, x_, inverse_mass, sweep, work.lam, carried, k, 0)
+            project_block(rows, inverse_mass, sweep, work.lam, carried, k, 0)
         k += LANES
         block += 1
     for p in range(k, hi):
-        project_one(p, d_, x_, inverse_mass, sweep, work.lam, carried)
+        project_one(p, rows[0], rows[1], inverse_mass, sweep, work.lam, carried)
 
 
 @njit(cache=True, error_model="numpy")
@@ -277,7 +278,7 @@ def project(dx, x_prev, inverse_mass, sweep, iterations, carried, work):
         block = 0
         for c in range(sweep.segments.shape[0] - 1):
             lo, hi = sweep.segments[c], sweep.segments[c + 1]
-            _segment(lo, hi, block, d_, x_, inverse_mass, sweep, carried, work)
+            _segment((lo, hi, block), (d_, x_), inverse_mass, sweep, carried, work)
             block += (hi - lo) // LANES
 
 

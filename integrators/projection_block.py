@@ -57,14 +57,15 @@ _LANE_VECTOR = ir.VectorType(_DOUBLE, LANES)
 _ROW_VECTOR = ir.VectorType(_DOUBLE, _ROW)
 
 
-def project_block(d, x, inverse_mass, sweep, lam, carried, k, kind=0):
-    """Constraints k to k + LANES - 1 of ``sweep`` (one segment) projected on the flat padded rows ``d`` (the
-    displacement, moved) and ``x`` (start positions); the multipliers ``lam`` when ``carried``. ``kind``, a
+def project_block(rows, inverse_mass, sweep, lam, carried, k, kind=0):
+    """Constraints k to k + LANES - 1 of ``sweep`` (one segment) projected on the flat padded rows ``rows`` =
+    (d, x): d the displacement, moved, x the start positions; the multipliers ``lam`` when ``carried``. ``kind``, a
     constant (:func:`.constraint_projection.block_kinds`): its low bits 0, or the stride s at which the
     block's bodies lie (i[k + l] = i[k] + s l, and so j), whose code then reads only i[k] and j[k] and finds
     the rows at fixed offsets from theirs; EQUAL_MASSES where w_i = w_j in every lane, whose code makes one
     product a lane for both moves. In Python, one after another (:func:`project_one`), whatever the kind:
     the same bytes."""
+    d, x = rows
     for p in range(k, k + LANES):
         project_one(p, d, x, inverse_mass, sweep, lam, carried)
 
@@ -254,8 +255,10 @@ def _emit(builder, block: _Block, carried: bool, stride: int, equal: bool) -> No
 
 
 @intrinsic(prefer_literal=True)
-def _project_block(typingctx, d, x, inverse_mass, sweep, lam, carried, k, kind):
-    floats = (d, x, inverse_mass, lam)
+def _project_block(typingctx, rows, inverse_mass, sweep, lam, carried, k, kind):
+    if not isinstance(rows, types.UniTuple) or rows.count != 2:
+        return None
+    floats = (rows.dtype, inverse_mass, lam)
     if not (all(isinstance(a, types.Array) and a.dtype == types.float64 and a.layout == "C" for a in floats)
             and isinstance(sweep, types.BaseNamedTuple) and isinstance(k, types.Integer)
             and isinstance(kind, types.IntegerLiteral)):
@@ -263,12 +266,13 @@ def _project_block(typingctx, d, x, inverse_mass, sweep, lam, carried, k, kind):
     stride, equal = kind.literal_value & ~EQUAL_MASSES, bool(kind.literal_value & EQUAL_MASSES)
 
     def codegen(context, builder, signature, args):
-        d_, x_, mass_, sweep_, lam_, carried_, k_, _ = args
-        data = [_data(context, builder, t, a) for t, a in zip(signature.args[:5], args[:5]) if t is not sweep]
-        rows = [builder.bitcast(pointer, _ROW_VECTOR.as_pointer()) for pointer in data[:2]]
+        rows_, mass_, sweep_, lam_, carried_, k_, _ = args
+        data = [_data(context, builder, rows.dtype, builder.extract_value(rows_, n)) for n in range(2)]
+        data += [_data(context, builder, t, a) for t, a in ((inverse_mass, mass_), (lam, lam_))]
+        padded = [builder.bitcast(pointer, _ROW_VECTOR.as_pointer()) for pointer in data[:2]]
         column = {name: _data(context, builder, sweep.types[n], builder.extract_value(sweep_, n))
                   for n, name in enumerate(sweep.fields) if name not in ("segments", "kinds")}
-        block = _Block(*rows, data[2], data[3], column, context.cast(builder, k_, k, types.intp))
+        block = _Block(*padded, data[2], data[3], column, context.cast(builder, k_, k, types.intp))
         with builder.if_else(carried_) as (carrying, holding):
             with carrying:
                 _emit(builder, block, True, stride, equal)
@@ -276,12 +280,12 @@ def _project_block(typingctx, d, x, inverse_mass, sweep, lam, carried, k, kind):
                 _emit(builder, block, False, stride, equal)
         return context.get_dummy_value()
 
-    return types.void(d, x, inverse_mass, sweep, lam, carried, k, kind), codegen
+    return types.void(rows, inverse_mass, sweep, lam, carried, k, kind), codegen
 
 
 @overload(project_block, inline="always", prefer_literal=True)
-def _project_block_compiled(d, x, inverse_mass, sweep, lam, carried, k, kind=0):
+def _project_block_compiled(rows, inverse_mass, sweep, lam, carried, k, kind=0):
     if not isinstance(kind, types.IntegerLiteral):
         return None
-    return lambda d, x, inverse_mass, sweep, lam, carried, k, kind=0: _project_block(
-        d, x, inverse_mass, sweep, lam, carried, k, kind)
+    return lambda rows, inverse_mass, sweep, lam, carried, k, kind=0: _project_block(
+        rows, inverse_mass, sweep, lam, carried, k, kind)
