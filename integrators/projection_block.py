@@ -195,6 +195,15 @@ def _bodies(builder, block: _Block, stride: int) -> list:
             for end in ends]
 
 
+def _masses(builder, block: _Block, bodies) -> ir.Value:
+    """The inverse masses of ``bodies`` (one a lane), in lanes."""
+    masses = ir.Constant(_LANE_VECTOR, None)
+    for lane, body in enumerate(bodies):
+        masses = builder.insert_element(masses, builder.load(builder.gep(block.inverse_mass, [body])),
+                                        ir.Constant(_INT32, lane))
+    return masses
+
+
 def _emit(builder, block: _Block, carried: bool, stride: int, equal: bool) -> None:
     """The block's code, for multipliers ``carried`` or held at 0 (each its own code: no branch inside), its
     bodies at ``stride`` (0: read from the i and j columns lane by lane), its ends' inverse masses ``equal``
@@ -228,24 +237,14 @@ def _emit(builder, block: _Block, carried: bool, stride: int, equal: bool) -> No
     # scatter: d_a += (-(w_a s)) e, d_b += (w_b s) e, reloading the rows (from L1: keeping all sixteen
     # in registers across the solve spills them)
     if equal:  # w_a = w_b in every lane: d_a + (-(w_a s)) e = d_a - (w s) e exactly, one product a lane
-        masses = ir.Constant(_LANE_VECTOR, None)
-        for lane, body in enumerate(bodies[0]):
-            mass = builder.load(builder.gep(block.inverse_mass, [body]))
-            masses = builder.insert_element(masses, mass, ir.Constant(_INT32, lane))
-        weight = builder.fmul(masses, s)
+        weight = builder.fmul(_masses(builder, block, bodies[0]), s)
         for lane in range(LANES):
             step = builder.fmul(_splat(builder, weight, lane), e_rows[lane])
             for ends_, move in zip(bodies, (builder.fsub, builder.fadd)):
                 row = builder.gep(block.d, [ends_[lane]])
                 builder.store(move(builder.load(row, align=8), step), row, align=8)
         return
-    weights = []
-    for ends_ in bodies:
-        masses = ir.Constant(_LANE_VECTOR, None)
-        for lane, body in enumerate(ends_):
-            mass = builder.load(builder.gep(block.inverse_mass, [body]))
-            masses = builder.insert_element(masses, mass, ir.Constant(_INT32, lane))
-        weights.append(builder.fmul(masses, s))
+    weights = [builder.fmul(_masses(builder, block, ends_), s) for ends_ in bodies]
     weights[0] = builder.fneg(weights[0])
     for lane in range(LANES):
         for weight, ends_ in zip(weights, bodies):
