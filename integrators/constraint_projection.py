@@ -241,7 +241,8 @@ def _segment(span, rows, inverse_mass, sweep, carried, work):
         prefetch(sweep.rest_length, ahead)
         prefetch(sweep.gamma, ahead)
         prefetch(sweep.denominator, ahead)
-        kind = sweep.kinds[block]  # each kind its own code (a constant argument)
+        # each kind its own code (a constant argument): 1, 2 the strides, 4 = EQUAL_MASSES added, 0 by index
+        kind = sweep.kinds[block]
         if kind == 5:
             project_block(rows, inverse_mass, sweep, work.lam, carried, k, 5)
         elif kind == 6:

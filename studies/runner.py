@@ -189,24 +189,19 @@ def provenance(cluster: dict | None = None) -> dict:
     } | ({} if cluster is None else {"cluster": cluster})
 
 
-def _cpu_name() -> str:
+def _cpu_name(cpuinfo: Path = Path("/proc/cpuinfo")) -> str:
     """The CPU's model name, with its family and model numbers and widest vector extension where
     /proc/cpuinfo gives them: a virtual machine may call two generations alike ("AMD EPYC"),
     and the compiled kernels' speed depends on which (AVX-512 or AVX2: docs/performance.md)."""
     try:
-        fields = {}
-        for line in Path("/proc/cpuinfo").read_text().splitlines():
-            name, _, value = line.partition(":")
-            if not line.strip():
-                break  # the first processor's block
-            fields[name.strip()] = value.strip()
+        first = cpuinfo.read_text().split("\n\n", 1)[0]  # the first processor's block
     except OSError:
-        return platform.processor() or platform.machine()
+        first = ""
+    fields = {name.strip(): value.strip() for name, _, value in (line.partition(":") for line in first.splitlines())}
     if "model name" not in fields:
         return platform.processor() or platform.machine()
     flags = fields.get("flags", "").split()
-    vector = next((v for f, v in (("avx512f", "AVX-512"), ("avx2", "AVX2")) if f in flags), None)
-    about = [f"family {fields['cpu family']} model {fields['model']}" if "cpu family" in fields and "model" in fields
-             else None, vector]
-    about = [a for a in about if a]
+    known = {"cpu family", "model"} <= fields.keys()
+    about = [f"family {fields['cpu family']} model {fields['model']}"] if known else []
+    about += [v for f, v in (("avx512f", "AVX-512"), ("avx2", "AVX2")) if f in flags][:1]
     return fields["model name"] + (f" ({', '.join(about)})" if about else "")

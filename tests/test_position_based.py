@@ -263,7 +263,7 @@ def test_the_benchmark_step_is_the_integrators_step_in_place():
     segments = len(XPBD(1, 1).init(model, 0.0, y0).segments)
     assert greedy_edge_colouring(400, *model.distance_constraints()[:2]).max() + 1 <= segments - 1
     assert step.bytes_read_and_written == 2 * 400 * 3 * 8
-    blocks = sum(np.diff(XPBD(1, 1).init(model, 0.0, y0).segments) // LANES)  # a byte each: its stride
+    blocks = sum(np.diff(XPBD(1, 1).init(model, 0.0, y0).segments) // LANES)  # a byte each: its kind
     assert step.bytes_read == springs * (2 * 4 + 3 * 8) + segments * 8 + blocks + 400 * 8 + 400 * 3 * 8
 
 
@@ -396,14 +396,16 @@ def test_the_sweep_in_bands_is_the_sweep_colour_by_colour(band, iterations):
     assert y[..., :3].tobytes() == np.stack([q + expected, expected / h]).tobytes() and not y[..., 3].any()
 
 
-def plain_strides(i, j, segments, lanes):
-    """Each block's stride written out: the blocks of a segment from its start, lanes at a time."""
+def plain_kinds(i, j, segments, lanes, mass=None):
+    """Each block's stride written out (the blocks of a segment from its start, lanes at a time), plus 4 where
+    ``mass`` is given and equal at both ends in every lane."""
     out = []
     for lo, hi in zip(segments[:-1], segments[1:]):
         for k in range(lo, hi - lanes + 1, lanes):
             found = [s for s in (1, 2) if all(int(i[k + n]) - int(i[k]) == s * n == int(j[k + n]) - int(j[k])
                                               for n in range(lanes))]
-            out.append(found[0] if found else 0)
+            equal = mass is not None and all(mass[i[k + n]] == mass[j[k + n]] for n in range(lanes))
+            out.append((found[0] if found else 0) + (4 if equal else 0))
     return out
 
 
@@ -413,6 +415,7 @@ def test_the_block_kinds_are_the_runs_of_bodies_and_equal_masses():
     # its two ends move by one product only where their inverse masses are equal in every lane
     from steplab.integrators.constraint_projection import EQUAL_MASSES, LANES, block_kinds, strides
 
+    assert EQUAL_MASSES == 4  # as plain_kinds writes it
     rng = np.random.default_rng(5)
     run = lambda start, s: start + s * np.arange(LANES)
     i = np.concatenate([run(0, 1), run(40, 2), run(100, 3), run(200, 1), rng.permutation(50)[:LANES],
@@ -423,21 +426,17 @@ def test_the_block_kinds_are_the_runs_of_bodies_and_equal_masses():
     segments = np.array([0, 2 * LANES, 5 * LANES, 6 * LANES + 3], np.int64)
     got = strides(i, j, segments)
     assert got.dtype == np.uint8 and list(got) == [1, 2, 0, 0, 0, 0]
-    assert list(got) == plain_strides(i, j, segments, LANES)
-    # random segments of a random order: the same as written out
+    assert list(got) == plain_kinds(i, j, segments, LANES)
+    # random segments of a random order, with some unequal masses: the same as written out
     for seed in range(5):
         r = np.random.default_rng(seed)
         p = int(r.integers(0, 200))
         i = (np.cumsum(r.integers(1, 3, p)) * r.integers(1, 3)).astype(np.uint32)  # runs of 1s and 2s
         j = (i + r.integers(1, 3)).astype(np.uint32)
         segments = np.unique(np.concatenate([[0, p], r.integers(0, p + 1, 6)])).astype(np.int64)
-        assert list(strides(i, j, segments)) == plain_strides(i, j, segments, LANES)
+        assert list(strides(i, j, segments)) == plain_kinds(i, j, segments, LANES)
         mass = r.choice([0.0, 0.5, 1.0], size=int(j.max(initial=0)) + 1, p=[0.05, 0.05, 0.9])
-        expected = [s | (EQUAL_MASSES if all(mass[i[k + n]] == mass[j[k + n]] for n in range(LANES)) else 0)
-                    for s, k in zip(plain_strides(i, j, segments, LANES),
-                                    [k for lo, hi in zip(segments[:-1], segments[1:])
-                                     for k in range(lo, hi - LANES + 1, LANES)])]
-        assert list(block_kinds(i, j, mass, segments)) == expected
+        assert list(block_kinds(i, j, mass, segments)) == plain_kinds(i, j, segments, LANES, mass)
 
 
 @pytest.mark.parametrize("iterations", [1, 3])

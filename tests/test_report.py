@@ -169,3 +169,17 @@ def test_every_method_has_its_own_colour_and_keeps_it_on_the_plotly_pages(site, 
     page = next((site / "interactive").glob("truncation_*.html")).read_text()
     drawn = {c["integrator"] for c in record["curves"]}
     assert drawn and all(f'"color":"{colours[m]}"' in page for m in drawn if m in colours)
+
+
+def test_provenance_names_the_cpus_family_model_and_vector_width(tmp_path):
+    # two VMs that both call their CPU "AMD EPYC" are told apart by family, model and vector width
+    from steplab.studies.runner import _cpu_name
+
+    info = tmp_path / "cpuinfo"
+    block = "processor\t: {n}\ncpu family\t: 25\nmodel\t\t: 1\nmodel name\t: AMD EPYC\nflags\t\t: fpu {flags}\n"
+    info.write_text(block.format(n=0, flags="avx avx2") + "\n" + block.format(n=1, flags="avx avx2 avx512f"))
+    assert _cpu_name(info) == "AMD EPYC (family 25 model 1, AVX2)"  # the first processor's block
+    info.write_text(block.format(n=0, flags="avx avx2 avx512f"))
+    assert _cpu_name(info) == "AMD EPYC (family 25 model 1, AVX-512)"
+    info.write_text("processor\t: 0\nmodel name\t: Some CPU\n")
+    assert _cpu_name(info) == "Some CPU"
