@@ -109,7 +109,8 @@ class PositionBased(Integrator):
                              "(a stiffness k > 0, alpha = 1 / k)")
         field = None if model.constant_field is None else np.asarray(model.constant_field, float)
         external = np.zeros((model.n_bodies, 3)) if field is None else np.broadcast_to(field, (model.n_bodies, 3))
-        return c, np.ascontiguousarray(external, float), np.asarray(model.inverse_masses, float)
+        # copies (np.array): a read-only view of the field would be another Numba type, another compile
+        return c, np.array(external, float), np.array(model.inverse_masses, float)
 
     def init(self, model, t, y):
         """What :meth:`step` keeps for a run: the constraints in the sweep's colour order

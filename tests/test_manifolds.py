@@ -81,6 +81,20 @@ def test_a_box_above_the_margin_has_no_contact_and_one_tilted_onto_an_edge_has_t
     np.testing.assert_allclose(m.point[:, 1:], 0.0, atol=1e-12)  # the edge along x at y = z = 0
 
 
+def test_a_margin_as_a_number_and_as_an_array_share_one_compiled_kernel():
+    """A margin given as one number and as an array per body are the same Numba type: the manifold kernel
+    (about half a minute to compile) is compiled once, not once more for a read-only view of the array."""
+    from steplab.physics.collision.manifolds import _slots_of_chunk
+
+    shapes, poses = scene([BOX, SPHERE], [0.0, 0.3], [[0.5, 0.5, 0.5], [0.0, 0.0, 0.0]],
+                          [[0.0, 0.0, 0.5], [0.0, 0.0, 1.25]], [quat.IDENTITY, quat.IDENTITY])
+    one, each = (manifolds(shapes, poses, [[0, 1]], [Plane(UP)], margin=m) for m in (0.1, np.full(2, 0.1)))
+    assert len(one.a) == 5  # four corners on the floor, the sphere on the box's top face
+    for field in one._fields:
+        np.testing.assert_array_equal(getattr(one, field), getattr(each, field))
+    assert len(_slots_of_chunk.signatures) == 1, _slots_of_chunk.signatures
+
+
 @BRUTE_FORCE
 @given(half=st.tuples(size, size, size), q=quaternion, centre=vector, radius=size,
        static=st.booleans())

@@ -35,5 +35,5 @@ def _approach_speed_rows(v_a, v_b, normal):
 def approach_speeds(v_a, v_b, normal):
     """:func:`approach_speed` of arrays of vectors (..., 3), broadcast against each other: shape (...)."""
     v_a, v_b, normal = np.broadcast_arrays(*(np.asarray(x, dtype=float) for x in (v_a, v_b, normal)))
-    rows = [np.ascontiguousarray(x.reshape(-1, 3)) for x in (v_a, v_b, normal)]
+    rows = [np.array(x.reshape(-1, 3)) for x in (v_a, v_b, normal)]  # writeable copies: one Numba type
     return _approach_speed_rows(*rows).reshape(v_a.shape[:-1])[()]

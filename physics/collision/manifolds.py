@@ -529,7 +529,9 @@ def manifolds(shapes: RigidShapes, poses: Poses, pairs, statics=(), margin=0.0) 
     """
     shapes = check_shapes(shapes)
     n = len(shapes.kind)
-    margin = np.broadcast_to(np.asarray(margin, dtype=float), (n,))
+    # a copy of its own: a read-only view (broadcast_to's) is another Numba type, and another compile of
+    # the manifold kernels (half a minute)
+    margin = np.array(np.broadcast_to(np.asarray(margin, dtype=float), (n,)))
     if not np.all(np.isfinite(margin) & (margin >= 0)):
         raise ValueError(f"margin must be finite and >= 0 m for every body, got {margin.min()} .. {margin.max()}")
     pairs = np.ascontiguousarray(pairs, dtype=np.int64).reshape(-1, 2)
@@ -548,7 +550,7 @@ def manifolds(shapes: RigidShapes, poses: Poses, pairs, statics=(), margin=0.0) 
     slots = ManifoldPoints(np.empty(capacity, np.int64), np.empty(capacity, np.int64), np.empty((capacity, 3)),
                            np.empty((capacity, 3)), np.empty(capacity), np.empty(capacity, np.int64))
     counts, firsts = (np.empty(len(pairs) + len(static_pairs), np.int64) for _ in range(2))
-    margins = (np.ascontiguousarray(margin), extent)
+    margins = (margin, extent)
     if len(counts) >= PARALLEL_PAIRS and numba.get_num_threads() > 1:
         manifold_slots(bodies, static, pairs, static_pairs, margins, slots, (counts, firsts))
     else:  # the same rows on this thread alone (a parallel region costs more than a few pairs, or one thread)
