@@ -51,7 +51,7 @@ from typing import NamedTuple
 import numpy as np
 from numba import njit
 
-from .projection_block import EQUAL_MASSES, LANES, project_block, project_one
+from .projection_block import APART, EQUAL_MASSES, LANES, PAIRS, RUN, project_block, project_one
 from .projection_law import factors
 from .vector4 import prefetch
 
@@ -88,9 +88,9 @@ class Substeps(NamedTuple):
 
 
 class Workspace(NamedTuple):
-    """Scratch a step writes, allocated once per run: the ``state`` q, v (2, N, 4) as padded rows (x, y, z, 0)
-    (:mod:`.vector4`), which the step moves in place (during a substep v's rows carry the displacement dx,
-    q's the positions at the start of the substep), and the multipliers ``lam`` (P,)."""
+    """Scratch a step writes, allocated once per run: the ``state`` q, v (2, 3, M) as coordinate rows
+    (:func:`coordinates`), which the step moves in place (during a substep v's rows carry the displacement
+    dx, q's the positions at the start of the substep), and the multipliers ``lam`` (P,)."""
 
     state: np.ndarray
     lam: np.ndarray
@@ -155,10 +155,6 @@ def sweep_columns(constraints, segments, inverse_mass, h: float) -> Sweep:
                  block_kinds(i, j, inverse_mass, segments))
 
 
-#: the strides a block's bodies may lie at and be read without their indices (:func:`strides`)
-STRIDES = (1, 2)
-
-
 def block_starts(segments) -> np.ndarray:
     """The first constraint of each block of LANES the sweep projects at once: a segment's from its start."""
     counts = np.diff(segments) // LANES
@@ -166,37 +162,55 @@ def block_starts(segments) -> np.ndarray:
     return np.repeat(segments[:-1], counts) + LANES * (np.arange(counts.sum()) - np.repeat(before, counts))
 
 
-def strides(i, j, segments) -> np.ndarray:
-    """For each block (:func:`block_starts`), the stride s in :data:`STRIDES` at which both ends' bodies
-    advance, i[k + l] = i[k] + s l and j[k + l] = j[k] + s l for each lane l, or 0 where they do not:
-    (B,) uint8, in the sweep's order."""
+def layouts(i, j, segments) -> np.ndarray:
+    """For each block (:func:`block_starts`), how its bodies lie, (B,) uint8, in the sweep's order
+    (:mod:`.projection_block` reads each way with its own code):
+
+    - RUN (1): both ends advance by 1 from lane to lane, i[k + l] = i[k] + l and j[k + l] = j[k] + l;
+    - PAIRS (2): the ends interleave, i[k + l] = i[k] + 2 l and j[k + l] = i[k + l] + 1 (a row's springs of
+      one colour): the block's 16 bodies are one run;
+    - APART (3): both advance by 2, their runs (2 LANES bodies from i[k] and from j[k]) not overlapping;
+    - 0: anything else.
+    """
     starts = block_starts(segments)
     i_, j_ = (e[starts[:, None] + np.arange(LANES)].astype(np.int64) for e in (i, j))
     out = np.zeros(len(starts), np.uint8)
-    for s in STRIDES:
-        step = s * np.arange(LANES)
-        out[((i_ - i_[:, :1]) == step).all(axis=1) & ((j_ - j_[:, :1]) == step).all(axis=1)] = s
+    run = lambda s: ((i_ - i_[:, :1]) == s * np.arange(LANES)).all(axis=1) & (
+        (j_ - j_[:, :1]) == s * np.arange(LANES)).all(axis=1)
+    offset = j_[:, 0] - i_[:, 0]
+    out[run(1)] = RUN
+    out[run(2) & (np.abs(offset) >= 2 * LANES)] = APART
+    out[run(2) & (offset == 1)] = PAIRS
     return out
 
 
 def block_kinds(i, j, inverse_mass, segments) -> np.ndarray:
-    """How the sweep's code may read each block (:func:`block_starts`), (B,) uint8: its :func:`strides`, plus
+    """How the sweep's code may read each block (:func:`block_starts`), (B,) uint8: its :func:`layouts`, plus
     EQUAL_MASSES where w_i = w_j in every lane.
 
-    On a grid cloth in its grid numbering most blocks are runs (the bench's 160 x 160 cloth: 92 %, a
-    row's horizontal springs of one colour at stride 2, its vertical and shear springs at stride 1), and
-    all but those at a pinned body join equal masses. At a stride the code reads two indices and finds
-    the sixteen rows at fixed offsets from two, instead of loading, shifting and keeping sixteen; with
+    On a grid cloth in its grid numbering most blocks lie in runs (the bench's 160 x 160 cloth: 92 %, a
+    row's horizontal springs of one colour as PAIRS, its vertical and shear springs as RUNs), and all
+    but those at a pinned body join equal masses. In a run the code reads two indices and loads each
+    coordinate of eight bodies as one vector, instead of loading sixteen indices and gathering; with
     equal masses, d_i + (-(w_i s)) e = d_i - (w s) e exactly, so one product a lane moves both ends.
     The arithmetic, and so the bytes, are the same (:mod:`.projection_block`).
     """
     lanes = block_starts(segments)[:, None] + np.arange(LANES)
     equal = (inverse_mass[i[lanes]] == inverse_mass[j[lanes]]).all(axis=1)
-    return strides(i, j, segments) | np.where(equal, EQUAL_MASSES, 0).astype(np.uint8)
+    return layouts(i, j, segments) | np.where(equal, EQUAL_MASSES, 0).astype(np.uint8)
 
 
 def workspace(n_bodies: int, n_constraints: int) -> Workspace:
-    return Workspace(aligned_zeros((2, n_bodies, 4)), np.empty(n_constraints))
+    return Workspace(aligned_zeros((2, 3, row_length(n_bodies))), np.empty(n_constraints))
+
+
+def row_length(n_bodies: int) -> int:
+    """M, the length of a coordinate row for N bodies: N rounded up to a cache line of float64, plus one line.
+
+    Each row then starts on a cache line, a block's loads of 2 LANES values from a body near the end
+    stay inside the row, and rows lie apart by no multiple of 4 kB (at N = 25,600 they would, 50 pages:
+    a store to x then looks to the core like it may feed the next load of y, which then waits)."""
+    return -(-n_bodies // LANES) * LANES + LANES
 
 
 #: bytes of a cache line
@@ -204,17 +218,27 @@ CACHE_LINE = 64
 
 
 def aligned_zeros(shape: tuple) -> np.ndarray:
-    """Zeros (float64) starting on a cache line: padded rows of 32 bytes then never straddle two lines
-    (NumPy's large arrays start 16 bytes past a page, which splits every other row's loads and stores)."""
+    """Zeros (float64) starting on a cache line (NumPy's large arrays start 16 bytes past a page, which
+    would split every vector load at a row's start over two lines)."""
     size = int(np.prod(shape))
     buffer = np.zeros(size + CACHE_LINE // 8)
     start = (-buffer.ctypes.data % CACHE_LINE) // 8
     return buffer[start:start + size].reshape(shape)
 
 
-def padded(a: np.ndarray) -> np.ndarray:
-    """(N, 3) -> (N, 4), the rows (x, y, z, 0) the sweep moves (:class:`Workspace`)."""
-    return np.concatenate([a, np.zeros((len(a), 1))], axis=1)
+def coordinates(a: np.ndarray) -> np.ndarray:
+    """(N, 3) -> (3, M): a coordinate a row (:func:`row_length`, zeros past N), as the sweep moves them.
+
+    One row per coordinate, the bodies along it: a block's eight bodies in a run are then one vector load
+    per coordinate, not eight rows to transpose into lanes (:mod:`.projection_block`)."""
+    out = aligned_zeros((3, row_length(len(a))))
+    out[:, :len(a)] = a.T
+    return out
+
+
+def bodies(rows: np.ndarray, n_bodies: int) -> np.ndarray:
+    """The view (..., N, 3) of coordinate rows (..., 3, M): the inverse of :func:`coordinates`, no copy."""
+    return np.swapaxes(rows[..., :n_bodies], -1, -2)
 
 
 #: constraints ahead of the gather whose columns the sweep prefetches (:func:`_segment`): far enough to
@@ -226,8 +250,8 @@ PREFETCH_AHEAD = 128
 @njit(inline="always", error_model="numpy")
 def _segment(span, rows, inverse_mass, sweep, carried, work):
     """One segment's projections (``span`` = (lo, hi, block): constraints lo to hi, no two sharing a body, its
-    first block of LANES the sweep's ``block``-th) on the flat padded rows ``rows`` = (dx, x_prev): LANES at a time
-    (:func:`.projection_block.project_block`, its bodies found by their stride where they lie at one), the
+    first block of LANES the sweep's ``block``-th) on the coordinate rows ``rows`` = (dx, x_prev), (3, M) each:
+    LANES at a time (:func:`.projection_block.project_block`, each way its bodies lie with its own code), the
     rest one by one."""
     lo, hi, block = span
     k = lo
@@ -241,12 +265,16 @@ def _segment(span, rows, inverse_mass, sweep, carried, work):
         prefetch(sweep.rest_length, ahead)
         prefetch(sweep.gamma, ahead)
         prefetch(sweep.denominator, ahead)
-        # each kind its own code (a constant argument): 1, 2 the strides, 4 = EQUAL_MASSES added, 0 by index
+        # each kind its own code (a constant argument): 1 to 3 how the bodies lie, 4 = EQUAL_MASSES added, 0 by index
         kind = sweep.kinds[block]
         if kind == 5:
             project_block(rows, inverse_mass, sweep, work.lam, carried, k, 5)
         elif kind == 6:
             project_block(rows, inverse_mass, sweep, work.lam, carried, k, 6)
+        elif kind == 7:
+            project_block(rows, inverse_mass, sweep, work.lam, carried, k, 7)
+        elif kind == 3:
+            project_block(rows, inverse_mass, sweep, work.lam, carried, k, 3)
         elif kind == 4:
             project_block(rows, inverse_mass, sweep, work.lam, carried, k, 4)
         elif kind == 1:
@@ -263,10 +291,10 @@ def _segment(span, rows, inverse_mass, sweep, carried, work):
 
 @njit(cache=True, error_model="numpy")
 def project(dx, x_prev, inverse_mass, sweep, iterations, carried, work):
-    """``iterations`` Gauss-Seidel sweeps over ``sweep`` (a :class:`Sweep`), moving ``dx`` (N, 4) in place.
+    """``iterations`` Gauss-Seidel sweeps over ``sweep`` (a :class:`Sweep`), moving ``dx`` (3, M) in place.
 
-    ``x_prev`` (N, 4) are the positions at the start of the substep, ``dx`` the predicted
-    displacement h v* on entry and the projected one on return, both padded rows (x, y, z, 0);
+    ``x_prev`` (3, M) are the positions at the start of the substep, ``dx`` the predicted
+    displacement h v* on entry and the projected one on return, both coordinate rows (:func:`coordinates`);
     the multipliers ``work.lam`` (P,) start at 0 in each substep and are only read and written
     when ``carried`` (otherwise held at 0 and untouched, which saves the sweep 16 bytes of
     traffic per constraint). Coincident bodies (no direction) and pairs of pinned bodies
@@ -274,36 +302,35 @@ def project(dx, x_prev, inverse_mass, sweep, iterations, carried, work):
     """
     if carried:
         work.lam[:] = 0.0
-    d_, x_ = dx.reshape(-1), x_prev.reshape(-1)  # flat: body a's row at 4a .. 4a + 3
     for _ in range(iterations):
         block = 0
         for c in range(sweep.segments.shape[0] - 1):
             lo, hi = sweep.segments[c], sweep.segments[c + 1]
-            _segment((lo, hi, block), (d_, x_), inverse_mass, sweep, carried, work)
+            _segment((lo, hi, block), (dx, x_prev), inverse_mass, sweep, carried, work)
             block += (hi - lo) // LANES
 
 
 @njit(cache=True, error_model="numpy")
 def advance(q, v, external, inverse_mass, sweep, steps, work):
     """``steps.substeps`` substeps of ``steps.h`` of a position-based step (a :class:`Substeps`), on q, v
-    (N, 4), padded rows (x, y, z, 0), in place, allocating nothing:
+    (3, M), coordinate rows (:func:`coordinates`), in place, allocating nothing:
 
         v <- dx = h (v + h a_ext),  project dx (:func:`project`, from x_prev = q),  q += dx,  v = dx / h.
 
     ``external`` (N, 3), m/s^2; ``sweep`` a :class:`Sweep` for h; ``work`` a :class:`Workspace`. The
     displacement lives in v's rows and the start positions are q's own: no copy of the state is
     written, so a step from cold caches reads q and v once and writes them in place (a separate dx
-    and x_prev, written first, cost their reads for ownership from memory, 1.6 MB on the bench's cloth).
+    and x_prev, written first, cost their reads for ownership from memory, 1.2 MB on the bench's cloth).
     """
     h = steps.h
     q_, v_ = q.reshape(-1), v.reshape(-1)
     for _ in range(steps.substeps):
-        for b in range(q.shape[0]):
+        for b in range(external.shape[0]):
             for c in range(3):
-                v[b, c] = h * (v[b, c] + h * external[b, c])  # predict: x* = q + h v*, v* = v + h a_ext
+                v[c, b] = h * (v[c, b] + h * external[b, c])  # predict: x* = q + h v*, v* = v + h a_ext
         project(v, q, inverse_mass, sweep, steps.iterations, steps.carried, work)
-        # update, in one contiguous loop over the padded rows that the compiler vectorises (scalar
-        # divisions cost a quarter of the step); the padding stays 0 (0 + 0, 0 / h)
+        # update, in one contiguous loop over the rows that the compiler vectorises (scalar divisions
+        # cost a quarter of the step); the rows' ends past N stay 0 (0 + 0, 0 / h)
         for k in range(q_.shape[0]):
             q_[k] += v_[k]
             v_[k] = v_[k] / h

@@ -135,7 +135,7 @@ class PositionBased(Integrator):
         return Substeps(dt / self.substeps, self.substeps, self.iterations, self.accumulate and self.iterations > 1)
 
     def step(self, model, t, y, dt, carry):
-        from .constraint_projection import advance  # Numba: only when a position-based run steps
+        from .constraint_projection import advance, bodies  # Numba: only when a position-based run steps
 
         if carry is None:  # a caller that did not call init
             carry = self.init(model, t, y)
@@ -145,10 +145,10 @@ class PositionBased(Integrator):
 
             return model.xp.stack(traced(carry, y[0], y[1], steps)), carry
         carry = carry.for_substep(steps.h)
-        state = carry.work.state  # padded rows (x, y, z, 0), stepped in place
-        state[..., :3] = y
+        state = carry.work.state  # coordinate rows (2, 3, M), stepped in place
+        bodies(state, model.n_bodies)[...] = y
         advance(state[0], state[1], carry.external, carry.inverse_mass, carry.sweep, steps, carry.work)
-        return np.array(state[..., :3], dtype=y.dtype), carry
+        return np.array(bodies(state, model.n_bodies), dtype=y.dtype), carry
 
     def linear_map(self, omega_dt: float, zeta: float = 0.0) -> np.ndarray:
         """One-step matrix on u'' = -u - 2 zeta u', from :meth:`step` on a spring of k = 1 to a
@@ -247,9 +247,9 @@ def cloth_benchmark_step(model, y0, dt: float, method: PositionBased | None = No
     particles, 101,442 springs with dampers. Each step is :func:`.constraint_projection.advance`,
     the kernel every pbd and xpbd step runs, on the carry :meth:`PositionBased.init` builds (so
     its result is :meth:`PositionBased.step`'s to the byte). The state lives where the kernel
-    steps it, the padded rows (2, N, 4) of the carry's workspace; ``y`` is their view (2, N, 3).
-    Its bytes read and written are counted as (2, N, 3) float64, the least a step must move: the
-    padding's third more is the step's own cost, not the bound's.
+    steps it, the coordinate rows (2, 3, M) of the carry's workspace; ``y`` is their view (2, N, 3).
+    Its bytes read and written are counted as (2, N, 3) float64, the least a step must move (the rows'
+    ends past N, M - N = 8 to 15 values, are the step's own cost, not the bound's).
 
     Each step calls a compiled entry point resolved once, on one argument: a call through Numba's
     dispatcher types the kernel's seven arguments (three NamedTuples of 13 arrays) in Python
@@ -260,13 +260,15 @@ def cloth_benchmark_step(model, y0, dt: float, method: PositionBased | None = No
     """
     from numba import typeof
 
+    from .constraint_projection import bodies
     from .position_based_entry import advance_at, table
 
     method = XPBD(substeps=1, iterations=1) if method is None else method
     substeps = method.substeps_of(dt)
     carry = method.init(model, 0.0, y0).for_substep(substeps.h)
     state = carry.work.state
-    state[..., :3] = y0
+    y = bodies(state, model.n_bodies)
+    y[...] = y0
     arguments = table(carry.external, carry.inverse_mass, carry.sweep, substeps, carry.work)
     kernel = advance_at.compile((typeof(arguments),))  # loaded from Numba's cache where it is
 
@@ -280,5 +282,4 @@ def cloth_benchmark_step(model, y0, dt: float, method: PositionBased | None = No
     # the columns the sweep reads: alpha_tilde only where the multipliers are carried
     read = [a for name, a in carry.sweep._asdict().items() if name != "alpha_tilde" or substeps.carried]
     data = sum(a.nbytes for a in read) + carry.inverse_mass.nbytes + carry.external.nbytes
-    y = state[..., :3]
     return InPlaceStep(y, steps, y.nbytes, data)

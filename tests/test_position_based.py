@@ -288,7 +288,7 @@ def test_the_benchmark_steps_table_points_at_the_carry_with_multipliers_carried(
     with pytest.raises(ValueError, match="^advance_at: inverse_mass must be C-contiguous float64, got float32$"):
         table(carry.external, carry.inverse_mass.astype(np.float32), carry.sweep, steps, carry.work)
     with pytest.raises(ValueError, match="do not fit 400 bodies"):
-        table(carry.external, carry.inverse_mass, carry.sweep, steps, workspace(399, len(carry.sweep.i)))
+        table(carry.external, carry.inverse_mass, carry.sweep, steps, workspace(380, len(carry.sweep.i)))
 
 
 def sequential_sweep(dx, x_prev, inverse_mass, c, h, iterations, carried):
@@ -332,7 +332,7 @@ def damped_cloth_net(seed):
 def test_the_sweep_by_colour_is_the_sequential_gauss_seidel_sweep(iterations):
     # the kernel gathers a colour, solves its projections together and scatters them: exact only
     # because no two constraints of a colour share a body; a plain sequential loop gives the same bytes
-    from steplab.integrators.constraint_projection import padded, project
+    from steplab.integrators.constraint_projection import bodies, coordinates, project
 
     model, (q, v) = damped_cloth_net(3)
     h = 2e-3
@@ -341,10 +341,11 @@ def test_the_sweep_by_colour_is_the_sequential_gauss_seidel_sweep(iterations):
     steps = method.substeps_of(h)
     assert len(carry.segments) > 3  # several colours: the order between them matters
     expected = h * (v + h * carry.external)
-    dx = padded(expected)
+    dx = coordinates(expected)
     sequential_sweep(expected, q, carry.inverse_mass, carry.constraints, h, iterations, steps.carried)
-    project(dx, padded(q), carry.inverse_mass, carry.sweep, iterations, steps.carried, carry.work)
-    assert dx[:, :3].tobytes() == expected.tobytes() and not dx[:, 3].any()
+    project(dx, coordinates(q), carry.inverse_mass, carry.sweep, iterations, steps.carried, carry.work)
+    n = len(q)
+    assert np.ascontiguousarray(bodies(dx, n)).tobytes() == expected.tobytes() and not dx[:, n:].any()
     assert np.abs(expected - h * (v + h * carry.external)).max() > 1e-4  # the sweep moved the bodies
 
 
@@ -357,9 +358,13 @@ def test_the_sweep_in_bands_is_the_sweep_colour_by_colour(band, iterations):
     from steplab.integrators.constraint_projection import (
         EQUAL_MASSES,
         LANES,
+        APART,
+        PAIRS,
+        RUN,
         advance,
+        bodies,
+        coordinates,
         ordered,
-        padded,
         project,
         sweep_columns,
         wavefront,
@@ -380,61 +385,66 @@ def test_the_sweep_in_bands_is_the_sweep_colour_by_colour(band, iterations):
     colour = np.repeat(np.arange(len(colours) - 1), np.diff(colours))
     assert np.diff(colour[where]).min() < 0  # ... the colours starting over in each band
     expected = h * (v + h * external)
-    dx = padded(expected)
+    dx = coordinates(expected)
     carried = method.substeps_of(h).carried
     sequential_sweep(expected, q, inverse_mass, c, h, iterations, carried)
     sweep, work = sweep_columns(banded, segments, inverse_mass, h), workspace(model.n_bodies, len(c.i))
     assert np.diff(segments).mean() >= 2 * LANES  # mostly blocks, and a tail in most segments
     kinds = sweep.kinds
-    assert set(np.unique(kinds % EQUAL_MASSES)) == {0, 1, 2}  # blocks read by index and at both strides,
+    assert set(np.unique(kinds % EQUAL_MASSES)) == {0, RUN, PAIRS, APART}  # blocks read each way,
     assert 0 < np.count_nonzero(kinds & EQUAL_MASSES) < len(kinds)  # with equal masses and not (pinned)
-    project(dx, padded(q), inverse_mass, sweep, iterations, carried, work)
-    assert dx[:, :3].tobytes() == expected.tobytes()
-    y = work.state  # and the whole step, on the padded rows (x, y, z, 0) of q, v
-    y[..., :3] = q, v
+    project(dx, coordinates(q), inverse_mass, sweep, iterations, carried, work)
+    n = model.n_bodies
+    assert np.ascontiguousarray(bodies(dx, n)).tobytes() == expected.tobytes()
+    y = work.state  # and the whole step, on the coordinate rows of q, v
+    bodies(y, n)[...] = q, v
     advance(y[0], y[1], external, inverse_mass, sweep, method.substeps_of(h), work)
-    assert y[..., :3].tobytes() == np.stack([q + expected, expected / h]).tobytes() and not y[..., 3].any()
+    assert np.ascontiguousarray(bodies(y, n)).tobytes() == np.stack([q + expected, expected / h]).tobytes()
+    assert not y[..., n:].any()
 
 
 def plain_kinds(i, j, segments, lanes, mass=None):
-    """Each block's stride written out (the blocks of a segment from its start, lanes at a time), plus 4 where
-    ``mass`` is given and equal at both ends in every lane."""
+    """Each block's layout written out (the blocks of a segment from its start, lanes at a time): 1 a run of both
+    ends, 2 pairs (both ends by 2, j = i + 1), 3 both ends by 2 with the runs of 2 lanes bodies apart, else 0;
+    plus 4 where ``mass`` is given and equal at both ends in every lane."""
     out = []
     for lo, hi in zip(segments[:-1], segments[1:]):
         for k in range(lo, hi - lanes + 1, lanes):
-            found = [s for s in (1, 2) if all(int(i[k + n]) - int(i[k]) == s * n == int(j[k + n]) - int(j[k])
-                                              for n in range(lanes))]
+            by = lambda s: all(int(i[k + n]) - int(i[k]) == s * n == int(j[k + n]) - int(j[k]) for n in range(lanes))
+            offset = int(j[k]) - int(i[k])
+            layout = 1 if by(1) else 2 if by(2) and offset == 1 else 3 if by(2) and abs(offset) >= 2 * lanes else 0
             equal = mass is not None and all(mass[i[k + n]] == mass[j[k + n]] for n in range(lanes))
-            out.append((found[0] if found else 0) + (4 if equal else 0))
+            out.append(layout + (4 if equal else 0))
     return out
 
 
 def test_the_block_kinds_are_the_runs_of_bodies_and_equal_masses():
-    # a block is read at stride s only where both ends' bodies advance by s from lane to lane;
-    # anything else (another stride, a broken run, different strides at the two ends) is read by index;
-    # its two ends move by one product only where their inverse masses are equal in every lane
-    from steplab.integrators.constraint_projection import EQUAL_MASSES, LANES, block_kinds, strides
+    # a block is read as a run only where both ends' bodies advance by 1 from lane to lane, or by 2 with
+    # the ends interleaved (j = i + 1) or their runs of sixteen apart; anything else (another stride, a
+    # broken run, different strides at the two ends, runs by 2 that overlap) is read by index; its two
+    # ends move by one product only where their inverse masses are equal in every lane
+    from steplab.integrators.constraint_projection import APART, EQUAL_MASSES, LANES, PAIRS, RUN, block_kinds, layouts
 
-    assert EQUAL_MASSES == 4  # as plain_kinds writes it
+    assert (RUN, PAIRS, APART, EQUAL_MASSES) == (1, 2, 3, 4)  # as plain_kinds writes them
     rng = np.random.default_rng(5)
     run = lambda start, s: start + s * np.arange(LANES)
     i = np.concatenate([run(0, 1), run(40, 2), run(100, 3), run(200, 1), rng.permutation(50)[:LANES],
-                        run(300, 2), [7, 9, 11]]).astype(np.uint32)
+                        run(300, 2), run(500, 2), run(600, 2), [7, 9, 11]]).astype(np.uint32)
     j = np.concatenate([run(20, 1), run(41, 2), run(120, 3), run(260, 2), rng.permutation(50)[:LANES] + 60,
-                        run(301, 2), [8, 10, 12]]).astype(np.uint32)
+                        run(301, 2), run(540, 2), run(610, 2), [8, 10, 12]]).astype(np.uint32)
     j[5 * LANES + 3] += 1  # a broken run at j
-    segments = np.array([0, 2 * LANES, 5 * LANES, 6 * LANES + 3], np.int64)
-    got = strides(i, j, segments)
-    assert got.dtype == np.uint8 and list(got) == [1, 2, 0, 0, 0, 0]
+    segments = np.array([0, 2 * LANES, 5 * LANES, 8 * LANES + 3], np.int64)
+    got = layouts(i, j, segments)
+    assert got.dtype == np.uint8 and list(got) == [RUN, PAIRS, 0, 0, 0, 0, APART, 0]
     assert list(got) == plain_kinds(i, j, segments, LANES)
     # random segments of a random order, with some unequal masses: the same as written out
     for seed in range(5):
         r = np.random.default_rng(seed)
         p = int(r.integers(0, 200))
         i = (np.cumsum(r.integers(1, 3, p)) * r.integers(1, 3)).astype(np.uint32)  # runs of 1s and 2s
-        j = (i + r.integers(1, 3)).astype(np.uint32)
+        j = (i + r.choice([1, 2, 20])).astype(np.uint32)
         segments = np.unique(np.concatenate([[0, p], r.integers(0, p + 1, 6)])).astype(np.int64)
-        assert list(strides(i, j, segments)) == plain_kinds(i, j, segments, LANES)
+        assert list(layouts(i, j, segments)) == plain_kinds(i, j, segments, LANES)
         mass = r.choice([0.0, 0.5, 1.0], size=int(j.max(initial=0)) + 1, p=[0.05, 0.05, 0.9])
         assert list(block_kinds(i, j, mass, segments)) == plain_kinds(i, j, segments, LANES, mass)
 
@@ -445,7 +455,7 @@ def test_the_vector_block_is_its_python_twin(monkeypatch, iterations):
     # (projection_block); interpreted, the same sweep runs the block's plain-Python twin, the
     # projections one after another: the same bytes, on segments long enough for many blocks
     from steplab.integrators import constraint_projection
-    from steplab.integrators.constraint_projection import LANES, padded, project
+    from steplab.integrators.constraint_projection import LANES, bodies, coordinates, project
 
     from steplab.bench.systems import cloth_model
 
@@ -455,14 +465,14 @@ def test_the_vector_block_is_its_python_twin(monkeypatch, iterations):
     assert np.diff(carry.segments).mean() >= 3 * LANES
     runs = []
     for kernel in (project, project.py_func):
-        dx = padded(h * (v + h * carry.external))
+        dx = coordinates(h * (v + h * carry.external))
         with monkeypatch.context() as patch:
             if kernel is project.py_func:
                 patch.setattr(constraint_projection, "_segment", constraint_projection._segment.py_func)
-            kernel(dx, padded(q), carry.inverse_mass, carry.sweep, iterations, iterations > 1, carry.work)
+            kernel(dx, coordinates(q), carry.inverse_mass, carry.sweep, iterations, iterations > 1, carry.work)
         runs.append(dx)
     assert runs[0].tobytes() == runs[1].tobytes()
-    assert np.abs(runs[0][:, :3] - h * (v + h * carry.external)).max() > 1e-5  # the sweep moved the bodies
+    assert np.abs(bodies(runs[0], len(q)) - h * (v + h * carry.external)).max() > 1e-5  # the sweep moved the bodies
 
 
 @pytest.mark.parametrize("method", [XPBD(1, 1), XPBD(3, 3), PBD(1, 4)], ids=["xpbd-1x1", "xpbd-3x3", "pbd-1x4"])

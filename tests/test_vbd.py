@@ -10,7 +10,7 @@ from hypothesis import strategies as st
 from steplab.integrators import VBD, XPBD, simulate
 from steplab.integrators.block_descent import descend
 from steplab.integrators.colouring import adjacency, greedy_colouring
-from steplab.integrators.constraint_projection import padded, project
+from steplab.integrators.constraint_projection import bodies, coordinates, project
 from steplab.physics import Dampers, Gravity, Model, Springs
 from steplab.physics.scene import load_scene
 
@@ -115,12 +115,12 @@ def test_the_python_and_compiled_sweeps_agree(monkeypatch):
                 dx = dy.copy()
                 kernel(dx, q, dy, carry.graph, h, 5)
             else:
-                dx = padded(dy)  # the sweep's rows (x, y, z, 0)
+                dx = coordinates(dy)  # the sweep's rows, a coordinate each
                 with monkeypatch.context() as patch:
                     if kernel is project.py_func:  # its inlined segment, interpreted too
                         patch.setattr(constraint_projection, "_segment", constraint_projection._segment.py_func)
-                    kernel(dx, padded(q), carry.inverse_mass, carry.sweep, 5, True, carry.work)
-                dx = dx[:, :3]
+                    kernel(dx, coordinates(q), carry.inverse_mass, carry.sweep, 5, True, carry.work)
+                dx = np.ascontiguousarray(bodies(dx, len(q)))
             runs.append(dx)
         assert runs[0].tobytes() == runs[1].tobytes()
         assert np.abs(runs[0] - dy).max() > 1e-6  # the sweep moved something
