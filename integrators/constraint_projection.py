@@ -27,21 +27,23 @@ compiles into the kernel and JAX evaluates on a colour's columns).
 The constraints are swept in the order of a greedy edge colouring (:func:`ordered`), colour
 after colour. Within a colour no two constraints share a body, so its projections are
 independent: the sweep projects eight consecutive constraints of a colour at once, each in a
-lane of LLVM vector code (:func:`.projection_block.project_block`: the bodies' rows gathered,
-transposed into lanes, the square roots and divisions eight at a time, the moves scattered),
-and a run's last few one by one (:func:`.projection_block.project_one`). That is the
-sequential Gauss-Seidel sweep exactly, the same operations in the same order per constraint
-(so the same bytes). What depends only on the constraint and the substep h (alpha_tilde,
-gamma and the denominator (1 + gamma) w + alpha_tilde) is computed once per run
-(:func:`sweep_columns`). Each body's position and velocity are padded rows (x, y, z, 0) that
-one 256-bit load or store moves (:mod:`.vector4`), and the step moves them in place (the
-velocity's rows carry the displacement during the substep, :func:`advance`); the colours are
-swept in bands of bodies (:func:`wavefront`), each body still receiving its projections in
-colour order (the same bytes), so that a band's bodies stay in the core's caches; the sweep
-prefetches the columns :data:`PREFETCH_AHEAD` constraints ahead (their reads from memory then
-overlap the sweep when the caches are cold). On the 25,600-particle cloth, one step, warm:
-0.59-0.62 ms gathered per colour, 0.38-0.40 ms with bands, rows and prefetch, 0.27-0.30 ms now
-(docs/performance.md has the steps between and the cold-cache times).
+lane of LLVM vector code (:func:`.projection_block.project_block`: the bodies' coordinates
+loaded into lanes, the square roots and divisions eight at a time, the moves stored back), and a
+segment's last few one by one (:func:`.projection_block.project_one`). That is the sequential
+Gauss-Seidel sweep exactly, the same operations in the same order per constraint (so the same
+bytes). What depends only on the constraint and the substep h (alpha_tilde, gamma and the
+denominator (1 + gamma) w + alpha_tilde) is computed once per run (:func:`sweep_columns`).
+Positions and velocities are coordinate rows, (3, M) each, a row per coordinate
+(:func:`coordinates`), the bodies in the rows :mod:`.arrangement` lays them out in, so that
+eight constraints whose ends advance by 1 (a run) read each coordinate as two vector loads; the
+step moves them in place (the velocity's rows carry the displacement during the substep,
+:func:`advance`). The colours are swept in bands of bodies (:func:`wavefront`), each body still
+receiving its projections in colour order (the same bytes), so that a band's bodies stay in the
+core's caches, each segment's runs first (:func:`runs_first`); the sweep prefetches the columns
+:data:`PREFETCH_AHEAD` constraints ahead (their reads from memory then overlap the sweep when the
+caches are cold). On the 25,600-particle cloth, one step, warm (AMD Zen 3): 0.49-0.52 ms on
+padded rows (x, y, z, 0) in the grid's numbering, 0.42-0.46 ms now (docs/performance.md has the
+steps before and the cold-cache times).
 """
 
 from __future__ import annotations
@@ -51,9 +53,9 @@ from typing import NamedTuple
 import numpy as np
 from numba import njit
 
-from .projection_block import EQUAL_MASSES, LANES, project_block, project_one
+from .prefetch import prefetch
+from .projection_block import EQUAL_MASSES, LANES, RUN, project_block, project_one
 from .projection_law import factors
-from .vector4 import prefetch
 
 
 class Sweep(NamedTuple):
@@ -88,9 +90,9 @@ class Substeps(NamedTuple):
 
 
 class Workspace(NamedTuple):
-    """Scratch a step writes, allocated once per run: the ``state`` q, v (2, N, 4) as padded rows (x, y, z, 0)
-    (:mod:`.vector4`), which the step moves in place (during a substep v's rows carry the displacement dx,
-    q's the positions at the start of the substep), and the multipliers ``lam`` (P,)."""
+    """Scratch a step writes, allocated once per run: the ``state`` q, v (2, 3, M) as coordinate rows
+    (:func:`coordinates`), which the step moves in place (during a substep v's rows carry the displacement
+    dx, q's the positions at the start of the substep), and the multipliers ``lam`` (P,)."""
 
     state: np.ndarray
     lam: np.ndarray
@@ -129,7 +131,7 @@ def wavefront(constraints, colours, band: int = BAND):
     m + reach - 1 < m + (c - c') reach, so it lies in the same band or an earlier one (and in the
     same band it comes first, colours in order); one of a higher colour lies in the same band
     or a later one by the same bound. Within a band the segments are the colours in order, each
-    sorted by its bodies. The bytes are those of the colour-by-colour sweep (tested); the bodies
+    with its runs first (:func:`runs_first`). The bytes are those of the colour-by-colour sweep (tested); the bodies
     a band touches stay in the core's caches while it is swept. With bodies in no spatial order
     (reach ~ N) the bands just repeat the colours: the same sweep, without the locality.
     """
@@ -141,7 +143,32 @@ def wavefront(constraints, colours, band: int = BAND):
     order = np.lexsort((j, i, key))
     key = key[order]
     segments = np.append(np.flatnonzero(np.diff(key, prepend=-1)), len(key)).astype(np.int64)
+    order = order[runs_first(i[order], j[order], segments)]
     return type(constraints)(*(np.ascontiguousarray(a[order]) for a in constraints)), segments
+
+
+def runs_first(i, j, segments) -> np.ndarray:
+    """The order within each segment (constraints of one colour, in any order the same bytes) that puts its
+    runs in whole blocks: (P,) indices into i, j.
+
+    A run is a family of constraints whose two ends both advance by 1 (i + l, j + l for l = 0, 1, ...):
+    a block of LANES of them reads each coordinate of its sixteen bodies as two vector loads from two
+    addresses (:mod:`.projection_block`), where a block by index loads sixteen scattered values. Each
+    segment's maximal runs (by offset j - i, then i) are cut into whole blocks from their start and
+    placed first, so that the blocks, LANES at a time from the segment's start, fall on them; each
+    run's last (length mod LANES) constraints follow, in blocks by index and one by one.
+    """
+    i, j = i.astype(np.int64), j.astype(np.int64)
+    segment = np.repeat(np.arange(len(segments) - 1), np.diff(segments))
+    by = np.lexsort((i, j - i, segment))
+    i, offset, segment = i[by], (j - i)[by], segment[by]
+    starts = np.ones(len(i), bool)
+    starts[1:] = (segment[1:] != segment[:-1]) | (offset[1:] != offset[:-1]) | (i[1:] != i[:-1] + 1)
+    run = np.cumsum(starts) - 1
+    first = np.flatnonzero(starts)
+    position = np.arange(len(i)) - first[run]
+    leftover = position >= np.diff(np.append(first, len(i)))[run] // LANES * LANES
+    return by[np.lexsort((position, run, leftover, segment))]
 
 
 def sweep_columns(constraints, segments, inverse_mass, h: float) -> Sweep:
@@ -155,10 +182,6 @@ def sweep_columns(constraints, segments, inverse_mass, h: float) -> Sweep:
                  block_kinds(i, j, inverse_mass, segments))
 
 
-#: the strides a block's bodies may lie at and be read without their indices (:func:`strides`)
-STRIDES = (1, 2)
-
-
 def block_starts(segments) -> np.ndarray:
     """The first constraint of each block of LANES the sweep projects at once: a segment's from its start."""
     counts = np.diff(segments) // LANES
@@ -166,37 +189,42 @@ def block_starts(segments) -> np.ndarray:
     return np.repeat(segments[:-1], counts) + LANES * (np.arange(counts.sum()) - np.repeat(before, counts))
 
 
-def strides(i, j, segments) -> np.ndarray:
-    """For each block (:func:`block_starts`), the stride s in :data:`STRIDES` at which both ends' bodies
-    advance, i[k + l] = i[k] + s l and j[k + l] = j[k] + s l for each lane l, or 0 where they do not:
-    (B,) uint8, in the sweep's order."""
+def layouts(i, j, segments) -> np.ndarray:
+    """For each block (:func:`block_starts`), how its bodies lie, (B,) uint8, in the sweep's order: RUN (1)
+    where both ends advance by 1 from lane to lane, i[k + l] = i[k] + l and j[k + l] = j[k] + l, 0 elsewhere
+    (:mod:`.projection_block` reads each way with its own code)."""
     starts = block_starts(segments)
     i_, j_ = (e[starts[:, None] + np.arange(LANES)].astype(np.int64) for e in (i, j))
-    out = np.zeros(len(starts), np.uint8)
-    for s in STRIDES:
-        step = s * np.arange(LANES)
-        out[((i_ - i_[:, :1]) == step).all(axis=1) & ((j_ - j_[:, :1]) == step).all(axis=1)] = s
-    return out
+    run = ((i_ - i_[:, :1]) == np.arange(LANES)).all(axis=1) & ((j_ - j_[:, :1]) == np.arange(LANES)).all(axis=1)
+    return np.where(run, RUN, 0).astype(np.uint8)
 
 
 def block_kinds(i, j, inverse_mass, segments) -> np.ndarray:
-    """How the sweep's code may read each block (:func:`block_starts`), (B,) uint8: its :func:`strides`, plus
+    """How the sweep's code may read each block (:func:`block_starts`), (B,) uint8: its :func:`layouts`, plus
     EQUAL_MASSES where w_i = w_j in every lane.
 
-    On a grid cloth in its grid numbering most blocks are runs (the bench's 160 x 160 cloth: 92 %, a
-    row's horizontal springs of one colour at stride 2, its vertical and shear springs at stride 1), and
-    all but those at a pinned body join equal masses. At a stride the code reads two indices and finds
-    the sixteen rows at fixed offsets from two, instead of loading, shifting and keeping sixteen; with
+    On the bench's 160 x 160 cloth, its bodies laid out by :mod:`.arrangement`, 94 % of the blocks are runs,
+    and all but those at a pinned body join equal masses. In a run the code reads two indices and loads each
+    coordinate of eight bodies as one vector, instead of loading sixteen indices and gathering; with
     equal masses, d_i + (-(w_i s)) e = d_i - (w s) e exactly, so one product a lane moves both ends.
     The arithmetic, and so the bytes, are the same (:mod:`.projection_block`).
     """
     lanes = block_starts(segments)[:, None] + np.arange(LANES)
     equal = (inverse_mass[i[lanes]] == inverse_mass[j[lanes]]).all(axis=1)
-    return strides(i, j, segments) | np.where(equal, EQUAL_MASSES, 0).astype(np.uint8)
+    return layouts(i, j, segments) | np.where(equal, EQUAL_MASSES, 0).astype(np.uint8)
 
 
 def workspace(n_bodies: int, n_constraints: int) -> Workspace:
-    return Workspace(aligned_zeros((2, n_bodies, 4)), np.empty(n_constraints))
+    return Workspace(aligned_zeros((2, 3, row_length(n_bodies))), np.empty(n_constraints))
+
+
+def row_length(n_bodies: int) -> int:
+    """M, the length of a coordinate row for N bodies: N rounded up to a cache line of float64, plus one line.
+
+    Each row then starts on a cache line, a block's loads of 2 LANES values from a body near the end
+    stay inside the row, and rows lie apart by no multiple of 4 kB (at N = 25,600 they would, 50 pages:
+    a store to x then looks to the core like it may feed the next load of y, which then waits)."""
+    return -(-n_bodies // LANES) * LANES + LANES
 
 
 #: bytes of a cache line
@@ -204,17 +232,27 @@ CACHE_LINE = 64
 
 
 def aligned_zeros(shape: tuple) -> np.ndarray:
-    """Zeros (float64) starting on a cache line: padded rows of 32 bytes then never straddle two lines
-    (NumPy's large arrays start 16 bytes past a page, which splits every other row's loads and stores)."""
+    """Zeros (float64) starting on a cache line (NumPy's large arrays start 16 bytes past a page, which
+    would split every vector load at a row's start over two lines)."""
     size = int(np.prod(shape))
     buffer = np.zeros(size + CACHE_LINE // 8)
     start = (-buffer.ctypes.data % CACHE_LINE) // 8
     return buffer[start:start + size].reshape(shape)
 
 
-def padded(a: np.ndarray) -> np.ndarray:
-    """(N, 3) -> (N, 4), the rows (x, y, z, 0) the sweep moves (:class:`Workspace`)."""
-    return np.concatenate([a, np.zeros((len(a), 1))], axis=1)
+def coordinates(a: np.ndarray) -> np.ndarray:
+    """(N, 3) -> (3, M): a coordinate a row (:func:`row_length`, zeros past N), as the sweep moves them.
+
+    One row per coordinate, the bodies along it: a block's eight bodies in a run are then one vector load
+    per coordinate, not eight rows to transpose into lanes (:mod:`.projection_block`)."""
+    out = aligned_zeros((3, row_length(len(a))))
+    out[:, :len(a)] = a.T
+    return out
+
+
+def bodies(rows: np.ndarray, n_bodies: int) -> np.ndarray:
+    """The view (..., N, 3) of coordinate rows (..., 3, M): the inverse of :func:`coordinates`, no copy."""
+    return np.swapaxes(rows[..., :n_bodies], -1, -2)
 
 
 #: constraints ahead of the gather whose columns the sweep prefetches (:func:`_segment`): far enough to
@@ -226,8 +264,8 @@ PREFETCH_AHEAD = 128
 @njit(inline="always", error_model="numpy")
 def _segment(span, rows, inverse_mass, sweep, carried, work):
     """One segment's projections (``span`` = (lo, hi, block): constraints lo to hi, no two sharing a body, its
-    first block of LANES the sweep's ``block``-th) on the flat padded rows ``rows`` = (dx, x_prev): LANES at a time
-    (:func:`.projection_block.project_block`, its bodies found by their stride where they lie at one), the
+    first block of LANES the sweep's ``block``-th) on the coordinate rows ``rows`` = (dx, x_prev), (3, M) each:
+    LANES at a time (:func:`.projection_block.project_block`, each way its bodies lie with its own code), the
     rest one by one."""
     lo, hi, block = span
     k = lo
@@ -241,18 +279,14 @@ def _segment(span, rows, inverse_mass, sweep, carried, work):
         prefetch(sweep.rest_length, ahead)
         prefetch(sweep.gamma, ahead)
         prefetch(sweep.denominator, ahead)
-        # each kind its own code (a constant argument): 1, 2 the strides, 4 = EQUAL_MASSES added, 0 by index
+        # each kind its own code (a constant argument): RUN (1) or by index (0), EQUAL_MASSES (4) added
         kind = sweep.kinds[block]
         if kind == 5:
             project_block(rows, inverse_mass, sweep, work.lam, carried, k, 5)
-        elif kind == 6:
-            project_block(rows, inverse_mass, sweep, work.lam, carried, k, 6)
-        elif kind == 4:
-            project_block(rows, inverse_mass, sweep, work.lam, carried, k, 4)
         elif kind == 1:
             project_block(rows, inverse_mass, sweep, work.lam, carried, k, 1)
-        elif kind == 2:
-            project_block(rows, inverse_mass, sweep, work.lam, carried, k, 2)
+        elif kind == 4:
+            project_block(rows, inverse_mass, sweep, work.lam, carried, k, 4)
         else:
             project_block(rows, inverse_mass, sweep, work.lam, carried, k, 0)
         k += LANES
@@ -263,10 +297,10 @@ def _segment(span, rows, inverse_mass, sweep, carried, work):
 
 @njit(cache=True, error_model="numpy")
 def project(dx, x_prev, inverse_mass, sweep, iterations, carried, work):
-    """``iterations`` Gauss-Seidel sweeps over ``sweep`` (a :class:`Sweep`), moving ``dx`` (N, 4) in place.
+    """``iterations`` Gauss-Seidel sweeps over ``sweep`` (a :class:`Sweep`), moving ``dx`` (3, M) in place.
 
-    ``x_prev`` (N, 4) are the positions at the start of the substep, ``dx`` the predicted
-    displacement h v* on entry and the projected one on return, both padded rows (x, y, z, 0);
+    ``x_prev`` (3, M) are the positions at the start of the substep, ``dx`` the predicted
+    displacement h v* on entry and the projected one on return, both coordinate rows (:func:`coordinates`);
     the multipliers ``work.lam`` (P,) start at 0 in each substep and are only read and written
     when ``carried`` (otherwise held at 0 and untouched, which saves the sweep 16 bytes of
     traffic per constraint). Coincident bodies (no direction) and pairs of pinned bodies
@@ -274,36 +308,36 @@ def project(dx, x_prev, inverse_mass, sweep, iterations, carried, work):
     """
     if carried:
         work.lam[:] = 0.0
-    d_, x_ = dx.reshape(-1), x_prev.reshape(-1)  # flat: body a's row at 4a .. 4a + 3
     for _ in range(iterations):
         block = 0
         for c in range(sweep.segments.shape[0] - 1):
             lo, hi = sweep.segments[c], sweep.segments[c + 1]
-            _segment((lo, hi, block), (d_, x_), inverse_mass, sweep, carried, work)
+            _segment((lo, hi, block), (dx, x_prev), inverse_mass, sweep, carried, work)
             block += (hi - lo) // LANES
 
 
 @njit(cache=True, error_model="numpy")
 def advance(q, v, external, inverse_mass, sweep, steps, work):
     """``steps.substeps`` substeps of ``steps.h`` of a position-based step (a :class:`Substeps`), on q, v
-    (N, 4), padded rows (x, y, z, 0), in place, allocating nothing:
+    (3, M), coordinate rows (:func:`coordinates`), in place, allocating nothing:
 
         v <- dx = h (v + h a_ext),  project dx (:func:`project`, from x_prev = q),  q += dx,  v = dx / h.
 
-    ``external`` (N, 3), m/s^2; ``sweep`` a :class:`Sweep` for h; ``work`` a :class:`Workspace`. The
+    ``external`` (3, M), m/s^2, coordinate rows too; ``sweep`` a :class:`Sweep` for h; ``work`` a
+    :class:`Workspace`. The
     displacement lives in v's rows and the start positions are q's own: no copy of the state is
     written, so a step from cold caches reads q and v once and writes them in place (a separate dx
-    and x_prev, written first, cost their reads for ownership from memory, 1.6 MB on the bench's cloth).
+    and x_prev, written first, cost their reads for ownership from memory, 1.2 MB on the bench's cloth).
     """
     h = steps.h
-    q_, v_ = q.reshape(-1), v.reshape(-1)
+    q_, v_, a_ = q.reshape(-1), v.reshape(-1), external.reshape(-1)
     for _ in range(steps.substeps):
-        for b in range(q.shape[0]):
-            for c in range(3):
-                v[b, c] = h * (v[b, c] + h * external[b, c])  # predict: x* = q + h v*, v* = v + h a_ext
+        # predict, x* = q + h v*, v* = v + h a_ext, in one contiguous loop too (the rows' ends stay 0)
+        for k in range(v_.shape[0]):
+            v_[k] = h * (v_[k] + h * a_[k])
         project(v, q, inverse_mass, sweep, steps.iterations, steps.carried, work)
-        # update, in one contiguous loop over the padded rows that the compiler vectorises (scalar
-        # divisions cost a quarter of the step); the padding stays 0 (0 + 0, 0 / h)
+        # update, in one contiguous loop over the rows that the compiler vectorises (scalar divisions
+        # cost a quarter of the step); the rows' ends past N stay 0 (0 + 0, 0 / h)
         for k in range(q_.shape[0]):
             q_[k] += v_[k]
             v_[k] = v_[k] / h

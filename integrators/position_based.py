@@ -33,18 +33,21 @@ LINEAR_AMPLITUDE = 0.25
 
 
 class SweepCarry(NamedTuple):
-    """What a pbd or xpbd run keeps between steps: the ``constraints`` in the sweep's order
-    (:func:`.constraint_projection.wavefront` of the colour order), ``external`` (N, 3), m/s^2,
-    ``inverse_mass`` (N,), 1/kg, ``work`` (:class:`.constraint_projection.Workspace`), the step's
-    scratch, ``segments`` (where each run of one colour starts), and ``sweep``, the columns the
-    kernel reads for substeps of ``h`` (:func:`.constraint_projection.sweep_columns`; None before
-    the first step, rebuilt when the step changes)."""
+    """What a pbd or xpbd run keeps between steps, its bodies in the sweep's rows: body b of the model is
+    row ``rows[b]`` (:func:`.arrangement.arranged`). The ``constraints`` on the rows in the sweep's order
+    (:func:`.constraint_projection.wavefront` of the colour order), ``external`` (3, M), m/s^2, as
+    coordinate rows (:func:`.constraint_projection.coordinates`), ``inverse_mass`` (N,), 1/kg, ``work``
+    (:class:`.constraint_projection.Workspace`), the step's scratch, ``segments`` (where each run of one
+    colour starts), and ``sweep``, the columns the kernel reads for substeps of ``h``
+    (:func:`.constraint_projection.sweep_columns`; None before the first step, rebuilt when the step
+    changes)."""
 
     constraints: tuple
     external: np.ndarray
     inverse_mass: np.ndarray
     work: tuple
     segments: np.ndarray
+    rows: np.ndarray
     h: float = float("nan")
     sweep: tuple | None = None
 
@@ -118,7 +121,8 @@ class PositionBased(Integrator):
         the same bytes), the external accelerations, the inverse masses and the scratch the step
         writes (a :class:`SweepCarry`); on the JAX backend the constraints in colour order as a
         padded table by colour (:class:`.constraint_projection_jax.ColourTable`)."""
-        from .constraint_projection import ordered, wavefront, workspace
+        from .arrangement import arranged, in_rows
+        from .constraint_projection import coordinates, ordered, workspace
 
         c, external, inverse_mass = self.constraints(model)
         c, colours = ordered(c, model.n_bodies)
@@ -126,8 +130,9 @@ class PositionBased(Integrator):
             from .constraint_projection_jax import colour_table
 
             return colour_table(c, colours, inverse_mass, external, model.dtype)
-        c, segments = wavefront(c, colours)
-        return SweepCarry(c, external, inverse_mass, workspace(model.n_bodies, len(c.i)), segments)
+        rows, c, segments = arranged(c, colours, model.n_bodies)
+        return SweepCarry(c, coordinates(in_rows(external, rows)), in_rows(inverse_mass, rows),
+                          workspace(model.n_bodies, len(c.i)), segments, rows)
 
     def substeps_of(self, dt: float):
         """:class:`.constraint_projection.Substeps` of a step of ``dt``."""
@@ -136,7 +141,7 @@ class PositionBased(Integrator):
         return Substeps(dt / self.substeps, self.substeps, self.iterations, self.accumulate and self.iterations > 1)
 
     def step(self, model, t, y, dt, carry):
-        from .constraint_projection import advance  # Numba: only when a position-based run steps
+        from .constraint_projection import advance, bodies  # Numba: only when a position-based run steps
 
         if carry is None:  # a caller that did not call init
             carry = self.init(model, t, y)
@@ -146,10 +151,11 @@ class PositionBased(Integrator):
 
             return model.xp.stack(traced(carry, y[0], y[1], steps)), carry
         carry = carry.for_substep(steps.h)
-        state = carry.work.state  # padded rows (x, y, z, 0), stepped in place
-        state[..., :3] = y
-        advance(state[0], state[1], carry.external, carry.inverse_mass, carry.sweep, steps, carry.work)
-        return np.array(state[..., :3], dtype=y.dtype), carry
+        state = bodies(carry.work.state, model.n_bodies)  # (2, N, 3) view of the rows the kernel steps in place
+        state[:, carry.rows] = y
+        advance(carry.work.state[0], carry.work.state[1], carry.external, carry.inverse_mass, carry.sweep, steps,
+                carry.work)
+        return state[:, carry.rows].astype(y.dtype, copy=False), carry
 
     def linear_map(self, omega_dt: float, zeta: float = 0.0) -> np.ndarray:
         """One-step matrix on u'' = -u - 2 zeta u', from :meth:`step` on a spring of k = 1 to a
@@ -230,15 +236,26 @@ class XPBD(PositionBased):
 
 class InPlaceStep(NamedTuple):
     """A position-based method stepping one state buffer in place, as a game engine does (the bench's
-    step): ``advance(n)`` takes n steps of ``dt`` on ``y`` (2, N, 3) and allocates nothing; the bytes
-    one step must move at the least are ``bytes_read_and_written`` (the state q, v) and
+    step): ``advance(n)`` takes n steps of ``dt`` on ``state`` (2, N, 3), body b in row ``rows[b]``
+    (:mod:`.arrangement`; :attr:`y` and :meth:`set` in the model's order), and allocates nothing; the
+    bytes one step must move at the least are ``bytes_read_and_written`` (the state q, v) and
     ``bytes_read`` (the constraints, inverse masses and external accelerations), for the
     memory-traffic bound (``steplab.peers.memory_stream``)."""
 
-    y: np.ndarray
+    state: np.ndarray
+    rows: np.ndarray
     advance: object
     bytes_read_and_written: int
     bytes_read: int
+
+    @property
+    def y(self) -> np.ndarray:
+        """The state q, v (2, N, 3) in the model's order (a copy)."""
+        return self.state[:, self.rows]
+
+    def set(self, y) -> None:
+        """Put the state q, v (2, N, 3), in the model's order, where the step moves it."""
+        self.state[:, self.rows] = y
 
 
 def cloth_benchmark_step(model, y0, dt: float, method: PositionBased | None = None) -> InPlaceStep:
@@ -248,9 +265,10 @@ def cloth_benchmark_step(model, y0, dt: float, method: PositionBased | None = No
     particles, 101,442 springs with dampers. Each step is :func:`.constraint_projection.advance`,
     the kernel every pbd and xpbd step runs, on the carry :meth:`PositionBased.init` builds (so
     its result is :meth:`PositionBased.step`'s to the byte). The state lives where the kernel
-    steps it, the padded rows (2, N, 4) of the carry's workspace; ``y`` is their view (2, N, 3).
-    Its bytes read and written are counted as (2, N, 3) float64, the least a step must move: the
-    padding's third more is the step's own cost, not the bound's.
+    steps it, the coordinate rows (2, 3, M) of the carry's workspace, the bodies in the sweep's rows
+    (:mod:`.arrangement`); ``state`` is their view (2, N, 3). Its bytes read and written are counted
+    as (2, N, 3) float64, the least a step must move (the rows' ends past N, M - N = 8 to 15 values,
+    are the step's own cost, not the bound's).
 
     Each step calls a compiled entry point resolved once, on one argument: a call through Numba's
     dispatcher types the kernel's seven arguments (three NamedTuples of 13 arrays) in Python
@@ -261,13 +279,14 @@ def cloth_benchmark_step(model, y0, dt: float, method: PositionBased | None = No
     """
     from numba import typeof
 
+    from .constraint_projection import bodies
     from .position_based_entry import advance_at, table
 
     method = XPBD(substeps=1, iterations=1) if method is None else method
     substeps = method.substeps_of(dt)
     carry = method.init(model, 0.0, y0).for_substep(substeps.h)
-    state = carry.work.state
-    state[..., :3] = y0
+    state = bodies(carry.work.state, model.n_bodies)
+    state[:, carry.rows] = y0
     arguments = table(carry.external, carry.inverse_mass, carry.sweep, substeps, carry.work)
     kernel = advance_at.compile((typeof(arguments),))  # loaded from Numba's cache where it is
 
@@ -280,6 +299,6 @@ def cloth_benchmark_step(model, y0, dt: float, method: PositionBased | None = No
 
     # the columns the sweep reads: alpha_tilde only where the multipliers are carried
     read = [a for name, a in carry.sweep._asdict().items() if name != "alpha_tilde" or substeps.carried]
-    data = sum(a.nbytes for a in read) + carry.inverse_mass.nbytes + carry.external.nbytes
-    y = state[..., :3]
-    return InPlaceStep(y, steps, y.nbytes, data)
+    # and the external field as (N, 3) float64, as the model holds it (the rows' ends past N are the step's own)
+    data = sum(a.nbytes for a in read) + carry.inverse_mass.nbytes + 3 * 8 * model.n_bodies
+    return InPlaceStep(state, carry.rows, steps, state.nbytes, data)

@@ -18,19 +18,19 @@ import numpy as np
 from numba import njit
 from steplab.physics.unowned import unowned
 
-from .constraint_projection import Substeps, Sweep, Workspace, advance
+from .constraint_projection import Substeps, Sweep, Workspace, advance, row_length
 
 #: the table's slots: sizes and settings, then one address per array (in this order)
-_BODIES, _CONSTRAINTS, _SEGMENTS, _BLOCKS, _SUBSTEPS, _ITERATIONS, _CARRIED, _H = range(8)
+_BODIES, _CONSTRAINTS, _SEGMENTS, _BLOCKS, _SUBSTEPS, _ITERATIONS, _CARRIED, _H, _ROW = range(9)
 _ARRAYS = ("state", "external", "inverse_mass", "i", "j", "rest_length", "alpha_tilde", "gamma", "denominator",
            "segments", "kinds", "lam")
 _STATE, _EXTERNAL, _INVERSE_MASS, _I, _J, _REST, _ALPHA, _GAMMA, _DENOMINATOR, _STARTS, _KINDS, _LAM = range(
-    8, 8 + len(_ARRAYS))
+    9, 9 + len(_ARRAYS))
 
 
 def table(external, inverse_mass, sweep: Sweep, steps: Substeps, work: Workspace) -> np.ndarray:
     """The int64 table :func:`advance_at` reads: the sizes, ``steps`` (h as its float64 bits) and the addresses
-    of ``work.state`` (2, N, 4), ``external`` (N, 3), ``inverse_mass`` (N,), the sweep's columns and ``work.lam``,
+    of ``work.state`` (2, 3, M), ``external`` (3, M), ``inverse_mass`` (N,), the sweep's columns and ``work.lam``,
     each C-contiguous and of the dtype :func:`.constraint_projection.advance` is compiled for (checked)."""
     arrays = {"state": work.state, "external": external, "inverse_mass": inverse_mass, "lam": work.lam,
               **{name: getattr(sweep, name) for name in Sweep._fields}}
@@ -40,12 +40,13 @@ def table(external, inverse_mass, sweep: Sweep, steps: Substeps, work: Workspace
         if a.dtype != kinds[name] or not a.flags.c_contiguous:
             raise ValueError(f"advance_at: {name} must be C-contiguous {np.dtype(kinds[name])}, got {a.dtype}")
     n, p = len(inverse_mass), len(sweep.i)
-    if work.state.shape != (2, n, 4) or external.shape != (n, 3) or len(work.lam) < p:
+    m = row_length(n)
+    if work.state.shape != (2, 3, m) or external.shape != (3, m) or len(work.lam) < p:
         raise ValueError(f"advance_at: state {work.state.shape}, external {external.shape} and lam "
                          f"{work.lam.shape} do not fit {n} bodies and {p} constraints")
-    t = np.zeros(8 + len(_ARRAYS), np.int64)
-    t[[_BODIES, _CONSTRAINTS, _SEGMENTS, _BLOCKS, _SUBSTEPS, _ITERATIONS, _CARRIED]] = (
-        n, p, len(sweep.segments), len(sweep.kinds), steps.substeps, steps.iterations, steps.carried)
+    t = np.zeros(9 + len(_ARRAYS), np.int64)
+    t[[_BODIES, _CONSTRAINTS, _SEGMENTS, _BLOCKS, _SUBSTEPS, _ITERATIONS, _CARRIED, _ROW]] = (
+        n, p, len(sweep.segments), len(sweep.kinds), steps.substeps, steps.iterations, steps.carried, m)
     t[_H] = np.float64(steps.h).view(np.int64)
     for slot, name in enumerate(_ARRAYS, start=_STATE):
         t[slot] = arrays[name].ctypes.data
@@ -62,11 +63,12 @@ def _at(t, slot, shape, dtype):
 def advance_at(t):
     """:func:`.constraint_projection.advance` on the arrays :func:`table` ``t`` holds, in place."""
     n, p, s, b = t[_BODIES], t[_CONSTRAINTS], t[_SEGMENTS], t[_BLOCKS]
-    state = _at(t, _STATE, (2, n, 4), np.float64)
+    state = _at(t, _STATE, (2, 3, t[_ROW]), np.float64)
     sweep = Sweep(_at(t, _I, p, np.uint32), _at(t, _J, p, np.uint32), _at(t, _REST, p, np.float64),
                   _at(t, _ALPHA, p, np.float64), _at(t, _GAMMA, p, np.float64), _at(t, _DENOMINATOR, p, np.float64),
                   _at(t, _STARTS, s, np.int64), _at(t, _KINDS, b, np.uint8))
     h = t[_H:_H + 1].view(np.float64)[0]
     steps = Substeps(h, t[_SUBSTEPS], t[_ITERATIONS], t[_CARRIED] != 0)
-    advance(state[0], state[1], _at(t, _EXTERNAL, (n, 3), np.float64), _at(t, _INVERSE_MASS, n, np.float64), sweep,
-            steps, Workspace(state, _at(t, _LAM, p, np.float64)))
+    external = _at(t, _EXTERNAL, (3, t[_ROW]), np.float64)
+    advance(state[0], state[1], external, _at(t, _INVERSE_MASS, n, np.float64), sweep, steps,
+            Workspace(state, _at(t, _LAM, p, np.float64)))

@@ -288,7 +288,7 @@ def test_the_benchmark_steps_table_points_at_the_carry_with_multipliers_carried(
     with pytest.raises(ValueError, match="^advance_at: inverse_mass must be C-contiguous float64, got float32$"):
         table(carry.external, carry.inverse_mass.astype(np.float32), carry.sweep, steps, carry.work)
     with pytest.raises(ValueError, match="do not fit 400 bodies"):
-        table(carry.external, carry.inverse_mass, carry.sweep, steps, workspace(399, len(carry.sweep.i)))
+        table(carry.external, carry.inverse_mass, carry.sweep, steps, workspace(380, len(carry.sweep.i)))
 
 
 def sequential_sweep(dx, x_prev, inverse_mass, c, h, iterations, carried):
@@ -332,20 +332,30 @@ def damped_cloth_net(seed):
 def test_the_sweep_by_colour_is_the_sequential_gauss_seidel_sweep(iterations):
     # the kernel gathers a colour, solves its projections together and scatters them: exact only
     # because no two constraints of a colour share a body; a plain sequential loop gives the same bytes
-    from steplab.integrators.constraint_projection import padded, project
+    from steplab.integrators.constraint_projection import bodies, coordinates, project
 
-    model, (q, v) = damped_cloth_net(3)
+    model, y = damped_cloth_net(3)
     h = 2e-3
     method = XPBD(1, iterations)
     carry = method.init(model, 0.0, None).for_substep(h)
     steps = method.substeps_of(h)
     assert len(carry.segments) > 3  # several colours: the order between them matters
-    expected = h * (v + h * carry.external)
-    dx = padded(expected)
+    q, v, a_ext = in_sweep_rows(carry, y)
+    expected = h * (v + h * a_ext)
+    dx = coordinates(expected)
     sequential_sweep(expected, q, carry.inverse_mass, carry.constraints, h, iterations, steps.carried)
-    project(dx, padded(q), carry.inverse_mass, carry.sweep, iterations, steps.carried, carry.work)
-    assert dx[:, :3].tobytes() == expected.tobytes() and not dx[:, 3].any()
-    assert np.abs(expected - h * (v + h * carry.external)).max() > 1e-4  # the sweep moved the bodies
+    project(dx, coordinates(q), carry.inverse_mass, carry.sweep, iterations, steps.carried, carry.work)
+    n = len(q)
+    assert np.ascontiguousarray(bodies(dx, n)).tobytes() == expected.tobytes() and not dx[:, n:].any()
+    assert np.abs(expected - h * (v + h * a_ext)).max() > 1e-4  # the sweep moved the bodies
+
+
+def in_sweep_rows(carry, y):
+    """q, v (N, 3) of ``y`` and the external field (N, 3), each body in its row of the sweep (``carry.rows``)."""
+    from steplab.integrators.arrangement import in_rows
+    from steplab.integrators.constraint_projection import bodies
+
+    return *in_rows(np.asarray(y), carry.rows, axis=1), bodies(carry.external, len(carry.rows))
 
 
 @pytest.mark.parametrize(("band", "iterations"), [(64, 1), (256, 1), (256, 3)])
@@ -357,9 +367,11 @@ def test_the_sweep_in_bands_is_the_sweep_colour_by_colour(band, iterations):
     from steplab.integrators.constraint_projection import (
         EQUAL_MASSES,
         LANES,
+        RUN,
         advance,
+        bodies,
+        coordinates,
         ordered,
-        padded,
         project,
         sweep_columns,
         wavefront,
@@ -380,61 +392,63 @@ def test_the_sweep_in_bands_is_the_sweep_colour_by_colour(band, iterations):
     colour = np.repeat(np.arange(len(colours) - 1), np.diff(colours))
     assert np.diff(colour[where]).min() < 0  # ... the colours starting over in each band
     expected = h * (v + h * external)
-    dx = padded(expected)
+    dx = coordinates(expected)
     carried = method.substeps_of(h).carried
     sequential_sweep(expected, q, inverse_mass, c, h, iterations, carried)
     sweep, work = sweep_columns(banded, segments, inverse_mass, h), workspace(model.n_bodies, len(c.i))
     assert np.diff(segments).mean() >= 2 * LANES  # mostly blocks, and a tail in most segments
     kinds = sweep.kinds
-    assert set(np.unique(kinds % EQUAL_MASSES)) == {0, 1, 2}  # blocks read by index and at both strides,
+    assert set(np.unique(kinds % EQUAL_MASSES)) == {0, RUN}  # blocks read each way (in the grid numbering),
     assert 0 < np.count_nonzero(kinds & EQUAL_MASSES) < len(kinds)  # with equal masses and not (pinned)
-    project(dx, padded(q), inverse_mass, sweep, iterations, carried, work)
-    assert dx[:, :3].tobytes() == expected.tobytes()
-    y = work.state  # and the whole step, on the padded rows (x, y, z, 0) of q, v
-    y[..., :3] = q, v
-    advance(y[0], y[1], external, inverse_mass, sweep, method.substeps_of(h), work)
-    assert y[..., :3].tobytes() == np.stack([q + expected, expected / h]).tobytes() and not y[..., 3].any()
+    project(dx, coordinates(q), inverse_mass, sweep, iterations, carried, work)
+    n = model.n_bodies
+    assert np.ascontiguousarray(bodies(dx, n)).tobytes() == expected.tobytes()
+    y = work.state  # and the whole step, on the coordinate rows of q, v
+    bodies(y, n)[...] = q, v
+    advance(y[0], y[1], coordinates(external), inverse_mass, sweep, method.substeps_of(h), work)
+    assert np.ascontiguousarray(bodies(y, n)).tobytes() == np.stack([q + expected, expected / h]).tobytes()
+    assert not y[..., n:].any()
 
 
 def plain_kinds(i, j, segments, lanes, mass=None):
-    """Each block's stride written out (the blocks of a segment from its start, lanes at a time), plus 4 where
-    ``mass`` is given and equal at both ends in every lane."""
+    """Each block's layout written out (the blocks of a segment from its start, lanes at a time): 1 where both ends
+    advance by 1 from lane to lane, else 0; plus 4 where ``mass`` is given and equal at both ends in every lane."""
     out = []
     for lo, hi in zip(segments[:-1], segments[1:]):
         for k in range(lo, hi - lanes + 1, lanes):
-            found = [s for s in (1, 2) if all(int(i[k + n]) - int(i[k]) == s * n == int(j[k + n]) - int(j[k])
-                                              for n in range(lanes))]
+            run = all(int(i[k + n]) - int(i[k]) == n == int(j[k + n]) - int(j[k]) for n in range(lanes))
             equal = mass is not None and all(mass[i[k + n]] == mass[j[k + n]] for n in range(lanes))
-            out.append((found[0] if found else 0) + (4 if equal else 0))
+            out.append(int(run) + (4 if equal else 0))
     return out
 
 
 def test_the_block_kinds_are_the_runs_of_bodies_and_equal_masses():
-    # a block is read at stride s only where both ends' bodies advance by s from lane to lane;
-    # anything else (another stride, a broken run, different strides at the two ends) is read by index;
-    # its two ends move by one product only where their inverse masses are equal in every lane
-    from steplab.integrators.constraint_projection import EQUAL_MASSES, LANES, block_kinds, strides
+    # a block is read as a run only where both ends' bodies advance by 1 from lane to lane; anything else
+    # (another stride, runs by 2 as a grid's row gives them before integrators/arrangement.py lays the
+    # row out, a broken run, different strides at the two ends) is read by index; its two ends move by
+    # one product only where their inverse masses are equal in every lane
+    from steplab.integrators.constraint_projection import EQUAL_MASSES, LANES, RUN, block_kinds, layouts
 
-    assert EQUAL_MASSES == 4  # as plain_kinds writes it
+    assert (RUN, EQUAL_MASSES) == (1, 4)  # as plain_kinds writes them
     rng = np.random.default_rng(5)
     run = lambda start, s: start + s * np.arange(LANES)
     i = np.concatenate([run(0, 1), run(40, 2), run(100, 3), run(200, 1), rng.permutation(50)[:LANES],
-                        run(300, 2), [7, 9, 11]]).astype(np.uint32)
+                        run(300, 1), run(500, 2), run(600, 1), [7, 9, 11]]).astype(np.uint32)
     j = np.concatenate([run(20, 1), run(41, 2), run(120, 3), run(260, 2), rng.permutation(50)[:LANES] + 60,
-                        run(301, 2), [8, 10, 12]]).astype(np.uint32)
+                        run(310, 1), run(540, 2), run(700, 1), [8, 10, 12]]).astype(np.uint32)
     j[5 * LANES + 3] += 1  # a broken run at j
-    segments = np.array([0, 2 * LANES, 5 * LANES, 6 * LANES + 3], np.int64)
-    got = strides(i, j, segments)
-    assert got.dtype == np.uint8 and list(got) == [1, 2, 0, 0, 0, 0]
+    segments = np.array([0, 2 * LANES, 5 * LANES, 8 * LANES + 3], np.int64)
+    got = layouts(i, j, segments)
+    assert got.dtype == np.uint8 and list(got) == [RUN, 0, 0, 0, 0, 0, 0, RUN]
     assert list(got) == plain_kinds(i, j, segments, LANES)
     # random segments of a random order, with some unequal masses: the same as written out
     for seed in range(5):
         r = np.random.default_rng(seed)
         p = int(r.integers(0, 200))
         i = (np.cumsum(r.integers(1, 3, p)) * r.integers(1, 3)).astype(np.uint32)  # runs of 1s and 2s
-        j = (i + r.integers(1, 3)).astype(np.uint32)
+        j = (i + r.choice([1, 2, 20])).astype(np.uint32)
         segments = np.unique(np.concatenate([[0, p], r.integers(0, p + 1, 6)])).astype(np.int64)
-        assert list(strides(i, j, segments)) == plain_kinds(i, j, segments, LANES)
+        assert list(layouts(i, j, segments)) == plain_kinds(i, j, segments, LANES)
         mass = r.choice([0.0, 0.5, 1.0], size=int(j.max(initial=0)) + 1, p=[0.05, 0.05, 0.9])
         assert list(block_kinds(i, j, mass, segments)) == plain_kinds(i, j, segments, LANES, mass)
 
@@ -445,24 +459,25 @@ def test_the_vector_block_is_its_python_twin(monkeypatch, iterations):
     # (projection_block); interpreted, the same sweep runs the block's plain-Python twin, the
     # projections one after another: the same bytes, on segments long enough for many blocks
     from steplab.integrators import constraint_projection
-    from steplab.integrators.constraint_projection import LANES, padded, project
+    from steplab.integrators.constraint_projection import LANES, bodies, coordinates, project
 
     from steplab.bench.systems import cloth_model
 
-    model, (q, v), _ = cloth_model(20)
+    model, y, _ = cloth_model(20)
     h, method = 1 / 600, XPBD(1, iterations)
     carry = method.init(model, 0.0, None).for_substep(h)
     assert np.diff(carry.segments).mean() >= 3 * LANES
+    q, v, a_ext = in_sweep_rows(carry, y)
     runs = []
     for kernel in (project, project.py_func):
-        dx = padded(h * (v + h * carry.external))
+        dx = coordinates(h * (v + h * a_ext))
         with monkeypatch.context() as patch:
             if kernel is project.py_func:
                 patch.setattr(constraint_projection, "_segment", constraint_projection._segment.py_func)
-            kernel(dx, padded(q), carry.inverse_mass, carry.sweep, iterations, iterations > 1, carry.work)
+            kernel(dx, coordinates(q), carry.inverse_mass, carry.sweep, iterations, iterations > 1, carry.work)
         runs.append(dx)
     assert runs[0].tobytes() == runs[1].tobytes()
-    assert np.abs(runs[0][:, :3] - h * (v + h * carry.external)).max() > 1e-5  # the sweep moved the bodies
+    assert np.abs(bodies(runs[0], len(q)) - h * (v + h * a_ext)).max() > 1e-5  # the sweep moved the bodies
 
 
 @pytest.mark.parametrize("method", [XPBD(1, 1), XPBD(3, 3), PBD(1, 4)], ids=["xpbd-1x1", "xpbd-3x3", "pbd-1x4"])
@@ -503,14 +518,14 @@ def test_both_sweeps_evaluate_the_one_projection():
 
 
 def test_the_sweeps_prefetch_compiles_to_a_prefetch_that_changes_nothing():
-    # the sweep's software prefetch (integrators/vector4.py): compiled, it is the CPU's prefetch
+    # the sweep's software prefetch (integrators/prefetch.py): compiled, it is the CPU's prefetch
     # instruction (its plain-Python twin, a no-op, would pass every byte test), and a prefetch past the
     # end of an array, as the sweep's last constraints make, neither faults nor changes a result
     import platform
 
     from numba import njit
     from steplab.integrators.constraint_projection import PREFETCH_AHEAD
-    from steplab.integrators.vector4 import prefetch
+    from steplab.integrators.prefetch import prefetch
 
     @njit
     def summed_with_prefetch(a, ahead):

@@ -8,9 +8,10 @@ from helpers import spring_net
 from hypothesis import given, settings
 from hypothesis import strategies as st
 from steplab.integrators import VBD, XPBD, simulate
+from steplab.integrators.arrangement import in_rows
 from steplab.integrators.block_descent import descend
 from steplab.integrators.colouring import adjacency, greedy_colouring
-from steplab.integrators.constraint_projection import padded, project
+from steplab.integrators.constraint_projection import bodies, coordinates, project
 from steplab.physics import Dampers, Gravity, Model, Springs
 from steplab.physics.scene import load_scene
 
@@ -103,24 +104,27 @@ def test_the_python_and_compiled_sweeps_agree(monkeypatch):
 
     model, y0 = damped_net(3)
     h = 1e-2
-    q, v = y0
     for method in (VBD(), XPBD()):
         carry = method.init(model, 0.0, y0)
-        if method.name == "xpbd":
+        q, v = y0
+        external = carry.external
+        if method.name == "xpbd":  # its carry holds the bodies in the sweep's rows (integrators/arrangement.py)
             carry = carry.for_substep(h)
-        dy = h * (v + h * carry.external)
+            q, v = in_rows(y0, carry.rows, axis=1)
+            external = bodies(carry.external, len(q))
+        dy = h * (v + h * external)
         runs = []
         for kernel in ((descend, descend.py_func) if method.name == "vbd" else (project, project.py_func)):
             if method.name == "vbd":
                 dx = dy.copy()
                 kernel(dx, q, dy, carry.graph, h, 5)
             else:
-                dx = padded(dy)  # the sweep's rows (x, y, z, 0)
+                dx = coordinates(dy)  # the sweep's rows, a coordinate each
                 with monkeypatch.context() as patch:
                     if kernel is project.py_func:  # its inlined segment, interpreted too
                         patch.setattr(constraint_projection, "_segment", constraint_projection._segment.py_func)
-                    kernel(dx, padded(q), carry.inverse_mass, carry.sweep, 5, True, carry.work)
-                dx = dx[:, :3]
+                    kernel(dx, coordinates(q), carry.inverse_mass, carry.sweep, 5, True, carry.work)
+                dx = np.ascontiguousarray(bodies(dx, len(q)))
             runs.append(dx)
         assert runs[0].tobytes() == runs[1].tobytes()
         assert np.abs(runs[0] - dy).max() > 1e-6  # the sweep moved something

@@ -10,8 +10,6 @@ loop's and over Newton's SolverXPBD's (target 0.5), in the same rounds.
 
 from __future__ import annotations
 
-import numpy as np
-
 from steplab.bench.timing import pin_threads
 
 # one thread per side, as ``steplab bench`` runs its ratios: before JAX or Numba is imported
@@ -26,9 +24,9 @@ class XPBDClothStep:
     timeout = 300
 
     def setup(self, contender, side):
-        from steplab.integrators.position_based import XPBD, cloth_benchmark_step
+        from steplab.integrators.position_based import cloth_benchmark_step
 
-        from steplab.bench.cloth import CLOTH_DT, newton_run, numba_xpbd_loop
+        from steplab.bench.cloth import CLOTH_DT, NumbaXPBDStep, newton_run
         from steplab.bench.systems import cloth_model
 
         model, y0, _ = cloth_model(side)
@@ -36,9 +34,8 @@ class XPBDClothStep:
         if contender == "steplab":
             self.call = cloth_benchmark_step(model, y0, dt).advance
         elif contender == "numba":
-            carry = XPBD(substeps=1, iterations=1).init(model, 0.0, y0)
-            y, loop = np.array(y0), numba_xpbd_loop()
-            self.call = lambda: loop(y[0], y[1], carry.inverse_mass, carry.external, carry.constraints, dt, 1)
+            step = NumbaXPBDStep(model, y0, dt)
+            self.call = lambda: step(1)
         else:
             newton = newton_run(model, dt, y0, solver="xpbd", iterations=1)
             if newton is None:

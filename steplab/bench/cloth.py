@@ -69,6 +69,33 @@ def numba_xpbd_loop():
     return numba.njit(cache=True)(_xpbd_loop)
 
 
+class NumbaXPBDStep:
+    """:func:`_xpbd_loop` on the bodies and constraints as steplab's xpbd carry holds them (the bodies in the
+    sweep's rows, :mod:`steplab.integrators.arrangement`; the constraints in its order): the same bytes in
+    the same places, so the two steps differ only in their code. ``self(n)`` takes n steps in place;
+    :attr:`y` and :meth:`set` are the state in the model's order."""
+
+    def __init__(self, model, y0, dt: float):
+        from steplab.integrators.arrangement import in_rows
+        from steplab.integrators.constraint_projection import bodies
+        from steplab.integrators.position_based import XPBD
+
+        carry = XPBD(substeps=1, iterations=1).init(model, 0.0, y0)
+        self.rows, self.dt, self.loop = carry.rows, dt, numba_xpbd_loop()
+        self.arguments = (carry.inverse_mass, np.array(bodies(carry.external, model.n_bodies)), carry.constraints)
+        self.buffer = in_rows(np.asarray(y0, float), carry.rows, axis=1)  # stepped in place, as a game engine would
+
+    def __call__(self, n: int) -> None:
+        self.loop(self.buffer[0], self.buffer[1], *self.arguments, self.dt, n)
+
+    @property
+    def y(self) -> np.ndarray:
+        return self.buffer[:, self.rows]
+
+    def set(self, y) -> None:
+        self.buffer[:, self.rows] = y
+
+
 def _xpbd_loop(q, v, inverse_mass, external, constraints, dt, n):
     """``n`` steps of XPBD with one substep and one iteration, in place on q, v (N, 3).
 
@@ -137,15 +164,12 @@ def newton_run(model, dt: float, y, **options):
 def xpbd_cloth(config: Config, record: Record, progress) -> None:
     """steplab's xpbd step on the cloth against the memory bound, a Numba loop and Newton's SolverXPBD."""
     from steplab import peers
-    from steplab.integrators.position_based import XPBD, cloth_benchmark_step
+    from steplab.integrators.position_based import cloth_benchmark_step
 
     model, y0, springs = cloth_model(config.cloth_side)
     dt, k = CLOTH_DT, config.loop_steps
-    step = cloth_benchmark_step(model, y0, dt)  # XPBD(1, 1) in place on step.y: the kernel every xpbd step runs
-    carry = XPBD(substeps=1, iterations=1).init(model, 0.0, y0)  # carry.constraints: in the sweep's order
-    buffer = np.array(y0)  # Numba steps this buffer in place, as a game engine would
-    loop = numba_xpbd_loop()
-    numba = lambda steps: loop(buffer[0], buffer[1], carry.inverse_mass, carry.external, carry.constraints, dt, steps)
+    step = cloth_benchmark_step(model, y0, dt)  # XPBD(1, 1) in place on step.state: the kernel every xpbd step runs
+    numba = NumbaXPBDStep(model, y0, dt)
     read_write, read_only = step.bytes_read_and_written, step.bytes_read
     stream = peers.memory_stream(read_write, read_only)
     calls = {("steplab", 1): lambda: step.advance(k), ("steplab", 2): lambda: step.advance(2 * k),
@@ -161,7 +185,8 @@ def xpbd_cloth(config: Config, record: Record, progress) -> None:
     evict = evictor()
     cold = {name: Times.of(s) for name, s in cold_samples({"steplab": lambda: step.advance(1), "stream": stream},
                                                           config.max_rounds, evict).items()}
-    step.y[:], buffer[:] = y0, y0
+    step.set(y0)
+    numba.set(y0)
     step.advance(k)
     numba(k)
     ours = step.y
@@ -173,7 +198,7 @@ def xpbd_cloth(config: Config, record: Record, progress) -> None:
                    eviction_bytes=EVICTION_FACTOR * largest_cache_bytes(),
                    warm=warm_pair(per_step["steplab"], per_step["stream"]))
     record.compare("vs_numba_xpbd_cloth", "cloth (XPBD)", what, "Numba loop of the whole step, in place",
-                   per_step["steplab"], per_step["numba"], final_difference(ours, buffer), dt=dt)
+                   per_step["steplab"], per_step["numba"], final_difference(ours, numba.y), dt=dt)
     if newton is None:
         record.data["details"]["newton"] = "newton is not installed (pip install steplab[newton]): not compared"
     else:

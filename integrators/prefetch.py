@@ -1,11 +1,8 @@
-"""The constraint sweep's software prefetch (a Numba intrinsic), and why its rows are four wide.
+"""The constraint sweep's software prefetch (a Numba intrinsic).
 
-The sweep keeps each body's position and velocity as a padded row of four float64
-(x, y, z, 0; 32 bytes), so that a body's three coordinates move in one 256-bit load or
-store instead of three scalar ones (:mod:`.projection_block` emits them). Numba does not emit
-those by itself: its loop vectoriser leaves the gather and scatter (indirect, one body pair at
-a time) scalar, and the SLP vectoriser that would pair the three coordinates is off in Numba
-(disabled for miscompilations, numba/numba#8852).
+The sweep (:mod:`.constraint_projection`) reads its columns once a step, from memory when the
+caches are cold; it asks for them a little ahead of their use, so that those reads overlap its
+work (the hardware prefetcher alone leaves them mostly unoverlapped, docs/performance.md).
 
 - :func:`prefetch` ``(a, k)``: a software prefetch of the cache line holding ``a.flat[k]``
   (LLVM's ``llvm.prefetch``, x86 ``prefetcht0``), which moves nothing the program sees; its
