@@ -35,7 +35,7 @@ bytes). What depends only on the constraint and the substep h (alpha_tilde, gamm
 denominator (1 + gamma) w + alpha_tilde) is computed once per run (:func:`sweep_columns`).
 Positions and velocities are coordinate rows, (3, M) each, a row per coordinate
 (:func:`coordinates`), the bodies in the rows :mod:`.arrangement` lays them out in, so that
-eight constraints whose ends advance by 1 (a run) read each coordinate as two vector loads; the
+four constraints whose ends advance by 1 (a run) read each coordinate as one vector load; the
 step moves them in place (the velocity's rows carry the displacement during the substep,
 :func:`advance`). The colours are swept in bands of bodies (:func:`wavefront`), each body still
 receiving its projections in colour order (the same bytes), so that a band's bodies stay in the
@@ -54,7 +54,7 @@ import numpy as np
 from numba import njit
 
 from .prefetch import prefetch
-from .projection_block import EQUAL_MASSES, LANES, RUN, project_block, project_one
+from .projection_block import EQUAL_MASSES, HALF, LANES, RUN, project_block, project_one
 from .projection_law import factors
 
 
@@ -152,11 +152,12 @@ def runs_first(i, j, segments) -> np.ndarray:
     runs in whole blocks: (P,) indices into i, j.
 
     A run is a family of constraints whose two ends both advance by 1 (i + l, j + l for l = 0, 1, ...):
-    a block of LANES of them reads each coordinate of its sixteen bodies as two vector loads from two
-    addresses (:mod:`.projection_block`), where a block by index loads sixteen scattered values. Each
-    segment's maximal runs (by offset j - i, then i) are cut into whole blocks from their start and
-    placed first, so that the blocks, LANES at a time from the segment's start, fall on them; each
-    run's last (length mod LANES) constraints follow, in blocks by index and one by one.
+    a block whose two halves of HALF constraints are each a run (:func:`layouts`) reads each coordinate
+    of its sixteen bodies as four vector loads (:mod:`.projection_block`), where a block by index loads
+    sixteen scattered values. Each segment's maximal runs (by offset j - i, then i) are cut into whole
+    halves from their start and placed first, so that the blocks, LANES at a time from the segment's
+    start, fall on them (a run's halves, or the last half of one run and the first of the next); each
+    run's last (length mod HALF) constraints follow, in blocks by index and one by one.
     """
     i, j = i.astype(np.int64), j.astype(np.int64)
     segment = np.repeat(np.arange(len(segments) - 1), np.diff(segments))
@@ -167,7 +168,7 @@ def runs_first(i, j, segments) -> np.ndarray:
     run = np.cumsum(starts) - 1
     first = np.flatnonzero(starts)
     position = np.arange(len(i)) - first[run]
-    leftover = position >= np.diff(np.append(first, len(i)))[run] // LANES * LANES
+    leftover = position >= np.diff(np.append(first, len(i)))[run] // HALF * HALF
     return by[np.lexsort((position, run, leftover, segment))]
 
 
@@ -191,11 +192,14 @@ def block_starts(segments) -> np.ndarray:
 
 def layouts(i, j, segments) -> np.ndarray:
     """For each block (:func:`block_starts`), how its bodies lie, (B,) uint8, in the sweep's order: RUN (1)
-    where both ends advance by 1 from lane to lane, i[k + l] = i[k] + l and j[k + l] = j[k] + l, 0 elsewhere
-    (:mod:`.projection_block` reads each way with its own code)."""
+    where in each half of its lanes both ends advance by 1 from lane to lane (i[k + l] = i[k] + l and
+    j[k + l] = j[k] + l for l < HALF, and so from k + HALF), 0 elsewhere (:mod:`.projection_block` reads
+    each way with its own code)."""
     starts = block_starts(segments)
     i_, j_ = (e[starts[:, None] + np.arange(LANES)].astype(np.int64) for e in (i, j))
-    run = ((i_ - i_[:, :1]) == np.arange(LANES)).all(axis=1) & ((j_ - j_[:, :1]) == np.arange(LANES)).all(axis=1)
+    half, lane = np.divmod(np.arange(LANES), HALF)
+    first = half * HALF  # each lane's half's first lane
+    run = ((i_ - i_[:, first]) == lane).all(axis=1) & ((j_ - j_[:, first]) == lane).all(axis=1)
     return np.where(run, RUN, 0).astype(np.uint8)
 
 
@@ -203,9 +207,10 @@ def block_kinds(i, j, inverse_mass, segments) -> np.ndarray:
     """How the sweep's code may read each block (:func:`block_starts`), (B,) uint8: its :func:`layouts`, plus
     EQUAL_MASSES where w_i = w_j in every lane.
 
-    On the bench's 160 x 160 cloth, its bodies laid out by :mod:`.arrangement`, 94 % of the blocks are runs,
-    and all but those at a pinned body join equal masses. In a run the code reads two indices and loads each
-    coordinate of eight bodies as one vector, instead of loading sixteen indices and gathering; with
+    On the bench's 160 x 160 cloth, its bodies laid out by :mod:`.arrangement`, 97.5 % of the blocks are runs,
+    and all but those at a pinned body join equal masses. In a run the code reads four indices and loads
+    each coordinate of each half's four bodies as one vector, instead of loading sixteen indices and
+    gathering; with
     equal masses, d_i + (-(w_i s)) e = d_i - (w s) e exactly, so one product a lane moves both ends.
     The arithmetic, and so the bytes, are the same (:mod:`.projection_block`).
     """
@@ -243,8 +248,8 @@ def aligned_zeros(shape: tuple) -> np.ndarray:
 def coordinates(a: np.ndarray) -> np.ndarray:
     """(N, 3) -> (3, M): a coordinate a row (:func:`row_length`, zeros past N), as the sweep moves them.
 
-    One row per coordinate, the bodies along it: a block's eight bodies in a run are then one vector load
-    per coordinate, not eight rows to transpose into lanes (:mod:`.projection_block`)."""
+    One row per coordinate, the bodies along it: four bodies in a run are then one vector load per
+    coordinate, not four rows to transpose into lanes (:mod:`.projection_block`)."""
     out = aligned_zeros((3, row_length(len(a))))
     out[:, :len(a)] = a.T
     return out

@@ -4,8 +4,8 @@ Within a segment of the sweep (:func:`.constraint_projection.wavefront`) no two 
 share a body, so LANES consecutive projections are independent: :func:`project_block` does
 constraints k to k + LANES - 1 together, each in a lane of a vector of LANES float64. The start
 positions ``x`` and the displacement ``d`` are coordinate rows, (3, M): coordinate c of body a at
-[c, a] (:func:`.constraint_projection.coordinates`), so where a block's bodies lie in a run, each
-coordinate of its eight bodies is one vector load, already in lanes:
+[c, a] (:func:`.constraint_projection.coordinates`), so where each half of a block's bodies lies in
+a run, each coordinate of its four bodies is one vector load, already in lanes:
 
 - gather: each coordinate of the bodies a and b of the eight constraints, of d and of x, in lanes;
   u = d_b - d_a and e = (x_b - x_a) + u, |e|^2 and e . u summed left to right as the scalar code sums them;
@@ -15,13 +15,15 @@ coordinate of its eight bodies is one vector load, already in lanes:
 - scatter: d_a += (-(w_a s)) e and d_b += (w_b s) e, coordinate by coordinate, stored as they were loaded.
 
 How the bodies lie is the block's kind (:func:`.constraint_projection.block_kinds`), each its own
-code: a RUN (a + l, b + l: two vector loads and stores a coordinate) or anything else (each lane's
-bodies from the i and j columns, one value at a time). Where the two ends' inverse masses are equal
-in every lane, one product (w s) e a lane moves both ends (subtracted at a, added at b: the same bytes
-as adding -(w_a s) e). With rows of (x, y, z, 0) per body instead, the rows had to be transposed into
-lanes and back: on the bench's cloth (AMD Zen 3, AVX2) a run's block took 3.8-4.1 ns a constraint that
-way, 2.9-3.1 ns in coordinate rows (docs/performance.md). Runs by 2 (a row's springs of one colour, in
-a grid's numbering) become runs by 1 with the bodies laid out by :mod:`.arrangement`.
+code: a RUN (in each half of the lanes a + l, b + l: four vector loads and stores a coordinate, two a
+half) or anything else (each lane's bodies from the i and j columns, one value at a time). Where the
+two ends' inverse masses are equal in every lane, one product (w s) e a lane moves both ends
+(subtracted at a, added at b: the same bytes as adding -(w_a s) e). With rows of (x, y, z, 0) per
+body instead, the rows had to be transposed into lanes and back: on the bench's cloth (AMD Zen 3,
+AVX2) a run's block took 3.8-4.1 ns a constraint that way, 2.9-3.1 ns in coordinate rows
+(docs/performance.md). Runs by 2 (a row's springs of one colour, in a grid's numbering) become runs
+by 1 with the bodies laid out by :mod:`.arrangement`; a run's halves of four let two runs share a
+block, so that a run leaves fewer than four constraints to the blocks by index, not eight.
 
 Each lane is the scalar operation it replaces (IEEE add, subtract, multiply, divide and square
 root, no fused multiply-add, the same order), so the bytes are those of the sequential sweep; the
@@ -48,8 +50,10 @@ LANES = 8
 RUN = 1
 #: the flag in a block's kind for equal inverse masses at both ends in every lane
 EQUAL_MASSES = 4
+#: a RUN block's halves: each a run of its own (:func:`.constraint_projection.layouts`), one AVX2 vector
+HALF = LANES // 2
 _DOUBLE, _INT32 = ir.DoubleType(), ir.IntType(32)
-_LANE_VECTOR = ir.VectorType(_DOUBLE, LANES)
+_LANE_VECTOR, _HALF_VECTOR = ir.VectorType(_DOUBLE, LANES), ir.VectorType(_DOUBLE, LANES // 2)
 
 
 def project_block(rows, inverse_mass, sweep, lam, carried, k, kind=0):
@@ -154,9 +158,11 @@ def _bodies(builder, block: _Block, layout: int) -> list:
     """Each lane's bodies, [[a_0 .. a_7], [b_0 .. b_7]] (intp): in a RUN i[k] and j[k] plus the lane, two loads
     and constant offsets; elsewhere the i and j columns' LANES entries from k."""
     i64 = ir.IntType(64)
-    if layout == RUN:
-        firsts = [builder.zext(builder.load(builder.gep(block.column[name], [block.k])), i64) for name in "ij"]
-        return [[builder.add(first, ir.Constant(i64, lane)) for lane in range(LANES)] for first in firsts]
+    if layout == RUN:  # each half of the lanes a run of its own: i[k] and i[k + HALF] plus the lane
+        at = [block.k, builder.add(block.k, ir.Constant(block.k.type, HALF))]
+        firsts = [[builder.zext(builder.load(builder.gep(block.column[name], [k])), i64) for k in at] for name in "ij"]
+        return [[builder.add(half[lane // HALF], ir.Constant(i64, lane % HALF)) for lane in range(LANES)]
+                for half in firsts]
     ends = [_load(builder, block.column[name], block.k, ir.VectorType(_INT32, LANES), align=4) for name in "ij"]
     return [[builder.zext(builder.extract_element(end, ir.Constant(_INT32, lane)), i64) for lane in range(LANES)]
             for end in ends]
@@ -178,8 +184,9 @@ class _Coordinate:
 
     def __init__(self, builder, row, bodies, layout):
         self.builder, self.row, self.bodies, self.layout = builder, row, bodies, layout
-        if layout == RUN:
-            self.ends = [_load(builder, row, ends[0], _LANE_VECTOR) for ends in bodies]
+        if layout == RUN:  # two vectors of HALF a end, from its halves' first bodies
+            halves = [[_load(builder, row, ends[h * HALF], _HALF_VECTOR) for h in range(2)] for ends in bodies]
+            self.ends = [builder.shuffle_vector(*half, _constant(range(LANES), LANES)) for half in halves]
             return
         self.ends = []
         for ends in bodies:
@@ -193,7 +200,9 @@ class _Coordinate:
         builder = self.builder
         for lanes, ends in zip(new, self.bodies):
             if self.layout == RUN:
-                _store(builder, lanes, self.row, ends[0])
+                for h in range(2):
+                    half = builder.shuffle_vector(lanes, lanes, _constant(range(h * HALF, (h + 1) * HALF), HALF))
+                    _store(builder, half, self.row, ends[h * HALF])
                 continue
             for lane, body in enumerate(ends):
                 builder.store(builder.extract_element(lanes, ir.Constant(_INT32, lane)), builder.gep(self.row, [body]))

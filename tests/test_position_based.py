@@ -411,22 +411,25 @@ def test_the_sweep_in_bands_is_the_sweep_colour_by_colour(band, iterations):
 
 
 def plain_kinds(i, j, segments, lanes, mass=None):
-    """Each block's layout written out (the blocks of a segment from its start, lanes at a time): 1 where both ends
-    advance by 1 from lane to lane, else 0; plus 4 where ``mass`` is given and equal at both ends in every lane."""
-    out = []
+    """Each block's layout written out (the blocks of a segment from its start, lanes at a time): 1 where in each
+    half of the lanes both ends advance by 1 from lane to lane, else 0; plus 4 where ``mass`` is given and equal
+    at both ends in every lane."""
+    out, half = [], lanes // 2
     for lo, hi in zip(segments[:-1], segments[1:]):
         for k in range(lo, hi - lanes + 1, lanes):
-            run = all(int(i[k + n]) - int(i[k]) == n == int(j[k + n]) - int(j[k]) for n in range(lanes))
+            run = all(int(i[k + n]) - int(i[k + n // half * half]) == n % half
+                      == int(j[k + n]) - int(j[k + n // half * half]) for n in range(lanes))
             equal = mass is not None and all(mass[i[k + n]] == mass[j[k + n]] for n in range(lanes))
             out.append(int(run) + (4 if equal else 0))
     return out
 
 
 def test_the_block_kinds_are_the_runs_of_bodies_and_equal_masses():
-    # a block is read as a run only where both ends' bodies advance by 1 from lane to lane; anything else
-    # (another stride, runs by 2 as a grid's row gives them before integrators/arrangement.py lays the
-    # row out, a broken run, different strides at the two ends) is read by index; its two ends move by
-    # one product only where their inverse masses are equal in every lane
+    # a block is read as a run only where in each half of its lanes both ends' bodies advance by 1 from lane
+    # to lane (the two halves anywhere); anything else (another stride, runs by 2 as a grid's row gives them
+    # before integrators/arrangement.py lays the row out, a broken run, different strides at the two ends)
+    # is read by index; its two ends move by one product only where their inverse masses are equal in
+    # every lane
     from steplab.integrators.constraint_projection import EQUAL_MASSES, LANES, RUN, block_kinds, layouts
 
     assert (RUN, EQUAL_MASSES) == (1, 4)  # as plain_kinds writes them
@@ -441,6 +444,12 @@ def test_the_block_kinds_are_the_runs_of_bodies_and_equal_masses():
     got = layouts(i, j, segments)
     assert got.dtype == np.uint8 and list(got) == [RUN, 0, 0, 0, 0, 0, 0, RUN]
     assert list(got) == plain_kinds(i, j, segments, LANES)
+    halves = np.concatenate([800 + np.arange(LANES // 2), 900 + np.arange(LANES // 2)])  # two runs of four
+    for broken, kind in ((None, RUN), (LANES - 1, 0)):
+        i, j = halves.astype(np.uint32), (halves + 20).astype(np.uint32)
+        if broken is not None:
+            j[broken] += 1
+        assert list(layouts(i, j, np.array([0, LANES], np.int64))) == [kind]
     # random segments of a random order, with some unequal masses: the same as written out
     for seed in range(5):
         r = np.random.default_rng(seed)
