@@ -140,7 +140,7 @@ def wavefront(constraints, colours, band: int = BAND):
     i, j = constraints.i.astype(np.int64), constraints.j.astype(np.int64)
     reach = int(np.abs(j - i).max(initial=0)) + 1
     key = (np.maximum(i, j) + colour * reach) // band * len(counts) + colour
-    order = np.lexsort((j, i, key))
+    order = np.argsort(key, kind="stable")  # within a segment, runs_first orders the constraints
     key = key[order]
     segments = np.append(np.flatnonzero(np.diff(key, prepend=-1)), len(key)).astype(np.int64)
     order = order[runs_first(i[order], j[order], segments)]
@@ -226,8 +226,8 @@ def workspace(n_bodies: int, n_constraints: int) -> Workspace:
 def row_length(n_bodies: int) -> int:
     """M, the length of a coordinate row for N bodies: N rounded up to a cache line of float64, plus one line.
 
-    Each row then starts on a cache line, a block's loads of 2 LANES values from a body near the end
-    stay inside the row, and rows lie apart by no multiple of 4 kB (at N = 25,600 they would, 50 pages:
+    Each row then starts on a cache line, a block's vector loads from a body near the end stay inside
+    the row, and rows lie apart by no multiple of 4 kB (at N = 25,600 they would, 50 pages:
     a store to x then looks to the core like it may feed the next load of y, which then waits)."""
     return -(-n_bodies // LANES) * LANES + LANES
 
