@@ -329,10 +329,10 @@ def advance(q, v, external, inverse_mass, sweep, steps, work):
         v <- dx = h (v + h a_ext),  project dx (:func:`project`, from x_prev = q),  q += dx,  v = dx / h.
 
     ``external`` (3, M), m/s^2, coordinate rows too; ``sweep`` a :class:`Sweep` for h; ``work`` a
-    :class:`Workspace`. The
-    displacement lives in v's rows and the start positions are q's own: no copy of the state is
-    written, so a step from cold caches reads q and v once and writes them in place (a separate dx
-    and x_prev, written first, cost their reads for ownership from memory, 1.2 MB on the bench's cloth).
+    :class:`Workspace`. The displacement lives in v's rows and the start positions are q's own: no copy
+    of the state is written, so a step from cold caches reads q and v once and writes them in place (a
+    separate dx and x_prev, written first, cost their reads for ownership from memory, 1.2 MB on the
+    bench's cloth).
     """
     h = steps.h
     q_, v_, a_ = q.reshape(-1), v.reshape(-1), external.reshape(-1)

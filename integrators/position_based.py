@@ -51,6 +51,14 @@ class SweepCarry(NamedTuple):
     h: float = float("nan")
     sweep: tuple | None = None
 
+    def in_rows(self, y):
+        """The state ``y`` (2, N, 3), each body in its row of the sweep, and the external accelerations (N, 3)
+        in the same rows: what a loop over :attr:`constraints` reads (copies)."""
+        from .arrangement import in_rows
+        from .constraint_projection import bodies
+
+        return in_rows(np.asarray(y, float), self.rows, axis=1), np.array(bodies(self.external, len(self.rows)))
+
     def for_substep(self, h: float) -> SweepCarry:
         """This carry with its ``sweep`` for substeps of ``h`` (itself when it has it)."""
         from .constraint_projection import sweep_columns

@@ -53,7 +53,7 @@ EQUAL_MASSES = 4
 #: a RUN block's halves: each a run of its own (:func:`.constraint_projection.layouts`), one AVX2 vector
 HALF = LANES // 2
 _DOUBLE, _INT32 = ir.DoubleType(), ir.IntType(32)
-_LANE_VECTOR, _HALF_VECTOR = ir.VectorType(_DOUBLE, LANES), ir.VectorType(_DOUBLE, LANES // 2)
+_LANE_VECTOR, _HALF_VECTOR = ir.VectorType(_DOUBLE, LANES), ir.VectorType(_DOUBLE, HALF)
 
 
 def project_block(rows, inverse_mass, sweep, lam, carried, k, kind=0):
@@ -179,8 +179,8 @@ def _masses(builder, block: _Block, bodies) -> ir.Value:
 
 class _Coordinate:
     """One coordinate row of ``d`` or ``x`` as a block reads and writes it: ``ends`` (a's lanes, b's lanes), and
-    :meth:`store` writing new lanes for both ends back as they were read (RUN: two vectors; by index: a value
-    a lane)."""
+    :meth:`store` writing new lanes for both ends back as they were read (RUN: a vector of HALF a half of
+    each end; by index: a value a lane)."""
 
     def __init__(self, builder, row, bodies, layout):
         self.builder, self.row, self.bodies, self.layout = builder, row, bodies, layout

@@ -59,6 +59,8 @@ def test_the_rows_change_no_byte_of_the_result(method, monkeypatch):
     from steplab.bench.systems import cloth_model
 
     model, y0, _ = cloth_model(24)
+    rows = method.init(model, 0.0, y0).rows
+    assert not np.array_equal(rows, np.arange(model.n_bodies))  # the rows are laid out by chains
     laid_out = simulate(model, method, y0, 0.0, n_steps=20, dt=1 / 600).y[-1]
     monkeypatch.setattr(arrangement, "chain_rows", lambda i, j, n: np.arange(n))
     numbered = simulate(model, method, y0, 0.0, n_steps=20, dt=1 / 600).y[-1]

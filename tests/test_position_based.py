@@ -340,7 +340,7 @@ def test_the_sweep_by_colour_is_the_sequential_gauss_seidel_sweep(iterations):
     carry = method.init(model, 0.0, None).for_substep(h)
     steps = method.substeps_of(h)
     assert len(carry.segments) > 3  # several colours: the order between them matters
-    q, v, a_ext = in_sweep_rows(carry, y)
+    (q, v), a_ext = carry.in_rows(y)
     expected = h * (v + h * a_ext)
     dx = coordinates(expected)
     sequential_sweep(expected, q, carry.inverse_mass, carry.constraints, h, iterations, steps.carried)
@@ -348,14 +348,6 @@ def test_the_sweep_by_colour_is_the_sequential_gauss_seidel_sweep(iterations):
     n = len(q)
     assert np.ascontiguousarray(bodies(dx, n)).tobytes() == expected.tobytes() and not dx[:, n:].any()
     assert np.abs(expected - h * (v + h * a_ext)).max() > 1e-4  # the sweep moved the bodies
-
-
-def in_sweep_rows(carry, y):
-    """q, v (N, 3) of ``y`` and the external field (N, 3), each body in its row of the sweep (``carry.rows``)."""
-    from steplab.integrators.arrangement import in_rows
-    from steplab.integrators.constraint_projection import bodies
-
-    return *in_rows(np.asarray(y), carry.rows, axis=1), bodies(carry.external, len(carry.rows))
 
 
 @pytest.mark.parametrize(("band", "iterations"), [(64, 1), (256, 1), (256, 3)])
@@ -476,7 +468,7 @@ def test_the_vector_block_is_its_python_twin(monkeypatch, iterations):
     h, method = 1 / 600, XPBD(1, iterations)
     carry = method.init(model, 0.0, None).for_substep(h)
     assert np.diff(carry.segments).mean() >= 3 * LANES
-    q, v, a_ext = in_sweep_rows(carry, y)
+    (q, v), a_ext = carry.in_rows(y)
     runs = []
     for kernel in (project, project.py_func):
         dx = coordinates(h * (v + h * a_ext))

@@ -8,7 +8,6 @@ from helpers import spring_net
 from hypothesis import given, settings
 from hypothesis import strategies as st
 from steplab.integrators import VBD, XPBD, simulate
-from steplab.integrators.arrangement import in_rows
 from steplab.integrators.block_descent import descend
 from steplab.integrators.colouring import adjacency, greedy_colouring
 from steplab.integrators.constraint_projection import bodies, coordinates, project
@@ -110,8 +109,7 @@ def test_the_python_and_compiled_sweeps_agree(monkeypatch):
         external = carry.external
         if method.name == "xpbd":  # its carry holds the bodies in the sweep's rows (integrators/arrangement.py)
             carry = carry.for_substep(h)
-            q, v = in_rows(y0, carry.rows, axis=1)
-            external = bodies(carry.external, len(q))
+            (q, v), external = carry.in_rows(y0)
         dy = h * (v + h * external)
         runs = []
         for kernel in ((descend, descend.py_func) if method.name == "vbd" else (project, project.py_func)):

@@ -26,7 +26,7 @@ class XPBDClothStep:
     def setup(self, contender, side):
         from steplab.integrators.position_based import cloth_benchmark_step
 
-        from steplab.bench.cloth import CLOTH_DT, NumbaXPBDStep, newton_run
+        from steplab.bench.cloth import CLOTH_DT, newton_run, numba_xpbd_step
         from steplab.bench.systems import cloth_model
 
         model, y0, _ = cloth_model(side)
@@ -34,8 +34,7 @@ class XPBDClothStep:
         if contender == "steplab":
             self.call = cloth_benchmark_step(model, y0, dt).advance
         elif contender == "numba":
-            step = NumbaXPBDStep(model, y0, dt)
-            self.call = lambda: step(1)
+            self.call = numba_xpbd_step(model, y0, dt).advance
         else:
             newton = newton_run(model, dt, y0, solver="xpbd", iterations=1)
             if newton is None:

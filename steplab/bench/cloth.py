@@ -69,31 +69,22 @@ def numba_xpbd_loop():
     return numba.njit(cache=True)(_xpbd_loop)
 
 
-class NumbaXPBDStep:
-    """:func:`_xpbd_loop` on the bodies and constraints as steplab's xpbd carry holds them (the bodies in the
-    sweep's rows, :mod:`steplab.integrators.arrangement`; the constraints in its order): the same bytes in
-    the same places, so the two steps differ only in their code. ``self(n)`` takes n steps in place;
-    :attr:`y` and :meth:`set` are the state in the model's order."""
+def numba_xpbd_step(model, y0, dt: float):
+    """:func:`_xpbd_loop` stepping in place, as an :class:`~steplab.integrators.position_based.InPlaceStep`, on the
+    bodies and constraints as steplab's xpbd carry holds them (the bodies in the sweep's rows,
+    :mod:`steplab.integrators.arrangement`; the constraints in its order): the same bytes in the same places,
+    so the two steps differ only in their code."""
+    from steplab.integrators.position_based import XPBD, InPlaceStep
 
-    def __init__(self, model, y0, dt: float):
-        from steplab.integrators.arrangement import in_rows
-        from steplab.integrators.constraint_projection import bodies
-        from steplab.integrators.position_based import XPBD
+    carry = XPBD(substeps=1, iterations=1).init(model, 0.0, y0)
+    state, external = carry.in_rows(y0)  # stepped in place, as a game engine would
+    arrays, loop = (carry.inverse_mass, external, carry.constraints), numba_xpbd_loop()
 
-        carry = XPBD(substeps=1, iterations=1).init(model, 0.0, y0)
-        self.rows, self.dt, self.loop = carry.rows, dt, numba_xpbd_loop()
-        self.arguments = (carry.inverse_mass, np.array(bodies(carry.external, model.n_bodies)), carry.constraints)
-        self.buffer = in_rows(np.asarray(y0, float), carry.rows, axis=1)  # stepped in place, as a game engine would
+    def steps(n: int = 1) -> None:
+        loop(state[0], state[1], *arrays, dt, n)
 
-    def __call__(self, n: int) -> None:
-        self.loop(self.buffer[0], self.buffer[1], *self.arguments, self.dt, n)
-
-    @property
-    def y(self) -> np.ndarray:
-        return self.buffer[:, self.rows]
-
-    def set(self, y) -> None:
-        self.buffer[:, self.rows] = y
+    read = carry.inverse_mass.nbytes + external.nbytes + sum(a.nbytes for a in carry.constraints)
+    return InPlaceStep(state, carry.rows, steps, state.nbytes, read)
 
 
 def _xpbd_loop(q, v, inverse_mass, external, constraints, dt, n):
@@ -169,11 +160,11 @@ def xpbd_cloth(config: Config, record: Record, progress) -> None:
     model, y0, springs = cloth_model(config.cloth_side)
     dt, k = CLOTH_DT, config.loop_steps
     step = cloth_benchmark_step(model, y0, dt)  # XPBD(1, 1) in place on step.state: the kernel every xpbd step runs
-    numba = NumbaXPBDStep(model, y0, dt)
+    numba = numba_xpbd_step(model, y0, dt)
     read_write, read_only = step.bytes_read_and_written, step.bytes_read
     stream = peers.memory_stream(read_write, read_only)
     calls = {("steplab", 1): lambda: step.advance(k), ("steplab", 2): lambda: step.advance(2 * k),
-             ("numba", 1): lambda: numba(k), ("numba", 2): lambda: numba(2 * k),
+             ("numba", 1): lambda: numba.advance(k), ("numba", 2): lambda: numba.advance(2 * k),
              ("stream", 1): lambda: streams(stream, k), ("stream", 2): lambda: streams(stream, 2 * k)}
     newton = newton_run(model, dt, y0, solver="xpbd", iterations=1)
     if newton is not None:
@@ -185,10 +176,9 @@ def xpbd_cloth(config: Config, record: Record, progress) -> None:
     evict = evictor()
     cold = {name: Times.of(s) for name, s in cold_samples({"steplab": lambda: step.advance(1), "stream": stream},
                                                           config.max_rounds, evict).items()}
-    step.set(y0)
-    numba.set(y0)
-    step.advance(k)
-    numba(k)
+    for contender in (step, numba):
+        contender.set(y0)
+        contender.advance(k)
     ours = step.y
     what = (f"cloth of {model.n_bodies:,} particles, {springs:,} springs and dampers, gravity, one xpbd step "
             f"(1 substep, 1 iteration) of dt = 1/600 s")
