@@ -12,7 +12,8 @@ a run, each coordinate of its four bodies is one vector load, already in lanes:
 - solve: l = sqrt |e|^2 and s from :func:`.projection_law.projection` itself, the one
   definition, evaluated here on vectors (its arithmetic emitted as vector instructions by
   :class:`_Lanes`), s = 0 where the denominator is 0; the multipliers, when carried;
-- scatter: d_a += (-(w_a s)) e and d_b += (w_b s) e, coordinate by coordinate, stored as they were loaded.
+- scatter: d_a += (-(w_a s)) e and d_b += (w_b s) e, coordinate by coordinate, each row read again (not
+  held in registers across the solve) and stored as it was loaded.
 
 How the bodies lie is the block's kind (:func:`.constraint_projection.block_kinds`), each its own
 code: a RUN (in each half of the lanes a + l, b + l: four vector loads and stores a coordinate, two a
@@ -178,15 +179,14 @@ def _masses(builder, block: _Block, bodies) -> ir.Value:
 
 
 class _Coordinate:
-    """One coordinate row of ``d`` or ``x`` as a block reads and writes it: ``ends`` (a's lanes, b's lanes), and
-    :meth:`store` writing new lanes for both ends back as they were read (RUN: a vector of HALF a half of
-    each end; by index: a value a lane)."""
+    """One coordinate row of ``d`` or ``x`` as a block reads and writes it: ``ends`` (a's lanes, b's lanes) as
+    gathered, and :meth:`move` adding each end's moves into the row (RUN: a vector of HALF a half of each
+    end; by index: a value a lane)."""
 
     def __init__(self, builder, row, bodies, layout):
         self.builder, self.row, self.bodies, self.layout = builder, row, bodies, layout
         if layout == RUN:  # two vectors of HALF a end, from its halves' first bodies
-            halves = [[_load(builder, row, ends[h * HALF], _HALF_VECTOR) for h in range(2)] for ends in bodies]
-            self.ends = [builder.shuffle_vector(*half, _constant(range(LANES), LANES)) for half in halves]
+            self.ends = [self._run(row, ends) for ends in bodies]
             return
         self.ends = []
         for ends in bodies:
@@ -195,17 +195,27 @@ class _Coordinate:
                 lanes = builder.insert_element(lanes, builder.load(builder.gep(row, [body])), ir.Constant(_INT32, lane))
             self.ends.append(lanes)
 
-    def store(self, new):
-        """Both ends' new lanes, ``new`` = [a's, b's], written where they were read."""
+    def _run(self, row, ends):
+        halves = [_load(self.builder, row, ends[h * HALF], _HALF_VECTOR) for h in range(2)]
+        return self.builder.shuffle_vector(*halves, _constant(range(LANES), LANES))
+
+    def move(self, operations, steps):
+        """Each end's row r becomes ``operation(r, step)`` lane by lane (``operations`` and ``steps`` = [a's, b's]),
+        stored where it was read. The rows are read again here, through a pointer LLVM cannot see is the
+        same row (an empty inline asm): the gathered ends would otherwise stay live across the solve, and
+        on AVX2's sixteen registers they were spilled to the stack and reloaded (a RUN block 8 % slower)."""
         builder = self.builder
-        for lanes, ends in zip(new, self.bodies):
+        row = builder.asm(ir.FunctionType(self.row.type, [self.row.type]), "", "=r,0", [self.row], False, "row")
+        for operation, step, ends in zip(operations, steps, self.bodies):
             if self.layout == RUN:
+                lanes = operation(self._run(row, ends), step)
                 for h in range(2):
                     half = builder.shuffle_vector(lanes, lanes, _constant(range(h * HALF, (h + 1) * HALF), HALF))
-                    _store(builder, half, self.row, ends[h * HALF])
+                    _store(builder, half, row, ends[h * HALF])
                 continue
             for lane, body in enumerate(ends):
-                builder.store(builder.extract_element(lanes, ir.Constant(_INT32, lane)), builder.gep(self.row, [body]))
+                at = builder.gep(row, [body])
+                builder.store(operation(builder.load(at), builder.extract_element(step, ir.Constant(_INT32, lane))), at)
 
 
 def _emit(builder, block: _Block, carried: bool, layout: int, equal: bool) -> None:
@@ -240,12 +250,12 @@ def _emit(builder, block: _Block, carried: bool, layout: int, equal: bool) -> No
         weight = builder.fmul(_masses(builder, block, bodies[0]), s)
         for c in range(3):
             step = builder.fmul(weight, e[c])
-            d[c].store([builder.fsub(d[c].ends[0], step), builder.fadd(d[c].ends[1], step)])
+            d[c].move((builder.fsub, builder.fadd), (step, step))
         return
     weights = [builder.fmul(_masses(builder, block, ends), s) for ends in bodies]
     weights[0] = builder.fneg(weights[0])
     for c in range(3):
-        d[c].store([builder.fadd(d[c].ends[n], builder.fmul(weights[n], e[c])) for n in range(2)])
+        d[c].move((builder.fadd, builder.fadd), [builder.fmul(weights[n], e[c]) for n in range(2)])
 
 
 @intrinsic(prefer_literal=True)
