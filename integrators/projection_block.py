@@ -196,6 +196,7 @@ class _Coordinate:
             self.ends.append(lanes)
 
     def _run(self, row, ends):
+        """The lanes of ``ends`` (a RUN's: two halves of HALF consecutive bodies) from ``row``, two vector loads."""
         halves = [_load(self.builder, row, ends[h * HALF], _HALF_VECTOR) for h in range(2)]
         return self.builder.shuffle_vector(*halves, _constant(range(LANES), LANES))
 
