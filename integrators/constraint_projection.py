@@ -42,7 +42,7 @@ receiving its projections in colour order (the same bytes), so that a band's bod
 core's caches, each segment's runs first (:func:`runs_first`); the sweep prefetches the columns
 :data:`PREFETCH_AHEAD` constraints ahead (their reads from memory then overlap the sweep when the
 caches are cold). On the 25,600-particle cloth, one step, warm (AMD Zen 3): 0.49-0.52 ms on
-padded rows (x, y, z, 0) in the grid's numbering, 0.42-0.46 ms now (docs/performance.md has the
+padded rows (x, y, z, 0) in the grid's numbering, 0.38-0.40 ms now (docs/performance.md has the
 steps before and the cold-cache times).
 """
 

@@ -294,7 +294,6 @@ def cloth_benchmark_step(model, y0, dt: float, method: PositionBased | None = No
     substeps = method.substeps_of(dt)
     carry = method.init(model, 0.0, y0).for_substep(substeps.h)
     state = bodies(carry.work.state, model.n_bodies)
-    state[:, carry.rows] = y0
     arguments = table(carry.external, carry.inverse_mass, carry.sweep, substeps, carry.work)
     kernel = advance_at.compile((typeof(arguments),))  # loaded from Numba's cache where it is
 
@@ -309,4 +308,6 @@ def cloth_benchmark_step(model, y0, dt: float, method: PositionBased | None = No
     read = [a for name, a in carry.sweep._asdict().items() if name != "alpha_tilde" or substeps.carried]
     # and the external field as (N, 3) float64, as the model holds it (the rows' ends past N are the step's own)
     data = sum(a.nbytes for a in read) + carry.inverse_mass.nbytes + 3 * 8 * model.n_bodies
-    return InPlaceStep(state, carry.rows, steps, state.nbytes, data)
+    step = InPlaceStep(state, carry.rows, steps, state.nbytes, data)
+    step.set(y0)
+    return step
