@@ -129,7 +129,8 @@ def first_rows(pairs, chords, now, bodies, planes, split, stamps):
     for p in range(k):
         _append(entries, p, i[p], j[p], stamps, t, dt)
     watched = np.empty(k + 64, np.int64)
-    n_watched = _test_rows(chords, now, bodies, planes, split, entries[:k], watched, 0)
+    # first as an int64, as the loop's later calls pass it: the literal 0 compiled _test_rows a second time
+    n_watched = _test_rows(chords, now, bodies, planes, split, entries[:k], watched, np.int64(0))
     for p in range(k):
         entries[p].time = t + entries[p].s * dt
     return entries, watched, n_watched

@@ -71,12 +71,14 @@ def box_box(box_a, box_b, margin, out):
          (dot3(fa[1], fb[0]), dot3(fa[1], fb[1]), dot3(fa[1], fb[2])),
          (dot3(fa[2], fb[0]), dot3(fa[2], fb[1]), dot3(fa[2], fb[2])))
     # the face axes of a: |t_i| against the two boxes' reaches h_i and sum_j |c_ij| hb_j
-    sep_a, face_a = -np.inf, 0
+    # the faces int64 from the start: Numba types a call while the loop's variables are still being
+    # resolved, and a literal 0 here compiled face_contact once more for Literal[int](0), never called
+    sep_a, face_a = -np.inf, np.int64(0)
     for i in range(3):
         s = abs(t[i]) - (ha[i] + abs(c[i][0]) * hb[0] + abs(c[i][1]) * hb[1] + abs(c[i][2]) * hb[2])
         if s > sep_a:
             sep_a, face_a = s, i
-    sep_b, face_b = -np.inf, 0
+    sep_b, face_b = -np.inf, np.int64(0)
     for j in range(3):
         s = (abs(t[0] * c[0][j] + t[1] * c[1][j] + t[2] * c[2][j])
              - (abs(c[0][j]) * ha[0] + abs(c[1][j]) * ha[1] + abs(c[2][j]) * ha[2] + hb[j]))
@@ -158,7 +160,7 @@ def face_contact(box1, axis, box2, reference, margin, out):
     reference_face = 2 * axis + (1 if side > 0 else 0)
     incident_face = 2 * j + (1 if side2 > 0 else 0)
     base = ((reference * 6 + reference_face) * 6 + incident_face) * 64
-    kept = 0
+    kept = np.int64(0)  # not the literal 0: reduce_to_four compiled once more for it (as box_box's faces)
     for k in range(count):
         x = (polygon[now, k, 0], polygon[now, k, 1], polygon[now, k, 2])
         height = side * x[axis] - h1[axis]

@@ -133,7 +133,7 @@ def box_capsule(box, capsule, margin, out):
     t, distance2 = segment_box_closest(p, dl, hb)
     y = madd3(p, t, dl)
     if distance2 > 0:
-        outside, axis = 0, 0
+        outside, axis = 0, np.int64(0)  # int64, not a literal 0: face_points compiled once (box_box's faces)
         for k in range(3):
             if abs(y[k]) > hb[k]:
                 outside, axis = outside + 1, k
@@ -144,7 +144,7 @@ def box_capsule(box, capsule, margin, out):
                             CORNER_FEATURE, out)
     # the segment meets the box: the separating axes, from the segment's middle h = p + d/2
     middle, half_d = madd3(p, 0.5, dl), scale3(dl, 0.5)
-    best_face, face = -np.inf, 0
+    best_face, face = -np.inf, np.int64(0)
     for k in range(3):
         s = abs(middle[k]) - hb[k] - abs(half_d[k]) - radius
         if s > best_face:
