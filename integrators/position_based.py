@@ -248,13 +248,15 @@ class InPlaceStep(NamedTuple):
     (:mod:`.arrangement`; :attr:`y` and :meth:`set` in the model's order), and allocates nothing; the
     bytes one step must move at the least are ``bytes_read_and_written`` (the state q, v) and
     ``bytes_read`` (the constraints, inverse masses and external accelerations), for the
-    memory-traffic bound (``steplab.peers.memory_stream``)."""
+    memory-traffic bound (``steplab.peers.memory_stream``); ``stream()``, where given, moves those bytes in
+    one compiled pass computing nothing (the tighter bound): (how many, the read ones' sum as integers)."""
 
     state: np.ndarray
     rows: np.ndarray
     advance: object
     bytes_read_and_written: int
     bytes_read: int
+    stream: object = None
 
     @property
     def y(self) -> np.ndarray:
@@ -283,12 +285,13 @@ def cloth_benchmark_step(model, y0, dt: float, method: PositionBased | None = No
     first, about 30 us more from cold caches, and the kernel's own entry point still unboxes
     them one by one, 15 to 25 us more than one array; so the step passes the kernel a table of
     the arrays' addresses (:func:`.position_based_entry.advance_at`), as a game engine calling
-    native code passes pointers.
+    native code passes pointers. Its ``stream`` moves the bytes the step counts through the same table
+    and the same kind of call, computing nothing (:func:`.position_based_entry.stream_at`).
     """
     from numba import typeof
 
     from .constraint_projection import bodies
-    from .position_based_entry import advance_at, table
+    from .position_based_entry import advance_at, stream_at, table
 
     method = XPBD(substeps=1, iterations=1) if method is None else method
     substeps = method.substeps_of(dt)
@@ -296,6 +299,7 @@ def cloth_benchmark_step(model, y0, dt: float, method: PositionBased | None = No
     state = bodies(carry.work.state, model.n_bodies)
     arguments = table(carry.external, carry.inverse_mass, carry.sweep, substeps, carry.work)
     kernel = advance_at.compile((typeof(arguments),))  # loaded from Numba's cache where it is
+    stream_kernel = stream_at.compile((typeof(arguments), typeof(1.0)))
 
     held = (arguments, carry)  # the table, and the arrays it points at, alive as long as the step
 
@@ -308,6 +312,10 @@ def cloth_benchmark_step(model, y0, dt: float, method: PositionBased | None = No
     read = [a for name, a in carry.sweep._asdict().items() if name != "alpha_tilde" or substeps.carried]
     # and the external field as (N, 3) float64, as the model holds it (the rows' ends past N are the step's own)
     data = sum(a.nbytes for a in read) + carry.inverse_mass.nbytes + 3 * 8 * model.n_bodies
-    step = InPlaceStep(state, carry.rows, steps, state.nbytes, data)
+
+    def stream() -> tuple[int, int]:
+        return stream_kernel(held[0], 1.0)
+
+    step = InPlaceStep(state, carry.rows, steps, state.nbytes, data, stream)
     step.set(y0)
     return step

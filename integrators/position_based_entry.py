@@ -9,7 +9,8 @@ table (an empty Python call, 11), and the bench's step 15 to 25 us less (docs/pe
 So the bench's step calls :func:`advance_at` instead, on one int64 array, :func:`table`: the
 sizes, the substeps and the addresses of the arrays, which it views again in place
 (``numba.carray``, no copy) and passes to the same kernel. The arrays must outlive the table
-(the caller keeps them).
+(the caller keeps them). :func:`stream_at` moves the same bytes through the same table and call,
+computing nothing: the bench's tighter memory-traffic bound.
 """
 
 from __future__ import annotations
@@ -72,3 +73,46 @@ def advance_at(t):
     external = _at(t, _EXTERNAL, (3, t[_ROW]), np.float64)
     advance(state[0], state[1], external, _at(t, _INVERSE_MASS, n, np.float64), sweep, steps,
             Workspace(state, _at(t, _LAM, p, np.float64)))
+
+
+@njit(cache=True)
+def stream_at(t, factor):
+    """The bytes one step of :func:`advance_at` ``t`` must move, moved in one compiled pass and nothing computed:
+    the state q, v (2, 3, N) read and written in place (multiplied by ``factor``, 1.0: unchanged), and read
+    once the external field (3, N), the inverse masses and the sweep's columns (``alpha_tilde`` only where
+    the multipliers are carried), each summed as integers (which vectorise, where a float sum's order may
+    not change). Returns (bytes moved, the sum): the sum keeps the reads from being optimised away.
+
+    The same call on the same table as the step, so both pay the same fixed cost of a call; NumPy's
+    two passes (``steplab.peers.memory_stream``) take longer on the same bytes (docs/performance.md).
+    """
+    n, p, s, b = t[_BODIES], t[_CONSTRAINTS], t[_SEGMENTS], t[_BLOCKS]
+    state = _at(t, _STATE, (6, t[_ROW]), np.float64)
+    moved = 0
+    for r in range(6):
+        row = state[r]
+        for k in range(n):
+            row[k] = row[k] * factor
+        moved += 8 * n
+    total = np.uint64(0)
+    external = _at(t, _EXTERNAL, (3, t[_ROW]), np.uint64)
+    for r in range(3):
+        total += _summed(external[r, :n])
+    moved += 3 * 8 * n
+    for slot, length in ((_INVERSE_MASS, n), (_REST, p), (_GAMMA, p), (_DENOMINATOR, p), (_STARTS, s),
+                         (_ALPHA, p if t[_CARRIED] != 0 else 0)):
+        total += _summed(_at(t, slot, length, np.uint64))
+        moved += 8 * length
+    for slot in (_I, _J):
+        total += _summed(_at(t, slot, p, np.uint32))
+        moved += 4 * p
+    total += _summed(_at(t, _KINDS, b, np.uint8))
+    return moved + b, total
+
+
+@njit(inline="always")
+def _summed(a):
+    total = np.uint64(0)
+    for k in range(a.shape[0]):
+        total += a[k]
+    return total

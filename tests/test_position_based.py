@@ -265,6 +265,18 @@ def test_the_benchmark_step_is_the_integrators_step_in_place():
     assert step.bytes_read_and_written == 2 * 400 * 3 * 8
     blocks = sum(np.diff(XPBD(1, 1).init(model, 0.0, y0).segments) // LANES)  # a byte each: its kind
     assert step.bytes_read == springs * (2 * 4 + 3 * 8) + segments * 8 + blocks + 400 * 8 + 400 * 3 * 8
+    # the bench's tighter bound moves those bytes through the same table, reading the arrays the step reads
+    # (their sum as integers, wrapping) and writing the state back unchanged
+    carry = PBD(3, 2).init(model, 0.0, y0).for_substep(PBD(3, 2).substeps_of(5e-4).h)
+    sweep = carry.sweep._replace(alpha_tilde=np.empty(0))  # read only where the multipliers are carried
+    words = [carry.external[:, :400], carry.inverse_mass, *sweep]
+    def summed(a):  # 8-byte values as uint64 words, narrower ones widened
+        a = np.ascontiguousarray(a)
+        return int((a.view(np.uint64) if a.itemsize == 8 else a).sum(dtype=np.uint64))
+
+    before = step.state.copy()
+    assert step.stream() == (step.bytes_read_and_written + step.bytes_read, sum(map(summed, words)) % 2**64)
+    assert step.state.tobytes() == before.tobytes()
 
 
 def test_the_benchmark_steps_table_points_at_the_carry_with_multipliers_carried():
@@ -285,6 +297,9 @@ def test_the_benchmark_steps_table_points_at_the_carry_with_multipliers_carried(
     assert step.y.tobytes() == expected.tobytes() and not np.array_equal(step.y, y0)
     carry = method.init(model, 0.0, y0).for_substep(2.5e-4)
     steps = method.substeps_of(5e-4)
+    # carried, the multipliers' alpha_tilde is read: counted and moved by the tighter bound's pass
+    assert step.bytes_read == sum(a.nbytes for a in carry.sweep) + 400 * 8 + 400 * 3 * 8
+    assert step.stream()[0] == step.bytes_read_and_written + step.bytes_read
     with pytest.raises(ValueError, match="^advance_at: inverse_mass must be C-contiguous float64, got float32$"):
         table(carry.external, carry.inverse_mass.astype(np.float32), carry.sweep, steps, carry.work)
     with pytest.raises(ValueError, match="do not fit 400 bodies"):

@@ -35,6 +35,15 @@ def clock(steplab: Times, peer: Times) -> str:
     return "cpu"
 
 
+def beside(steplab: Times, bound: Times) -> dict:
+    """The step against a bound its ratio and target are not on (the same bound warm, or a tighter one), on
+    :func:`clock`'s clock: both medians and minimums, and their ratios (steplab / bound)."""
+    chosen = clock(steplab, bound)
+    ours, theirs = (t.cpu if chosen == "cpu" else t for t in (steplab, bound))
+    return {"steplab": ours.median, "bound": theirs.median, "steplab_min": ours.minimum, "bound_min": theirs.minimum,
+            "ratio": ours.median / theirs.median, "ratio_of_minimums": ours.minimum / theirs.minimum, "clock": chosen}
+
+
 def _spread(t: Times) -> dict:
     return {"min": t.minimum, "median": t.median, "max": t.maximum, "rounds": t.rounds}
 

@@ -30,7 +30,7 @@ import numpy as np
 from steplab.core.timing import Times, interleaved_samples, ready
 
 from .config import SEED, Config
-from .record import Record, final_difference
+from .record import Record, beside, final_difference
 from .timing import marginal_times
 
 #: the issue's size: 10^5 free bodies
@@ -91,9 +91,8 @@ def tumbling_bodies(config: Config, record: Record, progress) -> None:
                    "memory-traffic bound (NumPy, in place)", per_step, bound, difference, dt=dt,
                    bytes_read_and_written=read_write, bytes_read=read_only, flops_per_body=FLOPS_PER_BODY,
                    largest_omega_dt=largest_turn,
-                   # the tighter bound: the same bytes in one compiled pass (median, min)
-                   compiled_stream_seconds=float(np.median(samples["compiled stream"])),
-                   compiled_stream_min_seconds=float(np.min(samples["compiled stream"])),
+                   # the tighter bound: the same bytes in one compiled pass
+                   compiled_stream=beside(per_step, Times.of(samples["compiled stream"])),
                    # the XLA loop on the rows, per step: its marginal cost, and with the trigonometric branch
                    step_xla_seconds=xla.median, step_xla_min_seconds=xla.minimum,
                    xla_difference_from_numpy=max(final_difference(q_loop, q_numpy[-1]),
