@@ -4,7 +4,8 @@
 (:func:`steplab.bench.systems.cloth_model`) by each contender; Newton's is skipped without the
 extra ``steplab[newton]``. ``track_ratio`` is ``steplab bench``'s ratios on the 160 x 160 cloth
 (25,600 particles, 101,442 springs): one step over one pass of the memory-traffic bound, both
-from cold caches (target 1.5; ``steplab.bench.cold``), and the marginal step over the Numba
+from cold caches (target 1.5; ``steplab.bench.cold``), the same step over a tighter bound, the
+same bytes in one compiled pass (``compiled_stream``), and the marginal step over the Numba
 loop's and over Newton's SolverXPBD's (target 0.5), in the same rounds.
 """
 
@@ -49,7 +50,7 @@ class XPBDClothStep:
 class XPBDClothRatios:
     """``steplab bench``'s cloth (XPBD) comparisons, measured once in ``setup_cache``."""
 
-    params = ["memory_bound", "numba", "newton"]
+    params = ["memory_bound", "compiled_stream", "numba", "newton"]
     param_names = ["peer"]
     unit = "ratio"
     timeout = 900
@@ -60,7 +61,8 @@ class XPBDClothRatios:
 
         record = Record(QUICK, quick=True)
         xpbd_cloth(QUICK, record, lambda message: None)
-        return record.data["ratios"]
+        tighter = record.data["seconds"]["vs_memory_bound_xpbd_cloth"]["compiled_stream"]["ratio"]
+        return record.data["ratios"] | {"vs_compiled_stream_xpbd_cloth": tighter}
 
     def setup(self, ratios, peer):
         if f"vs_{peer}_xpbd_cloth" not in ratios:
