@@ -249,7 +249,7 @@ class InPlaceStep(NamedTuple):
     bytes one step must move at the least are ``bytes_read_and_written`` (the state q, v) and
     ``bytes_read`` (the constraints, inverse masses and external accelerations), for the
     memory-traffic bound (``steplab.peers.memory_stream``); ``stream()``, where given, moves those bytes in
-    one compiled pass computing nothing (the tighter bound): (how many, the read ones' sum as integers)."""
+    one compiled pass computing nothing (the tighter bound) and returns the read ones' sum as integers."""
 
     state: np.ndarray
     rows: np.ndarray
@@ -313,7 +313,7 @@ def cloth_benchmark_step(model, y0, dt: float, method: PositionBased | None = No
     # and the external field as (N, 3) float64, as the model holds it (the rows' ends past N are the step's own)
     data = sum(a.nbytes for a in read) + carry.inverse_mass.nbytes + 3 * 8 * model.n_bodies
 
-    def stream() -> tuple[int, int]:
+    def stream() -> int:
         return stream_kernel(held[0], 1.0)
 
     step = InPlaceStep(state, carry.rows, steps, state.nbytes, data, stream)

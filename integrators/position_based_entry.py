@@ -78,36 +78,30 @@ def advance_at(t):
 @njit(cache=True)
 def stream_at(t, factor):
     """The bytes one step of :func:`advance_at` ``t`` must move, moved in one compiled pass and nothing computed:
-    the state q, v (2, 3, N) read and written in place (multiplied by ``factor``, 1.0: unchanged), and read
-    once the external field (3, N), the inverse masses and the sweep's columns (``alpha_tilde`` only where
-    the multipliers are carried), each summed as integers (which vectorise, where a float sum's order may
-    not change). Returns (bytes moved, the sum): the sum keeps the reads from being optimised away.
+    the state q, v (2, 3, N) read and written in place (multiplied by ``factor``; 1.0 leaves it unchanged), and
+    read once the external field (3, N), the inverse masses and the sweep's columns (``alpha_tilde`` only where
+    the multipliers are carried), summed as integers (which vectorise, where a float sum's order may not
+    change). Returns the sum, which keeps the reads from being optimised away.
 
     The same call on the same table as the step, so both pay the same fixed cost of a call; NumPy's
     two passes (``steplab.peers.memory_stream``) take longer on the same bytes (docs/performance.md).
     """
     n, p, s, b = t[_BODIES], t[_CONSTRAINTS], t[_SEGMENTS], t[_BLOCKS]
     state = _at(t, _STATE, (6, t[_ROW]), np.float64)
-    moved = 0
     for r in range(6):
         row = state[r]
         for k in range(n):
             row[k] = row[k] * factor
-        moved += 8 * n
     total = np.uint64(0)
     external = _at(t, _EXTERNAL, (3, t[_ROW]), np.uint64)
     for r in range(3):
         total += _summed(external[r, :n])
-    moved += 3 * 8 * n
     for slot, length in ((_INVERSE_MASS, n), (_REST, p), (_GAMMA, p), (_DENOMINATOR, p), (_STARTS, s),
                          (_ALPHA, p if t[_CARRIED] != 0 else 0)):
         total += _summed(_at(t, slot, length, np.uint64))
-        moved += 8 * length
     for slot in (_I, _J):
         total += _summed(_at(t, slot, p, np.uint32))
-        moved += 4 * p
-    total += _summed(_at(t, _KINDS, b, np.uint8))
-    return moved + b, total
+    return total + _summed(_at(t, _KINDS, b, np.uint8))
 
 
 @njit(inline="always")

@@ -152,6 +152,10 @@ def test_memory_bounds_keep_the_step_against_one_compiled_pass_beside_them(tiny_
         tighter = tiny_record["seconds"][name]["compiled_stream"]
         assert tighter["bound"] > 0 and tighter["ratio"] == pytest.approx(tighter["steplab"] / tighter["bound"])
         assert f"{name} {tighter['ratio']:.3g}x" in line
+    # the cloth's pass is timed in the step's own cold rounds: its step is the target's, on its own clock
+    cloth = tiny_record["seconds"]["vs_memory_bound_xpbd_cloth"]
+    tighter = cloth["compiled_stream"]
+    assert tighter["steplab"] == cloth[f"steplab_{tighter['clock']}_spread"]["median"]
 
 
 def test_record_says_where_a_ratio_cannot_be_trusted():

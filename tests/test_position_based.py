@@ -265,18 +265,21 @@ def test_the_benchmark_step_is_the_integrators_step_in_place():
     assert step.bytes_read_and_written == 2 * 400 * 3 * 8
     blocks = sum(np.diff(XPBD(1, 1).init(model, 0.0, y0).segments) // LANES)  # a byte each: its kind
     assert step.bytes_read == springs * (2 * 4 + 3 * 8) + segments * 8 + blocks + 400 * 8 + 400 * 3 * 8
-    # the bench's tighter bound moves those bytes through the same table, reading the arrays the step reads
-    # (their sum as integers, wrapping) and writing the state back unchanged
+    # the bench's tighter bound reads the arrays counted above (their sum as integers, wrapping) and writes
+    # the state back unchanged
     carry = PBD(3, 2).init(model, 0.0, y0).for_substep(PBD(3, 2).substeps_of(5e-4).h)
     sweep = carry.sweep._replace(alpha_tilde=np.empty(0))  # read only where the multipliers are carried
-    words = [carry.external[:, :400], carry.inverse_mass, *sweep]
-    def summed(a):  # 8-byte values as uint64 words, narrower ones widened
-        a = np.ascontiguousarray(a)
-        return int((a.view(np.uint64) if a.itemsize == 8 else a).sum(dtype=np.uint64))
-
     before = step.state.copy()
-    assert step.stream() == (step.bytes_read_and_written + step.bytes_read, sum(map(summed, words)) % 2**64)
+    assert step.stream() == integer_sum([carry.external[:, :400], carry.inverse_mass, *sweep])
     assert step.state.tobytes() == before.tobytes()
+
+
+def integer_sum(arrays) -> int:
+    """The arrays' values summed as unsigned integers modulo 2^64: 8-byte values as their bit patterns."""
+    total = 0
+    for a in map(np.ascontiguousarray, arrays):
+        total += int((a.view(np.uint64) if a.itemsize == 8 else a).sum(dtype=np.uint64))
+    return total % 2**64
 
 
 def test_the_benchmark_steps_table_points_at_the_carry_with_multipliers_carried():
@@ -285,7 +288,7 @@ def test_the_benchmark_steps_table_points_at_the_carry_with_multipliers_carried(
     # the kernel is not compiled for are refused in one line
     from steplab.integrators.constraint_projection import workspace
     from steplab.integrators.position_based import cloth_benchmark_step
-    from steplab.integrators.position_based_entry import table
+    from steplab.integrators.position_based_entry import stream_at, table
 
     from steplab.bench.systems import cloth_model
 
@@ -297,9 +300,15 @@ def test_the_benchmark_steps_table_points_at_the_carry_with_multipliers_carried(
     assert step.y.tobytes() == expected.tobytes() and not np.array_equal(step.y, y0)
     carry = method.init(model, 0.0, y0).for_substep(2.5e-4)
     steps = method.substeps_of(5e-4)
-    # carried, the multipliers' alpha_tilde is read: counted and moved by the tighter bound's pass
+    # carried, the multipliers' alpha_tilde is read: counted, and read by the tighter bound's pass, which
+    # writes each coordinate row of q and v over its N bodies and leaves the rows' padding alone
     assert step.bytes_read == sum(a.nbytes for a in carry.sweep) + 400 * 8 + 400 * 3 * 8
-    assert step.stream()[0] == step.bytes_read_and_written + step.bytes_read
+    t = table(carry.external, carry.inverse_mass, carry.sweep, steps, carry.work)
+    carry.work.state[...] = np.random.default_rng(0).normal(size=carry.work.state.shape)  # padding included
+    state = carry.work.state.copy()
+    assert stream_at(t, 2.0) == integer_sum([carry.external[:, :400], carry.inverse_mass, *carry.sweep])
+    assert np.array_equal(carry.work.state[..., :400], 2.0 * state[..., :400])
+    assert np.array_equal(carry.work.state[..., 400:], state[..., 400:])
     with pytest.raises(ValueError, match="^advance_at: inverse_mass must be C-contiguous float64, got float32$"):
         table(carry.external, carry.inverse_mass.astype(np.float32), carry.sweep, steps, carry.work)
     with pytest.raises(ValueError, match="do not fit 400 bodies"):
