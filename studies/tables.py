@@ -40,10 +40,18 @@ def markdown_table(header: list[str], rows: list[list[str]]) -> str:
     return "\n".join(lines)
 
 
+#: the units a placeholder may print a value in (its spec's last word), from the records' seconds and metres
+UNITS = {"ms": 1e3, "us": 1e6, "mm": 1e3}
+
+
 def format_value(value, spec: str) -> str:
-    """A value as the paper prints it: None as "none", booleans as yes/no, else ``format(value, spec)``."""
+    """A value as the paper prints it: None as "none", booleans as yes/no, else ``format(value, spec)``; a spec
+    ending in a unit of :data:`UNITS` prints seconds or metres in it (``.2g ms``: 0.00607 s as "6.1 ms")."""
     if value is None:
         return "none"
     if isinstance(value, bool):
         return "yes" if value else "no"
+    number, _, unit = spec.rpartition(" ")
+    if unit in UNITS:
+        return f"{format(value * UNITS[unit], number)} {unit}"
     return format(value, spec) if spec else str(value)

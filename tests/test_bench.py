@@ -156,6 +156,13 @@ def test_memory_bounds_keep_the_step_against_one_compiled_pass_beside_them(tiny_
     cloth = tiny_record["seconds"]["vs_memory_bound_xpbd_cloth"]
     tighter = cloth["compiled_stream"]
     assert tighter["steplab"] == cloth[f"steplab_{tighter['clock']}_spread"]["median"]
+    # and the warm step against the target's own cold bound: its bound is the target's peer, its step the
+    # warm pair's (each side on the clock the pair shares)
+    room = cloth["warm_step_against_cold_bound"]
+    assert room["bound"] == cloth[f"peer_{room['clock']}_spread"]["median"]
+    assert room["ratio"] == pytest.approx(room["steplab"] / room["bound"])
+    if room["clock"] == cloth["warm"]["clock"]:
+        assert room["steplab"] == cloth["warm"]["steplab"]
 
 
 def test_record_says_where_a_ratio_cannot_be_trusted():

@@ -34,10 +34,11 @@ def test_every_figure_the_paper_shows_is_committed():
 
 
 def test_collect_and_render_from_records():
-    records = {"s": {"x": 1.23456, "l": [1, 2, 3], "flag": True, "none": None}}
-    template = "x = {{s/x:.2f}}, n = {{s/l/__len__}}, second = {{s/l/1}}, {{s/flag}}, {{s/none}}"
+    records = {"s": {"x": 1.23456, "l": [1, 2, 3], "flag": True, "none": None, "t": 0.000607}}
+    template = ("x = {{s/x:.2f}}, n = {{s/l/__len__}}, second = {{s/l/1}}, {{s/flag}}, {{s/none}}, "
+                "{{s/t:.2f ms}} or {{s/t:.0f us}}")
     numbers = collect(template, records)
-    assert render(template, numbers).endswith("x = 1.23, n = 3, second = 2, yes, none")
+    assert render(template, numbers).endswith("x = 1.23, n = 3, second = 2, yes, none, 0.61 ms or 607 us")
     with pytest.raises(ValueError, match="no value at 's/y'"):
         lookup(records, "s/y")
 

@@ -40,8 +40,8 @@ def test_converged_xpbd_and_vbd_turn_the_lowest_mode_as_implicit_euler_does():
 
 
 def test_the_equal_time_claim_interpolates_implicit_euler_in_log_log():
-    rows = [{"method": "implicit-euler", "seconds": 1.0, "position_error": 1.0},
-            {"method": "implicit-euler", "seconds": 100.0, "position_error": 0.01},
+    rows = [{"method": "implicit-euler", "dt": 0.01, "seconds": 1.0, "position_error": 1.0},
+            {"method": "implicit-euler", "dt": 0.0001, "seconds": 100.0, "position_error": 0.01},
             {"method": "xpbd", "settings": {"substeps": 8}, "seconds": 10.0, "position_error": 0.005},
             {"method": "xpbd", "settings": {"substeps": 2}, "seconds": 0.1, "position_error": 2.0}]
     claim = sb.equal_time_claim(rows)
@@ -49,6 +49,11 @@ def test_the_equal_time_claim_interpolates_implicit_euler_in_log_log():
     assert inside["implicit_euler_error"] == pytest.approx(0.1) and inside["ratio"] == pytest.approx(0.05)
     assert inside["inside"] and not outside["inside"] and outside["ratio"] == pytest.approx(2.0)
     assert claim["best_ratio"] == pytest.approx(0.05) and claim["holds"]
+    # the slowest xpbd run (10 s) is not faster than implicit Euler's cheapest (1 s, dt = 0.01)
+    assert claim["slowest_xpbd"] is inside and claim["cheapest_implicit_euler"]["dt"] == 0.01
+    assert claim["xpbd_always_faster"] is False
+    slower = [r | {"seconds": 50 * r["seconds"]} if r["method"] == "implicit-euler" else r for r in rows]
+    assert sb.equal_time_claim(slower)["xpbd_always_faster"] is True
 
 
 def test_the_study_is_registered_and_reproduced():
