@@ -165,6 +165,26 @@ def test_memory_bounds_keep_the_step_against_one_compiled_pass_beside_them(tiny_
         assert room["steplab"] == cloth["warm"]["steplab"]
 
 
+def test_one_section_runs_alone_and_says_so(tiny_record):
+    # judging a ratio that moves between processes takes several runs of its section alone
+    assert "xpbd-cloth" in bench.section_names() and len(set(bench.section_names())) == len(bench.SECTIONS)
+    record = bench.run_bench(TINY, quick=True, only=["broadphase"])
+    assert set(record["ratios"]) == {n for n, s in tiny_record["seconds"].items() if s["group"] == "broadphase"}
+    assert list(record["details"]["section_seconds"]) == ["broadphase"] and record["details"]["only"] == ["broadphase"]
+    assert "quick (only broadphase) run" in bench.format_table(record)
+    assert tiny_record["details"]["only"] is None and "quick run" in bench.format_table(tiny_record)
+    with pytest.raises(ValueError, match="no section nope; the sections: small-system"):
+        bench.run_bench(TINY, quick=True, only=["nope"])
+
+
+def test_bench_only_names_a_section_or_fails_in_one_line(capsys):
+    with pytest.raises(SystemExit) as exit_:
+        main(["bench", "--only", "nope"])
+    assert exit_.value.code == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and "invalid choice: 'nope'" in err and "'xpbd-cloth'" in err
+
+
 def test_record_says_where_a_ratio_cannot_be_trusted():
     record = bench.Record(TINY, quick=True)
     steady, noisy = bench.Times.of([1.0, 1.01, 1.02]), bench.Times.of([1.0, 1.5, 2.0])
@@ -390,7 +410,7 @@ def test_ball_pit_scene_files_are_the_generators():
 def test_bench_command_writes_json_and_prints_tables(tiny_record, monkeypatch, tmp_path, capsys):
     monkeypatch.delenv("EQX_ON_ERROR", raising=False)  # restored after the test: other tests need diffrax to raise
     runs = []
-    monkeypatch.setattr(bench, "run_bench", lambda config, quick, progress: runs.append(config) or tiny_record)
+    monkeypatch.setattr(bench, "run_bench", lambda config, quick, progress, only: runs.append(config) or tiny_record)
     out = tmp_path / "bench.json"
     assert main(["bench", "--quick", "--json", str(out)]) == 0
     assert runs == [bench.QUICK]

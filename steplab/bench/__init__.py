@@ -57,14 +57,31 @@ from .timing import pin_threads as pin_threads
 from .timing import thread_settings as thread_settings
 
 
-def run_bench(config: Config, quick: bool = False, progress: Callable[[str], None] | None = None) -> dict:
-    """Run every comparison; returns the record ``--json`` writes."""
+def section_name(section: Callable) -> str:
+    """A section's name on the command line (``--only``): its function's, hyphenated (``xpbd-cloth``)."""
+    return section.__name__.replace("_", "-")
+
+
+def section_names() -> tuple[str, ...]:
+    """The sections ``steplab bench --only`` takes, in the order a run takes them."""
+    return tuple(section_name(section) for section in SECTIONS)
+
+
+def run_bench(config: Config, quick: bool = False, progress: Callable[[str], None] | None = None,
+              only: list[str] | None = None) -> dict:
+    """Run every comparison, or only the sections named in ``only`` (:func:`section_names`); returns the
+    record ``--json`` writes (its ``details["only"]``: the sections run, None for all)."""
     from steplab.studies.runner import provenance
 
     progress = progress or (lambda message: None)
+    unknown = sorted(set(only or ()) - set(section_names()))
+    if unknown:
+        raise ValueError(f"bench: no section {', '.join(unknown)}; the sections: {', '.join(section_names())}")
+    chosen = [section for section in SECTIONS if only is None or section_name(section) in only]
     record = Record(config, quick)
+    record.data["details"]["only"] = None if only is None else [section_name(section) for section in chosen]
     start = time.perf_counter()
-    for section in SECTIONS:
+    for section in chosen:
         begin = time.perf_counter()
         section(config, record, progress)
         record.data["details"].setdefault("section_seconds", {})[section.__name__] = time.perf_counter() - begin
@@ -99,7 +116,7 @@ def command(args) -> int:
     else:
         config = QUICK if args.quick else FULL
         log = (lambda message: print(f"[bench] {message}", file=sys.stderr, flush=True))
-        record = run_bench(config, quick=args.quick, progress=log)
+        record = run_bench(config, quick=args.quick, progress=log, only=args.only)
         if args.json is not None:
             from steplab.core.records import write_json
 

@@ -212,6 +212,9 @@ def _footer(record: dict) -> list[str]:
     out += startup_footer(record)
     prov = record.get("provenance", {})
     mode = "quick" if record["quick"] else "full"
+    only = record["details"].get("only")
+    if only:
+        mode += f" (only {', '.join(only)})"
     pinned = record["details"].get("threads", {}).get("pinned")
     out.append(f"ratio = steplab median / peer median (below 1: steplab faster), on the clock shown: CPU "
                f"seconds where both sides ran on one thread (what the wall time is on an idle core, and "

@@ -4,6 +4,14 @@ from __future__ import annotations
 
 from pathlib import Path
 
+from .args import Deferred
+
+
+def _sections():
+    from steplab.bench import section_names
+
+    return section_names()
+
 
 def add_parser(sub, name: str) -> None:
     p = sub.add_parser(name, help="time steplab against diffrax, scipy, Numba and the memory bound")
@@ -12,6 +20,9 @@ def add_parser(sub, name: str) -> None:
     p.add_argument("--markdown", action="store_true", help="print the table as Markdown (docs/performance.md's)")
     p.add_argument("--from", dest="source", type=Path, metavar="FILE",
                    help="print the table of a record written by --json instead of running")
+    p.add_argument("--only", action="append", choices=Deferred(_sections), metavar="SECTION",
+                   help="run only this section (repeat for more), e.g. xpbd-cloth or ball-pits (a wrong name "
+                        "lists them); a ratio that moves between runs, such as xpbd-cloth's, is judged over several")
 
 
 def command(args) -> int:
