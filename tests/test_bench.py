@@ -168,6 +168,8 @@ def test_memory_bounds_keep_the_step_against_one_compiled_pass_beside_them(tiny_
 def test_one_section_runs_alone_and_says_so(tiny_record):
     # judging a ratio that moves between processes takes several runs of its section alone
     assert "xpbd-cloth" in bench.section_names() and len(set(bench.section_names())) == len(bench.SECTIONS)
+    performance = (Path(__file__).resolve().parent.parent / "docs" / "performance.md").read_text()
+    assert all(f"`{name}`" in performance for name in bench.section_names())  # the page lists them all
     record = bench.run_bench(TINY, quick=True, only=["broadphase"])
     assert set(record["ratios"]) == {n for n, s in tiny_record["seconds"].items() if s["group"] == "broadphase"}
     assert list(record["details"]["section_seconds"]) == ["broadphase"] and record["details"]["only"] == ["broadphase"]
