@@ -12,7 +12,15 @@ import math
 
 import numpy as np
 import pytest
-from steplab.integrators import INTEGRATORS, ButcherTableau, ExplicitRungeKutta, Stepper, get_integrator
+from scipy.optimize import brentq
+from steplab.integrators import (
+    INTEGRATORS,
+    ButcherTableau,
+    ExplicitRungeKutta,
+    Stepper,
+    get_integrator,
+    linear_stability,
+)
 from steplab.integrators.linear_stability import oscillator_eigenvalues
 
 STEPPERS = [name for name, method in INTEGRATORS.items() if isinstance(method, Stepper)]
@@ -97,6 +105,36 @@ def test_semi_implicit_euler_limit_is_its_closed_form(zeta):
 def test_undamped_limits_are_their_closed_forms(name, limit):
     value = INTEGRATORS[name].stability_limit(0.0)
     assert value is None if limit is None else value == pytest.approx(limit, abs=1e-9)
+
+
+def _whole_grid_limit(stepper, zeta):
+    """The limit the whole grid brackets, every point evaluated: what the search's coarse scan must find."""
+    ys = np.geomspace(linear_stability.OMEGA_DT_MIN, linear_stability.OMEGA_DT_MAX, linear_stability.LIMIT_GRID_POINTS)
+    excess = lambda y: stepper.spectral_radius(y, zeta) - 1 - linear_stability.THEORY_TOLERANCE  # noqa: E731
+    stable = [excess(y) <= 0 for y in ys]
+    if not stable[0]:
+        return 0.0
+    if all(stable):
+        return None
+    k = stable.index(False)
+    return brentq(excess, ys[k - 1], ys[k], xtol=linear_stability.LIMIT_XTOL)
+
+
+@pytest.mark.parametrize("zeta", [0.0, 0.1, 1.0])
+@pytest.mark.parametrize("name", WITH_R + ["semi-implicit-euler"])
+def test_the_coarse_scan_finds_the_whole_grids_limit(name, zeta):
+    """Scanning every 20th point first skips no unstable window of these methods: the same limit, to the bit."""
+    method = INTEGRATORS[name]
+    assert linear_stability._search_limit(method, zeta) == _whole_grid_limit(method, zeta)
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("zeta", [0.0, 0.01, 0.1, 0.5, 1.0, 2.0])
+@pytest.mark.parametrize("name", [n for n in INTEGRATORS if hasattr(INTEGRATORS[n], "spectral_radius")])
+def test_the_coarse_scan_finds_the_whole_grids_limit_for_every_method(name, zeta):
+    """Every method with a linear map, the position-based ones too (4,000 radii each: about 2 minutes)."""
+    method = INTEGRATORS[name]
+    assert linear_stability._search_limit(method, zeta) == _whole_grid_limit(method, zeta)
 
 
 def test_explicit_euler_is_the_one_stage_tableau():
