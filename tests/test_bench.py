@@ -187,6 +187,53 @@ def test_bench_only_names_a_section_or_fails_in_one_line(capsys):
     assert len(err.splitlines()) == 1 and "invalid choice: 'nope'" in err and "'xpbd-cloth'" in err
 
 
+def _xpbd_run(ratio: float) -> dict:
+    """A record of one xpbd comparison whose ratio is ``ratio`` (its target 1.5)."""
+    record = bench.Record(TINY, quick=True)
+    record.compare("vs_memory_bound_xpbd_cloth", "cloth (XPBD)", "what", "bound", bench.Times.of([ratio]),
+                   bench.Times.of([1.0]))
+    return record.data
+
+
+def test_repeat_summarises_each_ratio_over_its_runs():
+    from steplab.bench.repeat import format_summary, summary
+
+    runs = [_xpbd_run(r) for r in (1.4, 1.6, 1.45)]
+    [row] = summary(runs)
+    assert row["ratios"] == pytest.approx([1.4, 1.6, 1.45])
+    assert (row["min"], row["median"], row["max"]) == pytest.approx((1.4, 1.45, 1.6))
+    assert (row["target"], row["met_runs"], row["median_met"]) == (1.5, 2, True)
+    text = format_summary({"repeat": 3, "arguments": ["bench", "--only", "xpbd-cloth"], "runs": runs,
+                           "summary": [row]})
+    assert "2 of 3 runs; the median meets it" in text and "3 runs of `steplab bench --only xpbd-cloth`" in text
+    assert summary([_xpbd_run(r) for r in (1.6, 1.45)])[0]["median_met"] is False  # median 1.525
+
+
+def test_bench_repeat_runs_each_in_a_fresh_process_and_summarises_them(capsys, tmp_path):
+    path = tmp_path / "repeat.json"
+    assert main(["bench", "--quick", "--only", "batching", "--repeat", "2", "--json", str(path)]) == 0
+    result = json.loads(path.read_text())
+    runs = result["runs"]
+    assert result["repeat"] == 2 and len(runs) == 2 and all(r["details"]["only"] == ["batching"] for r in runs)
+    assert len({r["details"]["total_seconds"] for r in runs}) == 2  # two runs, not one record twice
+    for row in result["summary"]:
+        ratios = [r["ratios"][row["name"]] for r in runs]
+        assert row["ratios"] == ratios and row["median"] == pytest.approx(sum(ratios) / 2)
+    out = capsys.readouterr().out
+    assert all(row["name"] in out for row in result["summary"]) and "2 runs of `steplab bench --quick" in out
+
+
+@pytest.mark.parametrize(("argv", "message"), [(["--repeat", "0"], "must be a positive integer, got 0"),
+                                               (["--repeat", "2", "--from", "x.json"], "give one of them")])
+def test_bench_repeat_refuses_bad_input_in_one_line(capsys, argv, message):
+    try:
+        status = main(["bench", *argv])
+    except SystemExit as exit_:  # argparse's own refusal
+        status = exit_.code
+    err = capsys.readouterr().err.strip()
+    assert status == 2 and len(err.splitlines()) == 1 and message in err
+
+
 def test_record_says_where_a_ratio_cannot_be_trusted():
     record = bench.Record(TINY, quick=True)
     steady, noisy = bench.Times.of([1.0, 1.01, 1.02]), bench.Times.of([1.0, 1.5, 2.0])

@@ -111,6 +111,21 @@ def command(args) -> int:
     """``steplab bench``: run (or, with ``--from``, re-print) the comparisons, one thread per side."""
     fair_diffrax()
     pin_threads()
+    if args.source is not None and args.repeat > 1:
+        raise ValueError("--repeat runs the bench and --from prints a record without running: give one of them")
+    if args.repeat > 1:
+        from .repeat import format_summary, run_repeated
+
+        log = (lambda message: print(f"[bench] {message}", file=sys.stderr, flush=True))
+        result = run_repeated(args.repeat, args.quick, args.only, log)
+        if result is None:  # a run failed and said why on stderr
+            return 1
+        if args.json is not None:
+            from steplab.core.records import write_json
+
+            write_json(args.json, result)
+        print(format_summary(result))
+        return 0
     if args.source is not None:
         record = json.loads(args.source.read_text())
     else:

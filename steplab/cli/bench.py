@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from .args import Deferred
+from .args import Deferred, count
 
 
 def _sections():
@@ -23,6 +23,9 @@ def add_parser(sub, name: str) -> None:
     p.add_argument("--only", action="append", choices=Deferred(_sections), metavar="SECTION",
                    help="run only this section (repeat for more), e.g. xpbd-cloth or ball-pits (a wrong name "
                         "lists them); a ratio that moves between runs, such as xpbd-cloth's, is judged over several")
+    p.add_argument("--repeat", type=count, default=1, metavar="N",
+                   help="run the bench N times, each in a process of its own, and print each ratio's least, median "
+                        "and largest value and how many runs met its target (--json: every run's record)")
 
 
 def command(args) -> int:
