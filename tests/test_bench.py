@@ -206,6 +206,8 @@ def test_repeat_summarises_each_ratio_over_its_runs():
     text = format_summary({"repeat": 3, "arguments": ["bench", "--only", "xpbd-cloth"], "runs": runs,
                            "summary": [row]})
     assert "2 of 3 runs; the median meets it" in text and "3 runs of `steplab bench --only xpbd-cloth`" in text
+    markdown = format_summary({"repeat": 3, "arguments": ["bench"], "runs": runs, "summary": [row]}, markdown=True)
+    assert "| cloth (XPBD) | vs_memory_bound_xpbd_cloth | 3 | 1.4 | 1.45 | 1.6 | ≤ 1.5 | 2 of 3 runs;" in markdown
     assert summary([_xpbd_run(r) for r in (1.6, 1.45)])[0]["median_met"] is False  # median 1.525
 
 
@@ -221,6 +223,7 @@ def test_bench_repeat_runs_each_in_a_fresh_process_and_summarises_them(capsys, t
         assert row["ratios"] == ratios and row["median"] == pytest.approx(sum(ratios) / 2)
     out = capsys.readouterr().out
     assert all(row["name"] in out for row in result["summary"]) and "2 runs of `steplab bench --quick" in out
+    assert main(["bench", "--from", str(path)]) == 0 and capsys.readouterr().out == out  # re-printed from the record
 
 
 @pytest.mark.parametrize(("argv", "message"), [(["--repeat", "0"], "must be a positive integer, got 0"),

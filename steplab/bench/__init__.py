@@ -124,10 +124,15 @@ def command(args) -> int:
             from steplab.core.records import write_json
 
             write_json(args.json, result)
-        print(format_summary(result))
+        print(format_summary(result, markdown=args.markdown))
         return 0
     if args.source is not None:
         record = json.loads(args.source.read_text())
+        if "summary" in record and "runs" in record:  # a --repeat record
+            from .repeat import format_summary
+
+            print(format_summary(record, markdown=args.markdown))
+            return 0
     else:
         config = QUICK if args.quick else FULL
         log = (lambda message: print(f"[bench] {message}", file=sys.stderr, flush=True))

@@ -60,17 +60,26 @@ def summary(records: list[dict]) -> list[dict]:
     return out
 
 
-def format_summary(result: dict) -> str:
-    """The summary as a table: a line per comparison, then what was run."""
-    lines = [f"{'group':<17} {'comparison':<40} {'runs':>4} {'least':>7} {'median':>7} {'largest':>7}  "
-             f"{'target':<8} met in"]
+def format_summary(result: dict, markdown: bool = False) -> str:
+    """The summary as a table for the terminal or as Markdown: a line per comparison, then what was run."""
+    header = ("group", "comparison", "runs", "least", "median", "largest", "target", "met in")
+    body = []
     for s in result["summary"]:
         verdict = "" if s["target"] is None else (
             f"{s['met_runs']} of {s['runs']} runs; the median {'meets' if s['median_met'] else 'misses'} it")
         target = "" if s["target"] is None else f"≤ {s['target']:g}"
-        lines.append(f"{s['group']:<17} {s['name']:<40} {s['runs']:>4} {s['min']:>7.3g} {s['median']:>7.3g} "
-                     f"{s['max']:>7.3g}  {target:<8} {verdict}")
+        body.append((s["group"], s["name"], str(s["runs"]), *(f"{s[k]:.3g}" for k in ("min", "median", "max")),
+                     target, verdict))
     cpu = result["runs"][0].get("provenance", {}).get("cpu", "?") if result["runs"] else "?"
-    lines.append(f"ratio = steplab / peer per run (steplab bench's table); {result['repeat']} runs of "
-                 f"`steplab {' '.join(result['arguments'])}`, each a process of its own, one after another; {cpu}")
-    return "\n".join(lines)
+    footer = (f"ratio = steplab / peer per run (steplab bench's table); {result['repeat']} runs of "
+              f"`steplab {' '.join(result['arguments'])}`, each a process of its own, one after another; {cpu}")
+    if markdown:
+        return "\n".join(["| " + " | ".join(header) + " |", "|" + "---|" * len(header)]
+                         + ["| " + " | ".join(row) + " |" for row in body] + ["", f"- {footer}"])
+    widths = (17, 40, 4, 7, 7, 7, 8)  # the last column as long as it is
+
+    def line(row) -> str:
+        cells = [f"{cell:<{w}}" if k in (0, 1, 6) else f"{cell:>{w}}" for k, (cell, w) in enumerate(zip(row, widths))]
+        return " ".join(cells + [row[-1]])
+
+    return "\n".join([line(header)] + [line(row) for row in body] + [footer])
