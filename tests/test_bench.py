@@ -211,7 +211,8 @@ def test_repeat_summarises_each_ratio_over_its_runs():
     assert summary([_xpbd_run(r) for r in (1.6, 1.45)])[0]["median_met"] is False  # median 1.525
 
 
-def test_bench_repeat_runs_each_in_a_fresh_process_and_summarises_them(capsys, tmp_path):
+def test_bench_repeat_runs_each_in_a_fresh_process_and_summarises_them(capsys, tmp_path, monkeypatch):
+    monkeypatch.delenv("EQX_ON_ERROR", raising=False)  # restored after the test: other tests need diffrax to raise
     path = tmp_path / "repeat.json"
     assert main(["bench", "--quick", "--only", "batching", "--repeat", "2", "--json", str(path)]) == 0
     result = json.loads(path.read_text())

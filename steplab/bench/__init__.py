@@ -109,8 +109,6 @@ def fair_diffrax() -> None:
 
 def command(args) -> int:
     """``steplab bench``: run (or, with ``--from``, re-print) the comparisons, one thread per side."""
-    fair_diffrax()
-    pin_threads()
     if args.source is not None and args.repeat > 1:
         raise ValueError("--repeat runs the bench and --from prints a record without running: give one of them")
     if args.repeat > 1:
@@ -126,6 +124,9 @@ def command(args) -> int:
             write_json(args.json, result)
         print(format_summary(result, markdown=args.markdown))
         return 0
+    # (a --repeat parent times nothing: its runs pin themselves, in the environment a plain run starts in)
+    fair_diffrax()
+    pin_threads()
     if args.source is not None:
         record = json.loads(args.source.read_text())
         if "summary" in record and "runs" in record:  # a --repeat record
