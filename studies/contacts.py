@@ -394,6 +394,8 @@ def plot(record: dict, out) -> list[str]:
     c.set(xscale="log", xlabel="iterations per substep", ylabel="last ball's speed / first ball's",
           ylim=(0, 1.05), title="Newton's cradle: the last ball")
     b.legend(fontsize=8)
+    for ax in (a, b, c):
+        plotting.integer_ticks(ax, [row["iterations"] for row in rest["solver"] + cr["solver"]])
     names += plotting.save_figure(fig, out, "contacts_restitution_cradle")
 
     fig, (a, b) = plt.subplots(1, 2, figsize=(11, 4.2))
@@ -406,6 +408,7 @@ def plot(record: dict, out) -> list[str]:
     a.axhline(1e3 * game[0]["soft_deflection"], color="k", ls="--", label="n g / omega^2 (soft contact at rest)")
     a.set(xscale="log", xlabel="iterations per substep", ylabel="floor penetration after 15 s, mm",
           title="Column of 10 balls at dt = 1/60 s")
+    plotting.integer_ticks(a, [row["iterations"] for row in game])
     a.legend(fontsize=8)
     by_dt = [row for row in col if row["iterations"] == DEFAULTS.iterations and row["substeps"] == DEFAULTS.substeps]
     floor = 1e-17  # an energy change of exactly 0 is drawn here
@@ -427,12 +430,17 @@ def plot(record: dict, out) -> list[str]:
             ("column", "error", "relative distance from rest at 2 s"),
             ("chain", "stretch", "largest relative spring stretch in 2 s"))):
         for sub_first, style in ((True, "o-"), (False, "s--")):
-            rows = [row for row in small if row["system"] == system
-                    and ((row["iterations"] == 1) if sub_first else (row["substeps"] == 1))]
-            ax.plot([row["substeps"] * row["iterations"] for row in rows],
-                    [max(row[key], 1e-16) if row[key] is not None else np.nan for row in rows], style,
+            # n -> its run, in order of n (the run of 1 x 1 belongs to both sweeps)
+            by_n = {row["substeps"] * row["iterations"]: row for row in small if row["system"] == system
+                    and ((row["iterations"] == 1) if sub_first else (row["substeps"] == 1))}
+            ax.plot(sorted(by_n), [max(by_n[n][key], 1e-16) if by_n[n][key] is not None else np.nan
+                                   for n in sorted(by_n)], style,
                     label="n substeps x 1 iteration" if sub_first else "1 step x n iterations")
         ax.set(xscale="log", yscale="log", xlabel="n (sweeps per step: equal cost)", ylabel=label)
+        low, high = ax.get_ylim()
+        if high < 10 * low:  # less than a decade: a log axis would label it 9.5 x 10^-2, 9.6 x 10^-2, ...
+            ax.set_yscale("linear")
+        plotting.integer_ticks(ax, [row["substeps"] * row["iterations"] for row in small if row["system"] == system])
         ax.legend(fontsize=8)
     axes[0].set_title("Small steps: the ball column settling")
     axes[1].set_title("Small steps: a chain on stiff springs (absent: diverged)")

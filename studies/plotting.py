@@ -70,6 +70,15 @@ def save_figure(fig, out: Path, stem: str) -> list[str]:
     return names
 
 
+def integer_ticks(ax, values) -> None:
+    """Tick a log x axis at the swept counts themselves (iterations, substeps: 1 2 4 8, not 10^0 10^1)."""
+    from matplotlib.ticker import NullFormatter
+
+    values = sorted(set(values))
+    ax.set_xticks(values, [str(v) for v in values])
+    ax.xaxis.set_minor_formatter(NullFormatter())
+
+
 def stable_dt_panel(ax, rows: list[dict], x: str, theory_label: str, slopes: dict | None = None) -> None:
     """Largest stable dt against ``x`` per integrator: measured (markers), theory (lines), 1/60 s.
 

@@ -358,6 +358,7 @@ def plot(record: dict, out) -> list[str]:
                     "linestyle": "--" if key == "substeps" else "-"})
     ax.set(xlabel="n (iterations, or substeps)", ylabel="largest position error at t_end (m)",
            title="The cloth at dt = 1/60 s: n substeps x 1 iteration against 1 step x n iterations")
+    plotting.integer_ticks(ax, [r["count"] for r in counts["rows"]])
     ax.grid(True, which="both", alpha=0.3)
     ax.legend(fontsize=8)
     fig.tight_layout()
