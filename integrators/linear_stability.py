@@ -149,17 +149,18 @@ def _cached_limit(stepper, zeta: float) -> float | None:
 def _search_limit(stepper, zeta: float) -> float | None:
     ys = np.geomspace(OMEGA_DT_MIN, OMEGA_DT_MAX, LIMIT_GRID_POINTS)
     excess = lambda y: stepper.spectral_radius(y, zeta) - 1 - THEORY_TOLERANCE  # noqa: E731
-    k = _first_unstable(excess, ys, range(0, len(ys) - 1 + LIMIT_COARSE_STRIDE, LIMIT_COARSE_STRIDE))
+    coarse = sorted({*range(0, len(ys), LIMIT_COARSE_STRIDE), len(ys) - 1})
+    k = _first_unstable(excess, ys, coarse)
     if k == 0:
         return 0.0
     if k is None:
         return None
-    k = _first_unstable(excess, ys, range(max(k - LIMIT_COARSE_STRIDE, 0) + 1, k + 1))  # between the coarse pair
+    k = _first_unstable(excess, ys, range(coarse[coarse.index(k) - 1] + 1, k + 1))  # between the coarse pair
     from scipy.optimize import brentq  # here, not at the top: SciPy's import costs a listing 0.2 s
 
     return float(brentq(excess, ys[k - 1], ys[k], xtol=LIMIT_XTOL))
 
 
 def _first_unstable(excess, ys, indices) -> int | None:
-    """The first of ``indices`` (clipped to the grid ``ys``) where ``excess`` > 0, or None."""
-    return next((k for k in (min(k, len(ys) - 1) for k in indices) if excess(ys[k]) > 0), None)
+    """The first of ``indices`` into the grid ``ys`` where ``excess`` > 0, or None."""
+    return next((k for k in indices if excess(ys[k]) > 0), None)

@@ -109,38 +109,27 @@ def fair_diffrax() -> None:
 
 def command(args) -> int:
     """``steplab bench``: run (or, with ``--from``, re-print) the comparisons, one thread per side."""
+    from .repeat import format_summary, run_repeated
+
     if args.source is not None and args.repeat > 1:
         raise ValueError("--repeat runs the bench and --from prints a record without running: give one of them")
-    if args.repeat > 1:
-        from .repeat import format_summary, run_repeated
-
-        log = (lambda message: print(f"[bench] {message}", file=sys.stderr, flush=True))
-        result = run_repeated(args.repeat, args.quick, args.only, log)
-        if result is None:  # a run failed and said why on stderr
-            return 1
-        if args.json is not None:
-            from steplab.core.records import write_json
-
-            write_json(args.json, result)
-        print(format_summary(result, markdown=args.markdown))
-        return 0
-    # (a --repeat parent times nothing: its runs pin themselves, in the environment a plain run starts in)
-    fair_diffrax()
-    pin_threads()
+    log = (lambda message: print(f"[bench] {message}", file=sys.stderr, flush=True))
     if args.source is not None:
         record = json.loads(args.source.read_text())
-        if "summary" in record and "runs" in record:  # a --repeat record
-            from .repeat import format_summary
-
-            print(format_summary(record, markdown=args.markdown))
-            return 0
+    elif args.repeat > 1:  # the parent times nothing: its runs pin themselves, as a plain run does
+        record = run_repeated(args.repeat, args.quick, args.only, log)
+        if record is None:  # a run failed and said why on stderr
+            return 1
     else:
-        config = QUICK if args.quick else FULL
-        log = (lambda message: print(f"[bench] {message}", file=sys.stderr, flush=True))
-        record = run_bench(config, quick=args.quick, progress=log, only=args.only)
-        if args.json is not None:
-            from steplab.core.records import write_json
+        fair_diffrax()
+        pin_threads()
+        record = run_bench(QUICK if args.quick else FULL, quick=args.quick, progress=log, only=args.only)
+    if args.source is None and args.json is not None:
+        from steplab.core.records import write_json
 
-            write_json(args.json, record)
-    print(format_markdown(record) if args.markdown else format_table(record))
+        write_json(args.json, record)
+    if "runs" in record and "summary" in record:  # a --repeat record
+        print(format_summary(record, markdown=args.markdown))
+    else:
+        print(format_markdown(record) if args.markdown else format_table(record))
     return 0
