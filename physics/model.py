@@ -64,10 +64,12 @@ class Model:
         self._field = xp.asarray(field, dtype=self.dtype) if constant else None
         self.acceleration = self._assemble_acceleration()
         # stiffness = inf springs are constraints: a force evaluation would be inf * 0, so every
-        # method that asks for the acceleration is refused, and the energy counts them as 0
-        # (an enforced constraint's potential); position-based methods read distance_constraints()
+        # method that asks for the acceleration or its Jacobian is refused, and the energy counts
+        # them as 0 (an enforced constraint's potential); position-based methods read
+        # distance_constraints()
         self._energy_forces = self.forces
-        if constraints.has_inextensible(self.forces):
+        self.inextensible = constraints.has_inextensible(self.forces)
+        if self.inextensible:
             self._energy_forces = constraints.without_inextensible(self.forces)
             self.acceleration = self._refuse_inextensible
 
@@ -164,6 +166,8 @@ class Model:
         Built from the forces' analytic Jacobians; reactive forces (ground contact) are
         held fixed, which implicit integrators tolerate as a quasi-Newton iteration.
         """
+        if self.inextensible:
+            raise constraints.inextensible_error()
         xp, n = self.xp, self.n_bodies
         dq = xp.zeros((n, 3, n, 3), dtype=self.dtype)
         dv = xp.zeros((n, 3, n, 3), dtype=self.dtype)
@@ -182,6 +186,8 @@ class Model:
         With ``definite``, each force's semidefinite part, which implicit Euler's conjugate
         gradients fall back to; :mod:`.sparse_jacobian` assembles them.
         """
+        if self.inextensible:
+            raise constraints.inextensible_error()
         blocks = (term.jacobian_blocks(self.xp, q, v, self.masses, definite) for term in self._applied)
         return [b for b in blocks if b is not None]
 

@@ -122,13 +122,18 @@ def against_dt(params, references, progress) -> dict:
     out = {}
     for name in params["scenes"]:
         scene, ref = load_scene(name), references[name]
+        # the scene's size, the diagonal of its bodies' box at the start: a run that ends farther from the
+        # reference than that has left the scene (unstable), however finite its numbers
+        extent = float(np.linalg.norm(np.ptp(np.asarray(scene.y0[0]), axis=0)))
         rows = []
         for label, _, _ in METHODS:
             for dt in params["dts"]:
-                rows.append({"method": label, "dt": dt} | errors(scene, final_state(scene, method(label), dt,
-                                                                                      params["t_end"]), ref["y"]))
+                row = {"method": label, "dt": dt} | errors(scene, final_state(scene, method(label), dt,
+                                                                               params["t_end"]), ref["y"])
+                rows.append(row | {"diverged": row["position_error"] is None or row["position_error"] > extent})
             progress()
-        out[name] = {"bodies": scene.model.n_bodies, "reference_convergence": ref["convergence"], "rows": rows}
+        out[name] = {"bodies": scene.model.n_bodies, "extent": extent, "reference_convergence": ref["convergence"],
+                     "rows": rows}
     return out
 
 
@@ -327,21 +332,34 @@ def _series(rows, label, x, y):
 def plot(record: dict, out) -> list[str]:
     plt = plotting.plt
     names = []
-    # 1. error and energy against dt, each scene
-    fig, axes = plt.subplots(2, 2, figsize=(12, 9))
+    # 1. error and energy against dt, each scene; a diverged run is a cross in a band above the curves (its
+    # error, where finite, is the blow-up's size, not the method's accuracy, and would squash the scale)
+    fig, axes = plt.subplots(2, 2, figsize=(12, 9.5))
     for col, (scene, part) in enumerate(record["against_dt"].items()):
-        for label, _, _ in METHODS:
-            for row, key in enumerate(("position_error", "energy_error")):
-                axes[row, col].loglog(*_series(part["rows"], label, "dt", key), **_style(label))
+        kept = [r for r in part["rows"] if not r["diverged"]]
+        lost = [(label, dts) for label, _, _ in METHODS
+                if (dts := [r["dt"] for r in part["rows"] if r["method"] == label and r["diverged"]])]
+        for row, key in enumerate(("position_error", "energy_error")):
+            ax = axes[row, col]
+            for label, _, _ in METHODS:
+                ax.loglog(*_series(kept, label, "dt", key), **_style(label))
+            low, high = ax.get_ylim()
+            ax.set_ylim(low, high * (high / low) ** 0.2)  # the band: the top sixth of the panel
+            # each diverging method's crosses at a height of their own (axes fraction): none hides another's
+            for n, (label, dts) in enumerate(lost):
+                ax.plot(dts, [0.94 - 0.04 * n] * len(dts), transform=ax.get_xaxis_transform(), linestyle="none",
+                        marker="x", ms=8, mew=1.5, color=_style(label)["color"])
         axes[0, col].set(xlabel="dt (s)", ylabel="largest position error at t_end (m)",
                          title=f"{scene} ({part['bodies']} bodies): position error against dt\n(reference: "
-                         f"DOP853, converged to {part['reference_convergence']:.1g} m)")
+                         f"DOP853, converged to {part['reference_convergence']:.1g} m; x: diverged)")
         axes[1, col].set(xlabel="dt (s)", ylabel="|energy error| at t_end (J)",
-                         title=f"{scene}: energy error against dt")
+                         title=f"{scene}: energy error against dt (x: diverged)")
     for ax in axes.flat:
         ax.grid(True, which="both", alpha=0.3)
-    axes[0, 0].legend(fontsize=8)
-    fig.tight_layout()
+    axes[0, 0].plot([], [], linestyle="none", marker="x", mew=1.5, color="k",
+                    label="diverged (in the method's colour): no finite result, or an error larger than the scene")
+    fig.legend(*axes[0, 0].get_legend_handles_labels(), loc="lower center", ncol=4, fontsize=9)
+    fig.tight_layout(rect=(0, 0.07, 1, 1))
     names += plotting.save_figure(fig, out, "soft-bodies_error")
 
     # 2. iterations and substeps at one frame ("small steps")
