@@ -30,7 +30,7 @@ from collections.abc import Callable, Iterable
 from pathlib import Path
 from typing import Any
 
-from steplab.core.records import remove_temporary_files, write_json
+from steplab.core.records import make_folder, remove_temporary_files, write_json
 
 from .tables import Table
 from .task_cache import TaskCache, as_json
@@ -126,6 +126,7 @@ def run_study(study: Study, out: Path, quick: bool = False, force: bool = False,
     out = Path(out)
     if out.is_dir():  # what a run killed by SIGKILL left half-written
         remove_temporary_files(out)
+    make_folder(out, "results folder")
     if not force and is_cached(study, out, quick):
         record = json.loads((out / f"{study.name}.json").read_text())
         record["cached"] = True

@@ -425,7 +425,7 @@ def plot(record: dict, out) -> list[str]:
     claim = work["claim"]
     verdict = "n/a" if claim["best_ratio"] is None else f"best ratio {claim['best_ratio']:.2g} (claim: <= 0.1)"
     ax.set(xlabel="wall time (s, least of 3)", ylabel="largest position error at t_end (m)",
-           title=f"Work-precision, cloth of {work['bodies']} particles, t_end = {work['t_end']:g} s\n"
+           title=f"Work-precision, cloth of {work['bodies']:,} particles, t_end = {work['t_end']:g} s\n"
            f"xpbd at equal time against implicit Euler: {verdict}")
     ax.grid(True, which="both", alpha=0.3)
     ax.legend(fontsize=8)

@@ -238,6 +238,18 @@ def test_bench_repeat_refuses_bad_input_in_one_line(capsys, argv, message):
     assert status == 2 and len(err.splitlines()) == 1 and message in err
 
 
+def test_bench_refuses_a_record_path_it_cannot_write_before_it_runs(capsys, tmp_path, monkeypatch):
+    """A full bench takes a quarter of an hour: a --json it could not write must fail first, in one line."""
+    for name in ("pin_threads", "fair_diffrax", "run_bench"):
+        monkeypatch.setattr(bench, name, lambda *a, **k: pytest.fail("ran before checking --json"))
+    (tmp_path / "file").write_text("")
+    for path, message in ((tmp_path / "file" / "bench.json", "--json's folder " + str(tmp_path / "file") + ": a file"),
+                          (tmp_path, "a folder; give the record's file name")):
+        status = main(["bench", "--quick", "--json", str(path)])
+        err = capsys.readouterr().err.strip()
+        assert status == 2 and len(err.splitlines()) == 1 and message in err
+
+
 def test_record_says_where_a_ratio_cannot_be_trusted():
     record = bench.Record(TINY, quick=True)
     steady, noisy = bench.Times.of([1.0, 1.01, 1.02]), bench.Times.of([1.0, 1.5, 2.0])

@@ -192,6 +192,22 @@ def test_study_command_writes_results(capsys, tmp_path):
     assert {"truncation", "stability", "work_precision", "frame_rate", "scenes"} <= set(out.split())
 
 
+def test_a_study_whose_folder_cannot_be_made_stops_before_computing(capsys, tmp_path, monkeypatch):
+    """A study without tasks computes its whole record before writing it: an --out under a file
+    must be refused first, in one line, not after minutes of work."""
+    from steplab.studies import soft_bodies
+
+    def compute(*args, **kwargs):
+        raise AssertionError("computed before the folder was made")
+
+    monkeypatch.setitem(vars(soft_bodies.STUDY), "compute", compute)  # a frozen dataclass's field
+    (tmp_path / "file").write_text("")
+    for out, message in ((tmp_path / "file", "results folder " + str(tmp_path / "file") + ": a file, not a folder"),
+                         (tmp_path / "file" / "results", "Not a directory")):
+        status, _, err = run(capsys, "study", "soft-bodies", "--quick", "--out", str(out))
+        assert status == 2 and message in err and err.count("\n") == 1
+
+
 def test_the_cloths_backends_differ_by_amplified_round_off_over_its_whole_run():
     """1,500 steps: NumPy and JAX differ by centimetres, as NumPy does from a start moved by 1e-15."""
     from steplab.studies import scene_tour

@@ -32,7 +32,7 @@ from numpy.testing import assert_allclose, assert_array_equal
 from steplab.integrators import INTEGRATORS, Stepper, simulate
 from steplab.integrators.simulate import check_time_advances
 from steplab.physics import Dampers, Drag, Friction, Gravity, Model, Springs
-from steplab.physics.friction import REST_SPEED
+from steplab.physics.friction import CONTACT_DISTANCE, REST_SPEED
 from steplab.physics.scene import parse_scene
 from steplab.physics.soft_body import all_pairs
 from steplab.studies import runner
@@ -248,10 +248,30 @@ def test_a_mirror_symmetric_scene_stays_symmetric(name, scene):
     # implicit Euler's Newton iteration does not converge once a body lands on the friction
     # ground (a non-smooth force with a frozen Jacobian): the run reports divergence
     model = Model(masses, radii, forces + ([ground] if name != "implicit-euler" else []))
-    states = run_steps(model, name, y0, 0.005, 60)
+    dt = 0.005
+    states = run_steps(model, name, y0, dt, 60)
+    if name != "implicit-euler":
+        states = states[:before_sliding_stops(states, Model(masses, radii, forces), ground, dt)]
     scale = max(1.0, np.abs(states).max())
     asymmetry = np.abs(states[:, :, mirror] * MIRROR - states).max()
     assert asymmetry <= 1e-10 * scale
+
+
+def before_sliding_stops(states, applied, ground, dt) -> int:
+    """The number of states before a body pressed on the ground slides slower than two steps of sliding
+    friction take away (mu_d a_n 2 dt). There sliding friction's direction, -v_t / |v_t|, turns
+    within a step (or a stage) through v_t = 0, where the round-off in v_t picks it: a 1e-17 m/s
+    difference between mirror images becomes one of mu_d a_n dt (the discontinuity of Coulomb
+    friction, which no ordering of the arithmetic makes symmetric). ``applied``: the model without
+    the ground, whose acceleration presses the bodies on it."""
+    n = ground.normal
+    for k, (q, v) in enumerate(states):
+        pressing = -(np.asarray(applied.acceleration(0.0, q, v)) @ n)
+        on = (q @ n - ground.height - ground.radii <= CONTACT_DISTANCE) & (pressing > 0)
+        sliding = np.linalg.norm(v - (v @ n)[:, None] * n, axis=1)
+        if np.any(on & (sliding <= ground.mu_dynamic * pressing * 2 * dt)):
+            return k
+    return len(states)
 
 
 # --- 4. determinism ---------------------------------------------------------------------------

@@ -27,7 +27,9 @@ import os
 import sys
 import time
 from collections.abc import Callable
+from pathlib import Path
 
+from steplab.core.records import make_folder
 from steplab.core.timing import Times as Times
 from steplab.core.timing import interleaved_medians as interleaved_medians
 from steplab.core.timing import interleaved_samples as interleaved_samples
@@ -114,6 +116,10 @@ def command(args) -> int:
     if args.source is not None and args.repeat > 1:
         raise ValueError("--repeat runs the bench and --from prints a record without running: give one of them")
     log = (lambda message: print(f"[bench] {message}", file=sys.stderr, flush=True))
+    if args.source is None and args.json is not None:  # a path that cannot be written fails now, not after the runs
+        if Path(args.json).is_dir():
+            raise ValueError(f"--json {args.json}: a folder; give the record's file name")
+        make_folder(Path(args.json).parent, "--json's folder")
     if args.source is not None:
         record = json.loads(args.source.read_text())
     elif args.repeat > 1:  # the parent times nothing: its runs pin themselves, as a plain run does

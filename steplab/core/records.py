@@ -41,6 +41,16 @@ def write_with(path: str | Path, save: Callable[[Path], object]) -> None:
         save(tmp)
 
 
+def make_folder(folder: str | Path, what: str) -> Path:
+    """Make ``folder`` and its parents before the work whose results go there, so that a path
+    that cannot hold them fails first (one line naming ``what``), not after the computing."""
+    folder = Path(folder)
+    if folder.exists() and not folder.is_dir():
+        raise ValueError(f"{what} {folder}: a file, not a folder")
+    folder.mkdir(parents=True, exist_ok=True)
+    return folder
+
+
 @contextlib.contextmanager
 def atomic_path(path: str | Path, keep_suffix: bool = False) -> Iterator[Path]:
     """A fresh temporary file beside ``path`` to write into; renamed onto ``path`` when the
