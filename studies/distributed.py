@@ -35,7 +35,7 @@ from pathlib import Path
 
 import numpy as np
 
-from steplab.core.records import remove_temporary_files
+from steplab.core.records import make_folder, remove_temporary_files
 
 from .runner import Study, cache_key, finish, is_cached, run_study
 from .task_cache import TaskCache, as_json, item_key
@@ -111,8 +111,7 @@ def run_studies(studies: list[Study], out: str | Path, client, quick: bool = Fal
     from distributed import as_completed
     from tqdm import tqdm
 
-    out = Path(out)
-    out.mkdir(parents=True, exist_ok=True)
+    out = make_folder(out, "results folder")
     remove_temporary_files(out)  # what a run killed by SIGKILL left half-written
     records, runs, alone, futures, cluster = _Records(finished), [], [], {}, describe(client)
     for study in studies:

@@ -269,6 +269,17 @@ def test_sphere_box_time_of_impact_is_exact(xs, r):
         assert depth(samples[samples < s - 1e-9]).max(initial=-1) < 1e-9
 
 
+def test_a_chord_with_a_subnormal_component_enters_the_box_without_a_warning():
+    """d = 5e-324 along x: its slab's bounds are +-inf (the division overflows, as it should, silently)."""
+    import warnings
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        assert float(time_of_impact(np.array([0.0, 0.0, 3.0]), np.array([5e-324, 0.0, -3.0]), 0.5, BOX)) == \
+            pytest.approx((3.0 - 1.5) / 6.0)
+        assert float(time_of_impact(np.array([3.0, 0.0, 3.0]), np.array([3.0 + 5e-324, 0.0, -3.0]), 0.5, BOX)) == np.inf
+
+
 # --- response ------------------------------------------------------------------------------
 
 

@@ -106,7 +106,8 @@ def _slab_entry(origin, d, lo, hi):
     parallel = d == 0
     inside = (origin >= lo) & (origin <= hi)
     safe = np.where(parallel, 1.0, d)
-    t1, t2 = (lo - origin) / safe, (hi - origin) / safe
+    with np.errstate(over="ignore"):  # a subnormal d: the slab's bounds are +-inf, which the division gives
+        t1, t2 = (lo - origin) / safe, (hi - origin) / safe
     near = np.where(parallel, np.where(inside, -np.inf, np.inf), np.minimum(t1, t2))
     far = np.where(parallel, np.where(inside, np.inf, -np.inf), np.maximum(t1, t2))
     t_in, t_out = near.max(axis=-1), far.min(axis=-1)
