@@ -324,9 +324,10 @@ class _SceneBuilder:
                 not isinstance(e, list) or len(e) != 2 or any(isinstance(k, bool) or not isinstance(k, int) for k in e)
                 for e in value):
             t.fail(f"must be a list of [i, j] vertex index pairs, got {short(value)}", "edges")
+        bad = [k for e in value for k in e if not 0 <= k < n]  # in Python: an index past int64 is one line too
+        if bad:
+            t.fail(f"vertex index {bad[0]} out of range 0..{n - 1}", "edges")
         edges = np.array(value, dtype=np.int64).reshape(-1, 2)
-        if edges.size and (edges.min() < 0 or edges.max() >= n):
-            t.fail(f"vertex index out of range 0..{n - 1}", "edges")
         if np.any(edges[:, 0] == edges[:, 1]):
             t.fail("an edge joins a vertex to itself", "edges")
         return edges

@@ -431,6 +431,9 @@ HOSTILE = [
      + ", ".join(f"[{k}.0, 0.0, 0.0]" for k in range(3200)) + "]\n", [], f"more than {MAX_PAIRS} all-pairs springs"),
     (SCENE + '[[soft_bodies]]\nname = "c"\nshape = "mesh"\nmass = 1.0\nstiffness = 1.0\n'
      "vertices = [[-1e308, 0.0, 0.0], [1e308, 0.0, 0.0]]\n", [], "a spring's rest length overflows"),
+    (SCENE + '[[soft_bodies]]\nname = "c"\nshape = "mesh"\nmass = 1.0\nstiffness = 1.0\n'
+     "vertices = [[0.0, 0.0, 0.0], [1.0, 0.0, 0.0]]\nedges = [[" + "9" * 30 + ", 1]]\n", [],  # past int64
+     f"soft_bodies[0].edges: vertex index {'9' * 30} out of range 0..1"),
     (TWO + '[[forces.springs]]\nbodies = ["a", "b"]\nstiffness = 1.0\nrest_length = inf\n', [],
      "forces.springs[0].rest_length: must be finite, got inf"),
     (TWO.replace("[1.0, 0.0, 0.0]", "[1e308, 0.0, 0.0]").replace("[0.0, 0.0, 0.0]", "[-1e308, 0.0, 0.0]")
