@@ -103,6 +103,13 @@ class Model:
     def _refuse_inextensible(t, q, v):
         raise constraints.inextensible_error()
 
+    def require_forces(self) -> None:
+        """Refuse, in one line (:class:`.constraints.InextensibleSpringError`), to evaluate forces
+        where a spring is inextensible (stiffness = inf): its force would be inf * 0. Every path
+        that computes the forces or their Jacobian without ``acceleration`` calls this first."""
+        if self.inextensible:
+            raise constraints.inextensible_error()
+
     def distance_constraints(self) -> constraints.DistanceConstraints:
         """The springs as distance constraints, float64 NumPy (:mod:`.constraints`), for position-based methods.
 
@@ -166,8 +173,7 @@ class Model:
         Built from the forces' analytic Jacobians; reactive forces (ground contact) are
         held fixed, which implicit integrators tolerate as a quasi-Newton iteration.
         """
-        if self.inextensible:
-            raise constraints.inextensible_error()
+        self.require_forces()
         xp, n = self.xp, self.n_bodies
         dq = xp.zeros((n, 3, n, 3), dtype=self.dtype)
         dv = xp.zeros((n, 3, n, 3), dtype=self.dtype)
@@ -186,8 +192,7 @@ class Model:
         With ``definite``, each force's semidefinite part, which implicit Euler's conjugate
         gradients fall back to; :mod:`.sparse_jacobian` assembles them.
         """
-        if self.inextensible:
-            raise constraints.inextensible_error()
+        self.require_forces()
         blocks = (term.jacobian_blocks(self.xp, q, v, self.masses, definite) for term in self._applied)
         return [b for b in blocks if b is not None]
 

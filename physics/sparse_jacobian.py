@@ -37,7 +37,6 @@ import weakref
 import numpy as np
 from numba import njit
 
-from . import constraints
 from .jacobian_blocks import BodyJacobian as BodyJacobian
 from .jacobian_blocks import PairJacobian as PairJacobian
 from .sparse_kernels import NewtonTerms, has_kernel, pair_groups
@@ -343,8 +342,7 @@ def newton_system(model, t, q, v, h: float, definite: bool = False):
 
 def _newton_system(model, t, q, v, h, definite, compiled, with_acceleration):
     _require_numpy(model, "implicit Euler's sparse Newton matrix")
-    if model.inextensible:  # the forces of stiffness = inf springs are inf * 0: refused, as model.acceleration is
-        raise constraints.inextensible_error()
+    model.require_forces()  # stiffness = inf springs refused, as model.acceleration refuses them
     q, v = np.ascontiguousarray(q, dtype=float), np.ascontiguousarray(v, dtype=float)
     force = np.zeros_like(q) if with_acceleration and compiled else None
     blocks = [_CompiledPairs(group, q, v, definite, force) for group in (pair_groups(model) if compiled else ())]
