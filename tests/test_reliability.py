@@ -492,8 +492,9 @@ def test_interrupted_run_prints_one_line_and_writes_no_file(tmp_path):
     process = start(["run", "projectile", "--dt", "1e-6", "--save-every", "1000", "--out", str(out)])
     time.sleep(1.0)
     process.send_signal(signal.SIGINT)
-    assert process.wait(timeout=600) == 130
-    assert process.stderr.read() == b"steplab run: error: interrupted\n"
+    status, err = process.wait(timeout=600), process.stderr.read()
+    assert status == 130, err.decode(errors="replace")[-3000:]
+    assert err == b"steplab run: error: interrupted\n"
     assert not list(tmp_path.iterdir())
 
 
@@ -513,8 +514,9 @@ def test_a_ctrl_c_that_lands_in_a_garbage_collection_callback_is_not_lost(tmp_pa
     assert process.stdout.readline() == b"ready\n"  # the collection before main: let it pass
     assert process.stdout.readline() == b"ready\n"  # a collection inside main, held
     process.send_signal(signal.SIGINT)
-    assert process.wait(timeout=600) == 130
-    assert process.stderr.read() == b"steplab run: error: interrupted\n"  # the dropped one is not printed
+    status, err = process.wait(timeout=600), process.stderr.read()
+    assert status == 130, err.decode(errors="replace")[-3000:]  # what went wrong, where it did (once, under load)
+    assert err == b"steplab run: error: interrupted\n"  # the dropped one is not printed
     assert not out.exists()
 
 
