@@ -433,8 +433,8 @@ def plot(record: dict, out) -> list[str]:
             # n -> its run, in order of n (the run of 1 x 1 belongs to both sweeps)
             by_n = {row["substeps"] * row["iterations"]: row for row in small if row["system"] == system
                     and ((row["iterations"] == 1) if sub_first else (row["substeps"] == 1))}
-            ax.plot(sorted(by_n), [max(by_n[n][key], 1e-16) if by_n[n][key] is not None else np.nan
-                                   for n in sorted(by_n)], style,
+            ns = sorted(by_n)
+            ax.plot(ns, [max(by_n[n][key], 1e-16) if by_n[n][key] is not None else np.nan for n in ns], style,
                     label="n substeps x 1 iteration" if sub_first else "1 step x n iterations")
         ax.set(xscale="log", yscale="log", xlabel="n (sweeps per step: equal cost)", ylabel=label)
         low, high = ax.get_ylim()

@@ -8,7 +8,9 @@ Kvaerno5 did not finish 0.5 s of the cloth in 600 s here, implicit Euler at dt /
 only first order, and the cloth at k = 100 N/m is not stiff for an explicit 8th-order
 method: omega_max t_end ~ 240 rad, a few hundred steps. Measured, each from the record:
 
-- position error (largest over the bodies at t_end, m) and energy error (J) against dt;
+- position error (largest over the bodies at t_end, m) and energy error (J) against dt, each run
+  marked ``diverged`` where it has no finite result or its error exceeds the scene's size (its
+  ``extent``, the diagonal of the bodies' box at the start);
 - against iterations and substeps at one frame, dt = 1/60 s, which is also Macklin et al.'s
   "small steps" (SCA 2019): n substeps x 1 iteration against 1 step x n iterations;
 - the effective stiffness: the period of the cloth's lowest mode (no gravity, no dampers,

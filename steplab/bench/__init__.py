@@ -29,7 +29,7 @@ import time
 from collections.abc import Callable
 from pathlib import Path
 
-from steplab.core.records import make_folder
+from steplab.core.records import make_folder, write_json
 from steplab.core.timing import Times as Times
 from steplab.core.timing import interleaved_medians as interleaved_medians
 from steplab.core.timing import interleaved_samples as interleaved_samples
@@ -116,7 +116,8 @@ def command(args) -> int:
     if args.source is not None and args.repeat > 1:
         raise ValueError("--repeat runs the bench and --from prints a record without running: give one of them")
     log = (lambda message: print(f"[bench] {message}", file=sys.stderr, flush=True))
-    if args.source is None and args.json is not None:  # a path that cannot be written fails now, not after the runs
+    writes = args.source is None and args.json is not None
+    if writes:  # a path that cannot be written fails now, not after the runs
         if Path(args.json).is_dir():
             raise ValueError(f"--json {args.json}: a folder; give the record's file name")
         make_folder(Path(args.json).parent, "--json's folder")
@@ -130,9 +131,7 @@ def command(args) -> int:
         fair_diffrax()
         pin_threads()
         record = run_bench(QUICK if args.quick else FULL, quick=args.quick, progress=log, only=args.only)
-    if args.source is None and args.json is not None:
-        from steplab.core.records import write_json
-
+    if writes:
         write_json(args.json, record)
     if "runs" in record and "summary" in record:  # a --repeat record
         print(format_summary(record, markdown=args.markdown))
