@@ -429,21 +429,27 @@ def plot(record: dict, out) -> list[str]:
     for ax, (system, key, label) in zip(axes, (
             ("column", "error", "relative distance from rest at 2 s"),
             ("chain", "stretch", "largest relative spring stretch in 2 s"))):
+        lost = []  # each sweep's diverged runs (no value): crosses above the curves
         for sub_first, style in ((True, "o-"), (False, "s--")):
             # n -> its run, in order of n (the run of 1 x 1 belongs to both sweeps)
             by_n = {row["substeps"] * row["iterations"]: row for row in small if row["system"] == system
                     and ((row["iterations"] == 1) if sub_first else (row["substeps"] == 1))}
             ns = sorted(by_n)
-            ax.plot(ns, [max(by_n[n][key], 1e-16) if by_n[n][key] is not None else np.nan for n in ns], style,
-                    label="n substeps x 1 iteration" if sub_first else "1 step x n iterations")
+            line, = ax.plot(ns, [max(by_n[n][key], 1e-16) if by_n[n][key] is not None else np.nan for n in ns],
+                            style, label="n substeps x 1 iteration" if sub_first else "1 step x n iterations")
+            if diverged := [n for n in ns if by_n[n][key] is None]:
+                lost.append((diverged, line.get_color()))
         ax.set(xscale="log", yscale="log", xlabel="n (sweeps per step: equal cost)", ylabel=label)
         low, high = ax.get_ylim()
         if high < 10 * low:  # less than a decade: a log axis would label it 9.5 x 10^-2, 9.6 x 10^-2, ...
             ax.set_yscale("linear")
+        if lost:
+            plotting.diverged_band(ax, lost)
+            ax.plot([], [], linestyle="none", marker="x", mew=1.5, color="k", label="diverged (in the sweep's colour)")
         plotting.integer_ticks(ax, [row["substeps"] * row["iterations"] for row in small if row["system"] == system])
         ax.legend(fontsize=8)
     axes[0].set_title("Small steps: the ball column settling")
-    axes[1].set_title("Small steps: a chain on stiff springs (absent: diverged)")
+    axes[1].set_title("Small steps: a chain on stiff springs (x: diverged)")
     names += plotting.save_figure(fig, out, "contacts_small_steps")
 
     fig, (a, b) = plt.subplots(1, 2, figsize=(11, 4.2))

@@ -79,6 +79,23 @@ def integer_ticks(ax, values) -> None:
     ax.xaxis.set_minor_formatter(NullFormatter())
 
 
+def diverged_band(ax, lost: list[tuple[list, str]]) -> None:
+    """Mark runs that diverged as crosses in a band above a panel's curves (its top sixth, on a log or linear axis).
+
+    ``lost`` holds, for each method with diverged runs, (its x values, its colour); each method's crosses
+    sit at a height of their own, so none hides another's. A diverged run has no error to draw (or
+    only the blow-up's size, which would squash the other curves), yet leaving it out reads as
+    "not run": the cross says it ran and failed. Call it after the curves, which set the y range.
+    """
+    low, high = ax.get_ylim()
+    top = high * (high / low) ** 0.2 if ax.get_yscale() == "log" else high + 0.2 * (high - low)
+    ax.set_ylim(low, top)
+    ax.axhspan(high, top, color="0.93", zorder=0, lw=0)  # shaded: off the scale, not a value
+    for n, (xs, colour) in enumerate(lost):
+        ax.plot(xs, [0.94 - 0.04 * n] * len(xs), transform=ax.get_xaxis_transform(), linestyle="none",
+                marker="x", ms=8, mew=1.5, color=colour)
+
+
 def stable_dt_panel(ax, rows: list[dict], x: str, theory_label: str, slopes: dict | None = None) -> None:
     """Largest stable dt against ``x`` per integrator: measured (markers), theory (lines), 1/60 s.
 

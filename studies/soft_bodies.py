@@ -339,18 +339,13 @@ def plot(record: dict, out) -> list[str]:
     fig, axes = plt.subplots(2, 2, figsize=(12, 9.5))
     for col, (scene, part) in enumerate(record["against_dt"].items()):
         kept = [r for r in part["rows"] if not r["diverged"]]
-        lost = [(label, dts) for label, _, _ in METHODS
+        lost = [(dts, _style(label)["color"]) for label, _, _ in METHODS
                 if (dts := [r["dt"] for r in part["rows"] if r["method"] == label and r["diverged"]])]
         for row, key in enumerate(("position_error", "energy_error")):
             ax = axes[row, col]
             for label, _, _ in METHODS:
                 ax.loglog(*_series(kept, label, "dt", key), **_style(label))
-            low, high = ax.get_ylim()
-            ax.set_ylim(low, high * (high / low) ** 0.2)  # the band: the top sixth of the panel
-            # each diverging method's crosses at a height of their own (axes fraction): none hides another's
-            for n, (label, dts) in enumerate(lost):
-                ax.plot(dts, [0.94 - 0.04 * n] * len(dts), transform=ax.get_xaxis_transform(), linestyle="none",
-                        marker="x", ms=8, mew=1.5, color=_style(label)["color"])
+            plotting.diverged_band(ax, lost)
         axes[0, col].set(xlabel="dt (s)", ylabel="largest position error at t_end (m)",
                          title=f"{scene} ({part['bodies']} bodies): position error against dt\n(reference: "
                          f"DOP853, converged to {part['reference_convergence']:.1g} m; x: diverged)")

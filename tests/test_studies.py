@@ -7,7 +7,7 @@ import pytest
 from steplab.integrators import INTEGRATORS, Stepper
 from steplab.studies import runner
 from steplab.studies.lecture import lecture_check
-from steplab.studies.plotting import plt, save_figure
+from steplab.studies.plotting import diverged_band, plt, save_figure
 from steplab.studies.problems import oscillator_problem, true_final
 from steplab.studies.stability_limits import measured_limit, oscillator_mode
 from steplab.studies.truncation import error_curve, fit_order
@@ -289,3 +289,24 @@ def test_frame_rate_fixed_step_is_bit_identical_and_naive_is_not():
     assert len({r["fixed_steps"] for r in record["runs"]}) == 1
     assert record["final_state_spread"]["fixed"] == 0.0
     assert record["final_state_spread"]["naive"] > 1e-3
+
+
+@pytest.mark.parametrize("scale", ["log", "linear"])
+def test_diverged_runs_are_crosses_in_a_band_above_every_curve(scale):
+    """A diverged run is drawn as a cross in a shaded band above the curves, each method at its own
+    height, so it can neither be read as a value nor hide another method's cross."""
+    fig, ax = plt.subplots()
+    ax.plot([1, 2, 4], [1e-3, 1e-2, 1e-1])
+    ax.set_yscale(scale)
+    top_of_curves = ax.get_ylim()[1]
+    diverged_band(ax, [([1, 4], "tab:red"), ([2], "tab:blue")])
+    # the height, as a fraction of the axes, where the curves' range ends
+    band_starts = ax.transAxes.inverted().transform(ax.transData.transform((1, top_of_curves)))[1]
+    assert 0.75 < band_starts < 0.9
+    crosses = [line for line in ax.lines if line.get_marker() == "x"]
+    assert [list(line.get_xdata()) for line in crosses] == [[1, 4], [2]]
+    heights = [set(line.get_ydata()) for line in crosses]
+    assert all(len(h) == 1 and band_starts < min(h) < 1 for h in heights) and heights[0] != heights[1]
+    shaded = [p for p in ax.patches if p.get_facecolor()[:3] != (1.0, 1.0, 1.0)]
+    assert len(shaded) == 1
+    plt.close(fig)
