@@ -91,8 +91,9 @@ def diverged_band(ax, lost: list[tuple[list, str]]) -> None:
     top = high * (high / low) ** 0.2 if ax.get_yscale() == "log" else high + 0.2 * (high - low)
     ax.set_ylim(low, top)
     ax.axhspan(high, top, color="0.93", zorder=0, lw=0)  # shaded: off the scale, not a value
+    step = min(0.04, 0.1 / max(len(lost), 1))  # the heights (axes fraction) stay within the band, 0.83 to 1
     for n, (xs, colour) in enumerate(lost):
-        ax.plot(xs, [0.94 - 0.04 * n] * len(xs), transform=ax.get_xaxis_transform(), linestyle="none",
+        ax.plot(xs, [0.94 - step * n] * len(xs), transform=ax.get_xaxis_transform(), linestyle="none",
                 marker="x", ms=8, mew=1.5, color=colour)
 
 

@@ -1,4 +1,5 @@
-"""The studies' computations (not their plots): orders, stability limits, round-off, caching."""
+"""The studies' computations (not their plots, but for the marks they share): orders, stability limits, round-off,
+caching."""
 
 import json
 
@@ -291,22 +292,25 @@ def test_frame_rate_fixed_step_is_bit_identical_and_naive_is_not():
     assert record["final_state_spread"]["naive"] > 1e-3
 
 
+@pytest.mark.parametrize("methods", [2, 6])
 @pytest.mark.parametrize("scale", ["log", "linear"])
-def test_diverged_runs_are_crosses_in_a_band_above_every_curve(scale):
+def test_diverged_runs_are_crosses_in_a_band_above_every_curve(scale, methods):
     """A diverged run is drawn as a cross in a shaded band above the curves, each method at its own
     height, so it can neither be read as a value nor hide another method's cross."""
     fig, ax = plt.subplots()
     ax.plot([1, 2, 4], [1e-3, 1e-2, 1e-1])
     ax.set_yscale(scale)
     top_of_curves = ax.get_ylim()[1]
-    diverged_band(ax, [([1, 4], "tab:red"), ([2], "tab:blue")])
+    lost = [([1, 4], "tab:red"), ([2], "tab:blue"), ([1], "tab:green"), ([4], "k"), ([2, 4], "tab:pink"), ([1], "y")]
+    diverged_band(ax, lost[:methods])
     # the height, as a fraction of the axes, where the curves' range ends
     band_starts = ax.transAxes.inverted().transform(ax.transData.transform((1, top_of_curves)))[1]
     assert 0.75 < band_starts < 0.9
     crosses = [line for line in ax.lines if line.get_marker() == "x"]
-    assert [list(line.get_xdata()) for line in crosses] == [[1, 4], [2]]
+    assert [list(line.get_xdata()) for line in crosses] == [xs for xs, _ in lost[:methods]]
     heights = [set(line.get_ydata()) for line in crosses]
-    assert all(len(h) == 1 and band_starts < min(h) < 1 for h in heights) and heights[0] != heights[1]
+    assert all(len(h) == 1 and band_starts < min(h) < 1 for h in heights)
+    assert len(set.union(*heights)) == methods
     shaded = [p for p in ax.patches if p.get_facecolor()[:3] != (1.0, 1.0, 1.0)]
     assert len(shaded) == 1
     plt.close(fig)
