@@ -57,7 +57,11 @@ def test_incremental_loop_logs_the_same_collisions_as_the_full_retest(n, seed, s
     assert np.abs(times[:, 0] - times[:, 1]).max() <= 1e-9
     assert np.abs(speeds[:, 0] - speeds[:, 1]).max() <= 1e-9 * max(1.0, np.abs(speeds).max())
     assert incremental.resting_corrections == full.resting_corrections
-    assert np.abs(runs["incremental"].y - runs["full"].y).max() <= 1e-9
+    # relative to the state's size, as the speeds: the loops round differently, and each impact between
+    # balls multiplies a difference by about distance / radius (HYPOTHESIS_PROFILE=explore found 17 elastic
+    # balls at 3 m/s whose states, equal to 2e-16 after one step, were 2.2e-9 apart after 30, speeds of 8 m/s)
+    ys = runs["incremental"].y, runs["full"].y
+    assert np.abs(ys[0] - ys[1]).max() <= 1e-9 * max(1.0, np.abs(ys[1]).max())
 
 
 @pytest.mark.parametrize("event_loop", EVENT_LOOPS)
