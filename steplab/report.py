@@ -17,6 +17,7 @@ from __future__ import annotations
 import html
 import json
 import re
+from collections.abc import Callable
 from pathlib import Path
 
 from steplab import report_figures
@@ -64,12 +65,12 @@ def build(results: Path, out: Path) -> list[Path]:
     if not studies and bench is None:
         raise ReportError(f"{results}: no study results (known studies: {', '.join(STUDIES)}); "
                           f"run `steplab reproduce --out {results}` first")
-    pages = {"index.html": index_page(studies, bench)}
-    for study, record in studies:
-        pages[f"{study.name}.html"] = study_page(study, record, results, report_figures.write(study.name, record, out))
-    pages["errata.html"] = errata_page(studies)
+    # each record's own page first, so that a record the site cannot show is named (the index reads them all)
+    own = {f"{study.name}.html": _shown(results / f"{study.name}.json", lambda: study_page(
+        study, record, results, report_figures.write(study.name, record, out))) for study, record in studies}
     if bench is not None:
-        pages["bench.html"] = bench_page(bench)
+        own["bench.html"] = _shown(results / "bench.json", lambda: bench_page(bench))
+    pages = {"index.html": index_page(studies, bench)} | own | {"errata.html": errata_page(studies)}
     written = []
     for study, record in studies:
         for figure in _pngs(record):
@@ -82,6 +83,16 @@ def build(results: Path, out: Path) -> list[Path]:
     for name, markdown_text in pages.items():
         write_atomic(out / name, to_html(markdown_text, {}).encode())
     return [out / name for name in pages] + written
+
+
+def _shown(path: Path, make: Callable[[], str]) -> str:
+    """``make()``: the page of the record at ``path``. A record without what its page needs (cut short,
+    edited, or written by a steplab whose records had other fields) is refused in one line naming it."""
+    try:
+        return make()
+    except (KeyError, IndexError, TypeError, AttributeError) as err:
+        raise ReportError(f"{path}: not a record its page can be made from ({type(err).__name__}: {err}); "
+                          "run its study (or the bench) again") from None
 
 
 # --- pages (Markdown) ---------------------------------------------------------------

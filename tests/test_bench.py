@@ -238,6 +238,23 @@ def test_bench_repeat_refuses_bad_input_in_one_line(capsys, argv, message):
     assert status == 2 and len(err.splitlines()) == 1 and message in err
 
 
+@pytest.mark.parametrize(("text", "message"), [
+    ("host\n", "not JSON (Expecting value"),
+    ("[1, 2]", "not a record of `steplab bench --json`"),
+    ('{"study": "truncation", "parameters": {}}', "not a record of `steplab bench --json`"),  # a study's record
+    ('{"order": [], "seconds": {}, "ratios": {}, "targets": {}}', "without what its table needs (KeyError"),
+    ('{"runs": [], "summary": []}', "without what its table needs (KeyError"),
+])
+def test_bench_from_refuses_a_file_that_is_not_its_record_in_one_line(capsys, tmp_path, text, message):
+    path = tmp_path / "record.json"
+    path.write_text(text)
+    status = main(["bench", "--from", str(path)])
+    captured = capsys.readouterr()
+    err = captured.err.strip()
+    assert status == 2 and captured.out == "" and len(err.splitlines()) == 1
+    assert f"--from {path}: " in err and message in err
+
+
 def test_bench_refuses_a_record_path_it_cannot_write_before_it_runs(capsys, tmp_path, monkeypatch):
     """A full bench takes a quarter of an hour: a --json it could not write must fail first, in one line."""
     for name in ("pin_threads", "fair_diffrax", "run_bench"):

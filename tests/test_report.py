@@ -126,6 +126,18 @@ def test_a_missing_or_empty_results_folder_is_one_line_and_status_2(tmp_path, ca
     assert not (tmp_path / "site").exists()
 
 
+@pytest.mark.parametrize("record", [{"study": "truncation"}, {"title": "Truncation", "curves": 3}])
+def test_a_record_its_page_cannot_be_made_from_is_named_in_one_line(tmp_path, capsys, record):
+    """A study record cut short, edited, or from a steplab whose records had other fields."""
+    results = tmp_path / "results"
+    results.mkdir()
+    (results / "truncation.json").write_text(json.dumps(record))
+    status = main(["report", "--results", str(results), "--out", str(tmp_path / "site")])
+    err = capsys.readouterr().err
+    assert status == 2 and err.count("\n") == 1
+    assert f"{results / 'truncation.json'}: not a record its page can be made from" in err
+
+
 def _chromium(*args, cwd):
     browser = shutil.which("chromium") or shutil.which("chromium-browser")
     if browser is None:

@@ -109,6 +109,23 @@ def fair_diffrax() -> None:
         os.environ.setdefault("EQX_ON_ERROR", "nan")
 
 
+#: the fields ``--from`` needs: a run's record (``--json``), or ``--repeat``'s
+RECORD_FIELDS = (("order", "seconds", "ratios", "targets"), ("runs", "summary"))
+
+
+def read_record(path: Path) -> dict:
+    """The record ``steplab bench --json`` wrote to ``path`` (a run's or ``--repeat``'s), for ``--from``;
+    any other file is refused in one line that says what it is not."""
+    try:
+        record = json.loads(path.read_text())
+    except ValueError as err:  # not JSON, or not text
+        raise ValueError(f"--from {path}: not JSON ({err})") from None
+    if not (isinstance(record, dict) and any(all(k in record for k in keys) for keys in RECORD_FIELDS)):
+        raise ValueError(f"--from {path}: not a record of `steplab bench --json` (a run's has the fields "
+                         f"{', '.join(RECORD_FIELDS[0])}; --repeat's {', '.join(RECORD_FIELDS[1])})")
+    return record
+
+
 def command(args) -> int:
     """``steplab bench``: run (or, with ``--from``, re-print) the comparisons, one thread per side."""
     from .repeat import format_summary, run_repeated
@@ -122,7 +139,7 @@ def command(args) -> int:
             raise ValueError(f"--json {args.json}: a folder; give the record's file name")
         make_folder(Path(args.json).parent, "--json's folder")
     if args.source is not None:
-        record = json.loads(args.source.read_text())
+        record = read_record(args.source)
     elif args.repeat > 1:  # the parent times nothing: its runs pin themselves, as a plain run does
         record = run_repeated(args.repeat, args.quick, args.only, log)
         if record is None:  # a run failed and said why on stderr
@@ -133,8 +150,16 @@ def command(args) -> int:
         record = run_bench(QUICK if args.quick else FULL, quick=args.quick, progress=log, only=args.only)
     if writes:
         write_json(args.json, record)
-    if "runs" in record and "summary" in record:  # a --repeat record
-        print(format_summary(record, markdown=args.markdown))
-    else:
-        print(format_markdown(record) if args.markdown else format_table(record))
+    try:
+        if "runs" in record and "summary" in record:  # a --repeat record
+            text = format_summary(record, markdown=args.markdown)
+        else:
+            text = format_markdown(record) if args.markdown else format_table(record)
+    except (KeyError, IndexError, TypeError, AttributeError) as err:
+        if args.source is None:
+            raise
+        # a record cut short or edited, or written by a steplab whose records had other fields
+        raise ValueError(f"--from {args.source}: a bench record without what its table needs "
+                         f"({type(err).__name__}: {err})") from None
+    print(text)
     return 0
