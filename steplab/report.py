@@ -66,10 +66,10 @@ def build(results: Path, out: Path) -> list[Path]:
         raise ReportError(f"{results}: no study results (known studies: {', '.join(STUDIES)}); "
                           f"run `steplab reproduce --out {results}` first")
     # each record's own page first, so that a record the site cannot show is named (the index reads them all)
-    own = {f"{study.name}.html": _shown(results / f"{study.name}.json", lambda: study_page(
-        study, record, results, report_figures.write(study.name, record, out))) for study, record in studies}
+    own = {f"{study.name}.html": _shown(results / f"{study.name}.json", _study_page_with_figures,
+                                        study, record, results, out) for study, record in studies}
     if bench is not None:
-        own["bench.html"] = _shown(results / "bench.json", lambda: bench_page(bench))
+        own["bench.html"] = _shown(results / "bench.json", bench_page, bench)
     pages = {"index.html": index_page(studies, bench)} | own | {"errata.html": errata_page(studies)}
     written = []
     for study, record in studies:
@@ -85,14 +85,19 @@ def build(results: Path, out: Path) -> list[Path]:
     return [out / name for name in pages] + written
 
 
-def _shown(path: Path, make: Callable[[], str]) -> str:
-    """``make()``: the page of the record at ``path``. A record without what its page needs (cut short,
+def _shown(path: Path, make: Callable[..., str], *args) -> str:
+    """``make(*args)``: the page of the record at ``path``. A record without what its page needs (cut short,
     edited, or written by a steplab whose records had other fields) is refused in one line naming it."""
     try:
-        return make()
+        return make(*args)
     except (KeyError, IndexError, TypeError, AttributeError) as err:
         raise ReportError(f"{path}: not a record its page can be made from ({type(err).__name__}: {err}); "
                           "run its study (or the bench) again") from None
+
+
+def _study_page_with_figures(study, record: dict, results: Path, out: Path) -> str:
+    """A study's page, its interactive figures written into ``out`` first."""
+    return study_page(study, record, results, report_figures.write(study.name, record, out))
 
 
 # --- pages (Markdown) ---------------------------------------------------------------
