@@ -445,7 +445,7 @@ def plot(record: dict, out) -> list[str]:
             ax.set_yscale("linear")
         if lost:
             plotting.diverged_band(ax, lost)
-            ax.plot([], [], linestyle="none", marker="x", mew=1.5, color="k", label="diverged (in the sweep's colour)")
+            plotting.diverged_key(ax, "diverged (in the sweep's colour)")
         plotting.integer_ticks(ax, [row["substeps"] * row["iterations"] for row in small if row["system"] == system])
         ax.legend(fontsize=8)
     axes[0].set_title("Small steps: the ball column settling")

@@ -79,6 +79,10 @@ def integer_ticks(ax, values) -> None:
     ax.xaxis.set_minor_formatter(NullFormatter())
 
 
+#: a diverged run's mark, in the band and in the legend
+_CROSS = {"linestyle": "none", "marker": "x", "ms": 8, "mew": 1.5}
+
+
 def diverged_band(ax, lost: list[tuple[list, str]]) -> None:
     """Mark runs that diverged as crosses in a band above a panel's curves (its top sixth, on a log or linear axis).
 
@@ -93,8 +97,12 @@ def diverged_band(ax, lost: list[tuple[list, str]]) -> None:
     ax.axhspan(high, top, color="0.93", zorder=0, lw=0)  # shaded: off the scale, not a value
     step = min(0.04, 0.1 / max(len(lost), 1))  # the heights (axes fraction) stay within the band, 0.83 to 1
     for n, (xs, colour) in enumerate(lost):
-        ax.plot(xs, [0.94 - step * n] * len(xs), transform=ax.get_xaxis_transform(), linestyle="none",
-                marker="x", ms=8, mew=1.5, color=colour)
+        ax.plot(xs, [0.94 - step * n] * len(xs), transform=ax.get_xaxis_transform(), color=colour, **_CROSS)
+
+
+def diverged_key(ax, label: str) -> None:
+    """The legend's entry for :func:`diverged_band`'s crosses (a black one), under ``label``."""
+    ax.plot([], [], color="k", label=label, **_CROSS)
 
 
 def stable_dt_panel(ax, rows: list[dict], x: str, theory_label: str, slopes: dict | None = None) -> None:

@@ -123,10 +123,8 @@ def is_cached(study: Study, out: Path, quick: bool) -> bool:
 
 def run_study(study: Study, out: Path, quick: bool = False, force: bool = False, progress=None) -> dict:
     """Run one study into ``out`` (unless cached) and return its record."""
-    out = Path(out)
-    if out.is_dir():  # what a run killed by SIGKILL left half-written
-        remove_temporary_files(out)
-    make_folder(out, "results folder")
+    out = make_folder(out, "results folder")
+    remove_temporary_files(out)  # what a run killed by SIGKILL left half-written
     if not force and is_cached(study, out, quick):
         record = json.loads((out / f"{study.name}.json").read_text())
         record["cached"] = True

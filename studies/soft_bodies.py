@@ -353,8 +353,8 @@ def plot(record: dict, out) -> list[str]:
                          title=f"{scene}: energy error against dt (x: diverged)")
     for ax in axes.flat:
         ax.grid(True, which="both", alpha=0.3)
-    axes[0, 0].plot([], [], linestyle="none", marker="x", mew=1.5, color="k",
-                    label="diverged (in the method's colour): no finite result, or an error larger than the scene")
+    plotting.diverged_key(axes[0, 0], "diverged (in the method's colour): no finite result, or an error larger "
+                          "than the scene")
     fig.legend(*axes[0, 0].get_legend_handles_labels(), loc="lower center", ncol=4, fontsize=9)
     fig.tight_layout(rect=(0, 0.07, 1, 1))
     names += plotting.save_figure(fig, out, "soft-bodies_error")
