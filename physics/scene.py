@@ -95,6 +95,24 @@ def parse_scene(text: bytes | str, label: str = "<scene>", name: str = "scene", 
         return _SceneBuilder(label).build(data, name, collisions)
 
 
+#: the keys that describe each shape of [[soft_bodies]] (the others are common to all)
+SOFT_SHAPE_KEYS = {"box": ("size", "center"), "grid": ("rows", "cols", "spacing", "origin", "shear"),
+                   "mesh": ("vertices", "edges")}
+
+
+def _check_energy(root: Table, model: Model, y0: np.ndarray, rigid) -> None:
+    """Refuse a start whose energy overflows float64: each number of the scene is finite, but a run
+    would report its energy as inf J and the change as NaN (a mass of 1e300 kg at 1e5 m/s)."""
+    parts = {"kinetic energy, sum of m |v|^2 / 2,": model.kinetic_energy(y0[1]),
+             "potential energy of the forces": model.potential_energy(y0[0])}
+    if rigid is not None:
+        parts["rotational kinetic energy, sum of omega . I omega / 2,"] = rigid.kinetic_energy()
+    for what, value in [*parts.items(), ("mechanical energy", sum(parts.values()))]:
+        if not np.isfinite(value):
+            root.fail(f"the initial {what} is {value} J, beyond float64: masses, speeds, spins or "
+                      "forces too large (their product overflows)")
+
+
 @dataclasses.dataclass(frozen=True)
 class SceneBodies:
     """The bodies a scene declared, as the forces' ``from_scene`` reads them.
@@ -214,10 +232,12 @@ class _SceneBuilder:
         model = Model(np.array(self.masses), np.array(self.radii), self.forces,
                       pinned=np.array(self.pinned), names=self.names)
         y0 = np.stack([np.array(self.positions), np.array(self.velocities)])
+        rigid = self.rigid_bodies()
+        _check_energy(root, model, y0, rigid)
         table = root.table("collisions") if collisions else None
         collisions = self.add_collisions(table, rotation) if table is not None else None
-        return Scene(root.string("name", name), model, y0, integrator, dt, t_start, t_end,
-                     root.string("description", ""), collisions, self.rigid_bodies(), rotation,
+        return Scene(root.name("name", name), model, y0, integrator, dt, t_start, t_end,
+                     root.string("description", ""), collisions, rigid, rotation,
                      {} if settings is None else dict(settings.data))
 
     def rigid_bodies(self) -> rigid_body.RigidBodies | None:
@@ -251,7 +271,7 @@ class _SceneBuilder:
         velocity, pinned = t.vector("velocity", [0, 0, 0]), t.boolean("pinned")
         if pinned and np.any(velocity != 0):
             t.fail("a pinned body never moves, so it cannot have a velocity", "velocity")
-        name = t.string("name", REQUIRED)
+        name = t.name("name", REQUIRED)
         mass, radius = t.number("mass", REQUIRED, positive=True), t.number("radius", REQUIRED, positive=True)
         self._append(t, name, mass, radius, t.vector("position", REQUIRED), velocity, pinned)
         rotation = rigid_body.from_scene_body(t, mass, radius)
@@ -263,11 +283,15 @@ class _SceneBuilder:
                 self.half[len(self.names) - 1] = np.array([0.0, 0.0, 0.5 * t.number("length", REQUIRED)])
 
     def add_soft_body(self, t: Table):
-        t.allow("name", "shape", "size", "center", "rows", "cols", "spacing", "origin", "shear",
-                "vertices", "edges", "connect", "mass", "radius", "stiffness", "damping",
-                "velocity", "pinned", "material")
-        name = t.string("name", REQUIRED)
-        shape = t.string("shape", REQUIRED, choices=("box", "grid", "mesh"))
+        t.allow("name", "shape", *(key for keys in SOFT_SHAPE_KEYS.values() for key in keys), "connect", "mass",
+                "radius", "stiffness", "damping", "velocity", "pinned", "material")
+        name = t.name("name", REQUIRED)
+        shape = t.string("shape", REQUIRED, choices=tuple(SOFT_SHAPE_KEYS))
+        for other, keys in SOFT_SHAPE_KEYS.items():  # a key of another shape would be ignored: refused
+            for key in keys:
+                if key in t.data and other != shape:
+                    t.fail(f'belongs to a soft body of shape "{other}"; this one\'s shape is "{shape}" '
+                           f"(its keys: {', '.join(SOFT_SHAPE_KEYS[shape])})", key)
         if shape == "box":
             mesh = soft_body.box(t.vector("size", [1, 1, 1], positive=True), t.vector("center", [0, 0, 0]))
         elif shape == "grid":
@@ -334,7 +358,7 @@ class _SceneBuilder:
 
     def add_particles(self, t: Table):
         t.allow("name", "count", "seed", "mass", "radius", "box_min", "box_max", "speed", "material")
-        name, count = t.string("name", REQUIRED), t.integer("count", REQUIRED, 1, MAX_BODIES)
+        name, count = t.name("name", REQUIRED), t.integer("count", REQUIRED, 1, MAX_BODIES)
         lo, hi = t.vector("box_min", REQUIRED), t.vector("box_max", REQUIRED)
         if not np.all(hi > lo):
             t.fail("must exceed box_min in every component", "box_max")
@@ -355,7 +379,7 @@ class _SceneBuilder:
         each a rotating box of ``size``, at rest, its radius the half diagonal (the sphere
         that bounds it), its mass ``mass`` or, row by row from the bottom, ``masses``."""
         t.allow("name", "kind", "rows", "size", "mass", "masses", "gap", "base", "material")
-        name, kind = t.string("name", REQUIRED), t.string("kind", REQUIRED, choices=stacks.KINDS)
+        name, kind = t.name("name", REQUIRED), t.string("kind", REQUIRED, choices=stacks.KINDS)
         rows = t.integer("rows", REQUIRED, 1, 1000)
         size = t.vector("size", REQUIRED, positive=True)
         if ("mass" in t.data) == ("masses" in t.data):
@@ -468,12 +492,12 @@ class _SceneBuilder:
         for p in c.tables("planes"):
             p.allow("name", "normal", "offset", "material", "trigger")
             normal = p.direction("normal", REQUIRED)  # [1e200, 1e200, 0] too
-            shapes.append((p, Plane(normal, p.number("offset", 0.0), p.string("name", f"plane[{len(shapes)}]"),
+            shapes.append((p, Plane(normal, p.number("offset", 0.0), p.name("name", f"plane[{len(shapes)}]"),
                                     p.string("material", DEFAULT_MATERIAL), p.boolean("trigger"))))
         for b in c.tables("boxes"):
             b.allow("name", "center", "size", "axis", "angle", "material", "trigger")
             center, size = b.vector("center", REQUIRED), b.vector("size", REQUIRED, positive=True)
-            common = {"name": b.string("name", f"box[{len(shapes)}]"),
+            common = {"name": b.name("name", f"box[{len(shapes)}]"),
                       "material": b.string("material", DEFAULT_MATERIAL), "trigger": b.boolean("trigger")}
             angle = b.number("angle", 0.0)
             axis = b.direction("axis", [0, 0, 1])

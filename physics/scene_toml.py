@@ -125,6 +125,14 @@ class Table:
             self.fail(f"must be one of {', '.join(choices)}, got {value!r}", key)
         return value
 
+    def name(self, key="name", default=None):
+        """A name (a body's, a group's, a shape's, the scene's): a non-empty string of printable
+        characters, as the tables, logs and CSV rows that print it on one line need."""
+        value = self.string(key, default)
+        if not value or not value.isprintable():
+            self.fail(f"must be a non-empty name of printable characters, got {value!r}", key)
+        return value
+
     def boolean(self, key, default=False):
         value = self.raw(key, default)
         if not isinstance(value, bool):

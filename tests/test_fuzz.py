@@ -119,7 +119,7 @@ def valid_scenes(draw) -> dict:
         sim["t_start"] = t_start
     doc = {"simulation": sim}
     if draw(st.booleans()):
-        doc["name"] = draw(st.text(max_size=10))
+        doc["name"] = draw(st.text(min_size=1, max_size=10).filter(str.isprintable))  # a name prints on one line
     names = draw(st.lists(body_name, min_size=1, max_size=4, unique=True))
     bodies = []
     for name in names:

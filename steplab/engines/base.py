@@ -138,6 +138,10 @@ def scene_parts(model, collisions, engine: str, forces=(Gravity, Springs, Damper
                 if entry[1] is not None:
                     raise UnsupportedFeatureError(f"two springs on one pair of bodies ({model.names[i]}, "
                                                   f"{model.names[j]}): {engine} gets one spring-damper per pair")
+                if not np.isfinite(k):
+                    raise UnsupportedFeatureError(f"the inextensible spring (stiffness = inf) between "
+                                                  f"{model.names[i]} and {model.names[j]}: {engine} gets springs "
+                                                  "of finite stiffness (the position-based integrators take it)")
                 entry[0], entry[1] = float(k), float(rest)
         else:
             for i, j, c in zip(force.i, force.j, force.damping):
@@ -238,6 +242,10 @@ def rigid_shapes(model, bodies: RigidBodies | None, collisions=None) -> tuple[Ri
             half = np.array([r, r, 0.5 * length])
         else:
             half = np.full(3, r)
+        if not np.all(np.isfinite(half)):
+            raise UnsupportedFeatureError(f"body {model.names[i]!r}: the {shape} of mass {m:g} kg with moments "
+                                          f"{inertia.tolist()} kg m^2 has edges beyond float64 (the engines get "
+                                          "its extents from its moments)")
         out.append(RigidShape(int(i), shape, m, inertia, np.maximum(half, SMALLEST_EXTENT)))
     return tuple(out)
 

@@ -1,0 +1,100 @@
+"""Scenes whose every number is finite but which no run or export can represent: one line, status 2.
+
+Found by probing the command line with hostile scenes: each of these ran (or exported) and printed
+inf or NaN with status 0, or silently ignored a key.
+"""
+
+from __future__ import annotations
+
+import pytest
+from steplab.physics.scene import SceneError, parse_scene
+from steplab.physics.scene_library import SCENES
+
+from steplab.cli import main
+
+POINT = """
+[simulation]
+dt = 0.01
+t_end = 0.1
+[[bodies]]
+name = "b"
+mass = {mass}
+radius = 0.1
+position = [0, 0, 0]
+velocity = [{speed}, 0, 0]
+"""
+
+
+def one_line_status_2(capsys, argv) -> str:
+    status = main(argv)
+    err = capsys.readouterr().err
+    assert status == 2, err
+    assert err.count("\n") == 1 and "Traceback" not in err
+    return err
+
+
+def dzhanibekov(replace: dict) -> str:
+    text = SCENES["dzhanibekov"].read_text()
+    for old, new in replace.items():
+        assert old in text
+        text = text.replace(old, new)
+    return text
+
+
+def test_a_start_whose_kinetic_energy_overflows_is_refused(capsys, tmp_path):
+    # 1/2 1e300 kg (1e5 m/s)^2 = 5e309 J: past float64, though mass and speed are finite
+    path = tmp_path / "k.toml"
+    path.write_text(POINT.format(mass=1e300, speed=1e5))
+    err = one_line_status_2(capsys, ["run", str(path)])
+    assert "the initial kinetic energy, sum of m |v|^2 / 2, is inf J" in err
+    # just inside float64 the same body runs
+    path.write_text(POINT.format(mass=1e300, speed=1.0))
+    assert main(["run", str(path)]) == 0
+
+
+def test_a_spin_whose_energy_overflows_is_refused():
+    with pytest.raises(SceneError, match=r"the initial rotational kinetic energy, .* is inf J"):
+        parse_scene(dzhanibekov({"angular_velocity = [0.05, 6.283185307179586, 0.05]":
+                                 "angular_velocity = [1e200, 0, 0]"}))
+    assert parse_scene(dzhanibekov({"angular_velocity = [0.05, 6.283185307179586, 0.05]":
+                                    "angular_velocity = [1e150, 0, 0]"})).rigid_bodies.kinetic_energy() < 1e300
+
+
+@pytest.mark.parametrize("shape,key,value", [
+    ("mesh", "center", "[9, 9, 9]"),       # a box's key: the mesh would not move
+    ("box", "vertices", "[[0, 0, 0], [1, 0, 0]]"),
+    ("box", "rows", "3"),
+    ("grid", "size", "[1, 1, 1]"),
+])
+def test_a_soft_body_key_of_another_shape_is_refused(shape, key, value):
+    described = {"box": "", "grid": "rows = 2\ncols = 2\nspacing = 0.1\n",
+                 "mesh": "vertices = [[0, 0, 0], [1, 0, 0]]\n"}[shape]
+    text = (f'[simulation]\ndt = 0.01\nt_end = 0.1\n[[soft_bodies]]\nname = "s"\nshape = "{shape}"\n'
+            f"{described}mass = 1.0\nstiffness = 10.0\n")
+    assert parse_scene(text).model.n_bodies > 0  # the shape's own keys are fine
+    with pytest.raises(SceneError, match=rf'soft_bodies\[0\]\.{key}: belongs to a soft body of shape "\w+"; '
+                                         rf'this one\'s shape is "{shape}"'):
+        parse_scene(text + f"{key} = {value}\n")
+
+
+@pytest.mark.parametrize("name", ['""', '"a\\nb"', '"tab\\there"'])
+def test_a_body_name_must_print_on_one_line(name):
+    with pytest.raises(SceneError, match="bodies\\[0\\].name: must be a non-empty name of printable characters"):
+        parse_scene(POINT.format(mass=1.0, speed=0.0).replace('"b"', name))
+    assert parse_scene(POINT.format(mass=1.0, speed=0.0).replace('"b"', '"球 ball-2"')).model.names == ("球 ball-2",)
+
+
+def test_an_inextensible_spring_is_not_exported_to_mujoco(capsys, tmp_path):
+    path = tmp_path / "c.toml"
+    path.write_text(SCENES["cloth"].read_text().replace("stiffness = 100.0", "stiffness = inf"))
+    err = one_line_status_2(capsys, ["export", str(path), "--to", "mjcf"])
+    assert "the inextensible spring (stiffness = inf)" in err and "MuJoCo gets springs of finite stiffness" in err
+
+
+def test_a_box_whose_moments_give_no_finite_edges_is_not_exported(capsys, tmp_path):
+    # without collisions the engines take a box's edges from its moments: 1e307 kg m^2 on 0.2 kg overflows
+    path = tmp_path / "d.toml"
+    path.write_text(dzhanibekov({"size = [0.3, 0.2, 0.1]": "size = [0.3, 0.2, 0.1]\ninertia = [1e307, 1e307, 1e307]",
+                                 "angular_velocity = [0.05, 6.283185307179586, 0.05]": "angular_velocity = [0, 0, 0]"}))
+    err = one_line_status_2(capsys, ["export", str(path), "--to", "mjcf"])
+    assert "has edges beyond float64" in err
