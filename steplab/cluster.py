@@ -68,3 +68,6 @@ def _probe(address: str) -> None:
     except (OSError, ValueError, TypeError) as err:
         raise ClusterError(f"cannot reach a Dask scheduler at {address!r}: {err} "
                            "(start one with `dask scheduler`, workers with `dask worker ADDRESS`)") from None
+    except Exception:  # something else answered (a web server): Dask read its bytes as a message's lengths
+        raise ClusterError(f"what answers at {address!r} is not a Dask scheduler (its reply is not Dask's "
+                           "protocol; start one with `dask scheduler`)") from None

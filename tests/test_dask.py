@@ -137,3 +137,29 @@ def test_bad_scheduler_address_is_one_line_and_status_2(address, capsys, monkeyp
     with pytest.raises(SystemExit) as exit_:
         main(["reproduce", "--workers", "0"])
     assert exit_.value.code == 2 and len(capsys.readouterr().err.splitlines()) == 1
+
+
+@pytest.mark.parametrize("reply", [b"HTTP/1.1 400 Bad Request\r\n\r\n", b"\x01" + bytes(7) + b"\x02"])
+def test_a_server_that_is_not_dask_is_named_in_one_line(reply, capsys, monkeypatch, tmp_path):
+    # a web server where the scheduler was expected: Dask reads "HTTP/1.1" as a message of 3 EiB and
+    # asks NumPy for it (a MemoryError, which reached the user as "out of memory"); a reply shorter
+    # than a length, a struct.error traceback
+    import socket
+
+    server = socket.create_server(("127.0.0.1", 0))
+    port = server.getsockname()[1]
+
+    def answer():
+        with server:
+            connection, _ = server.accept()
+            with connection:
+                connection.sendall(reply)
+                connection.recv(1024)
+
+    threading.Thread(target=answer, daemon=True).start()
+    monkeypatch.setattr(clusters, "CONNECT_TIMEOUT_S", 5.0)
+    address = f"tcp://127.0.0.1:{port}"
+    status = main(["study", "frame_rate", "--quick", "--out", str(tmp_path), "--scheduler", address])
+    out, err = capsys.readouterr()
+    assert status == 2 and out == "" and len(err.splitlines()) == 1
+    assert f"what answers at {address!r} is not a Dask scheduler" in err
