@@ -17,12 +17,34 @@ Two kinds share one driver (:func:`integrators.simulate`):
 from __future__ import annotations
 
 import dataclasses
+import math
 from collections.abc import Callable
 from typing import ClassVar
 
 import numpy as np
 
 from . import linear_stability
+
+
+def check_count(method: str, key: str, value, maximum: int, limit: str) -> None:
+    """Refuse (one-line ValueError) a setting ``key`` of ``method`` that is not a whole number
+    from 1 to ``maximum`` (named ``limit``, the module constant that holds it)."""
+    if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < 1:
+        raise ValueError(f"{method}: {key} must be a whole number >= 1, got {value!r}")
+    if value > maximum:
+        raise ValueError(f"{method}: {key} must be a whole number from 1 to {maximum:,} ({limit}), got {value!r}")
+
+
+def check_real(method: str, key: str, value, ok: Callable[[float], bool], allowed: str) -> None:
+    """Refuse (one-line ValueError) a setting ``key`` of ``method`` that is not a finite real number
+    (an int or float, not a bool or a string) for which ``ok(value)`` holds; ``allowed`` says which, in words."""
+    real = not isinstance(value, bool) and isinstance(value, (int, float, np.integer, np.floating))
+    try:
+        real = real and math.isfinite(float(value)) and bool(ok(float(value)))
+    except OverflowError:  # an int too large for a float
+        real = False
+    if not real:
+        raise ValueError(f"{method}: {key} must be {allowed}, got {value!r}")
 
 
 @dataclasses.dataclass(frozen=True)

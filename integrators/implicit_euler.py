@@ -9,10 +9,10 @@ from typing import NamedTuple
 
 import numpy as np
 
-from .base import Stepper
+from .base import Stepper, check_count, check_real
 
 #: Newton iterations before a step is declared failed (its state becomes NaN, so the
-#: driver's divergence check reports the step)
+#: driver's divergence check reports the step); also the most ``newton_iterations`` may ask for
 MAX_NEWTON_ITERATIONS = 50
 #: ``linear_solver="auto"`` solves Newton's system densely up to this many bodies and by
 #: conjugate gradients above. The dense solve costs N^3 (a step of the bench's cloth at
@@ -77,18 +77,19 @@ class ImplicitEuler(Stepper):
     Parameters
     ----------
     rtol : float, optional
-        Newton stops when the update (dense) or its error estimate (cg) is below
+        In (0, 1). Newton stops when the update (dense) or its error estimate (cg) is below
         ``rtol (1 + |v1|)`` (max norm). Default: the square root of the machine epsilon of
         the state's precision; Newton's quadratic convergence leaves the dense iterate far
         more accurate than that.
     linear_solver : {"auto", "dense", "cg"}
         ``"auto"`` (default): dense up to DENSE_MAX_BODIES bodies (and always on JAX), CG above.
     cg_rtol : float, optional
-        Relative residual |b - A x| / |b| each CG solve stops at. Default:
+        Relative residual |b - A x| / |b| each CG solve stops at, in (0, 1). Default:
         ``conjugate_gradients.CG_RTOL``, looked up when a CG step runs (so that listing
         the integrators imports neither the compiled solver nor Numba).
     newton_iterations : int, optional
-        Take exactly this many Newton iterations instead of iterating to ``rtol``: 1 is
+        Take exactly this many Newton iterations (1 to :data:`MAX_NEWTON_ITERATIONS`) instead of
+        iterating to ``rtol``: 1 is
         Baraff and Witkin's linearised step (linearised at the predicted position q + dt v),
         first order too, with a step error of the linearisation's, O(dt^2) per step.
     """
@@ -110,12 +111,13 @@ class ImplicitEuler(Stepper):
         if self.linear_solver not in LINEAR_SOLVERS:
             raise ValueError(f"implicit-euler: linear_solver must be one of {', '.join(LINEAR_SOLVERS)}, "
                              f"got {self.linear_solver!r}")
-        if self.cg_rtol is not None and not 0 < self.cg_rtol < 1:
-            raise ValueError(f"implicit-euler: cg_rtol must be in (0, 1), got {self.cg_rtol!r}")
-        if self.newton_iterations is not None and not (isinstance(self.newton_iterations, int)
-                                                        and self.newton_iterations >= 1):
-            raise ValueError(f"implicit-euler: newton_iterations must be a positive integer or None, "
-                             f"got {self.newton_iterations!r}")
+        for key in ("rtol", "cg_rtol"):
+            value = getattr(self, key)
+            if value is not None:
+                check_real(self.name, key, value, lambda x: 0 < x < 1, "a number in (0, 1), or None for the default")
+        if self.newton_iterations is not None:
+            check_count(self.name, "newton_iterations", self.newton_iterations, MAX_NEWTON_ITERATIONS,
+                        "steplab.integrators.implicit_euler.MAX_NEWTON_ITERATIONS, the most a step iterates to rtol")
 
     def stability_function(self, z):
         """R(z) = 1 / (1 - z): v1 = v + dt a(v1) on y' = lambda y gives y1 = y / (1 - lambda dt)."""

@@ -25,11 +25,21 @@ from typing import ClassVar, NamedTuple
 import numpy as np
 
 from . import linear_stability
-from .base import Integrator
+from .base import Integrator, check_count
 
 #: displacement and velocity of the linear map's basis states, m, m/s: along the spring's axis
 #: C = x - l_rest is exactly linear, so any size that keeps x > 0 gives the map to round-off
 LINEAR_AMPLITUDE = 0.25
+#: the most substeps a step of pbd, xpbd or vbd takes, and the most iterations (sweeps over the
+#: constraints) a substep takes: settings above them are refused in one line. Real use is 1 to a few
+#: hundred of each (Macklin et al.'s small steps: tens of substeps of one iteration; vbd's tests: 400
+#: iterations); 10^4 is far above that and still a bounded step, where 10^11 never ends
+MAX_SUBSTEPS = 10_000
+MAX_ITERATIONS = 10_000
+#: the most sweeps, substeps x iterations, a step takes: a sweep over the 1,000 springs of the
+#: built-in cloth takes about 3 us, so a step at this bound takes about 0.3 s there (10^4 x 10^4
+#: would take five minutes a step)
+MAX_SWEEPS = 100_000
 
 
 class SweepCarry(NamedTuple):
@@ -80,9 +90,10 @@ class PositionBased(Integrator):
     Parameters
     ----------
     substeps : int
-        Substeps of h = dt / substeps per step, >= 1.
+        Substeps of h = dt / substeps per step, 1 to :data:`MAX_SUBSTEPS`.
     iterations : int
-        Gauss-Seidel sweeps over the constraints per substep, >= 1.
+        Gauss-Seidel sweeps over the constraints per substep, 1 to :data:`MAX_ITERATIONS`;
+        substeps x iterations at most :data:`MAX_SWEEPS`.
     """
 
     substeps: int = 1
@@ -103,10 +114,13 @@ class PositionBased(Integrator):
         return self.substeps * self.iterations
 
     def __post_init__(self):
-        for key in ("substeps", "iterations"):
-            value = getattr(self, key)
-            if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < 1:
-                raise ValueError(f"{self.name}: {key} must be a whole number >= 1, got {value!r}")
+        where = "steplab.integrators.position_based"
+        check_count(self.name, "substeps", self.substeps, MAX_SUBSTEPS, f"{where}.MAX_SUBSTEPS")
+        check_count(self.name, "iterations", self.iterations, MAX_ITERATIONS, f"{where}.MAX_ITERATIONS")
+        if self.substeps * self.iterations > MAX_SWEEPS:
+            raise ValueError(f"{self.name}: substeps x iterations must be at most {MAX_SWEEPS:,} sweeps a step "
+                             f"({where}.MAX_SWEEPS), got {self.substeps:,} x {self.iterations:,} = "
+                             f"{self.substeps * self.iterations:,}")
 
     def constraints(self, model):
         """The model's springs as constraints, its external accelerations (N, 3) and inverse masses (N,)

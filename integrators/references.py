@@ -12,10 +12,18 @@ from typing import NamedTuple
 
 import numpy as np
 
-from .base import Solver
+from .base import Solver, check_real
 
 #: step budget of one reference solve; exceeding it is reported, never truncated silently
 MAX_REFERENCE_STEPS = 1_000_000
+#: the smallest rtol a reference takes: scipy's solve_ivp raises any rtol below 100 x the float64
+#: machine epsilon to it (with a warning), so a tighter one would not be the tolerance recorded
+MIN_RTOL = 100 * float(np.finfo(float).eps)
+#: the smallest atol a reference takes. atol = 0 makes scipy's error scale atol + rtol |y| zero on
+#: a coordinate that is zero (a pinned body, a planar scene), and its first step 0 / 0 = NaN, a
+#: solve that never ends; a subnormal atol overflows y / atol to inf the same way. 1e-100 leaves
+#: y / atol finite for any |y| < 1e200
+MIN_ATOL = 1e-100
 
 
 class ReferenceFailedError(RuntimeError):
@@ -113,6 +121,8 @@ def solve_adaptive(vector_field, ts, y0, method: str, rtol, atol, *, at_saved_ti
     kwargs = {} if jacobian is None else {"jac": jacobian}
     sol = solve_ivp(fun, (ts[0], ts[-1]), y0.ravel(), method=solver, t_eval=ts if at_saved_times else None,
                     rtol=rtol, atol=atol, **kwargs)
+    if not sol.success and isinstance(sol.y, list):  # stopped before the first saved time: solve_ivp leaves []
+        return AdaptiveSolution(np.empty((0,) + shape), None, int(sol.nfev), False, sol.message)
     ys = sol.y.T.reshape((-1,) + shape)
     return AdaptiveSolution(ys if at_saved_times else ys[-1:], None if at_saved_times else int(sol.t.size - 1),
                             int(sol.nfev), bool(sol.success), sol.message)
@@ -120,12 +130,28 @@ def solve_adaptive(vector_field, ts, y0, method: str, rtol, atol, *, at_saved_ti
 
 @dataclasses.dataclass(frozen=True)
 class AdaptiveReference(Solver):
-    """An adaptive reference solve (:func:`solve_adaptive`) under the registry name ``name``."""
+    """An adaptive reference solve (:func:`solve_adaptive`) under the registry name ``name``.
+
+    Parameters
+    ----------
+    rtol : float
+        Relative tolerance, in [:data:`MIN_RTOL`, 1).
+    atol : float
+        Absolute tolerance, finite and >= :data:`MIN_ATOL`.
+    """
 
     rtol: float = 1e-12
     atol: float = 1e-12
 
     evaluations = None
+
+    def __post_init__(self):
+        check_real(self.name, "rtol", self.rtol, lambda x: MIN_RTOL <= x < 1,
+                   f"a number in [{MIN_RTOL:.3g}, 1) (the low end is scipy's 100 x machine epsilon, "
+                   "steplab.integrators.references.MIN_RTOL)")
+        check_real(self.name, "atol", self.atol, lambda x: x >= MIN_ATOL,
+                   f"a finite number >= {MIN_ATOL:g} (steplab.integrators.references.MIN_ATOL; 0 stalls the "
+                   "solver on a coordinate that stays 0)")
 
     def solve(self, model, ts, y0):
         if self.backend == "jax":

@@ -23,7 +23,7 @@ from typing import ClassVar
 
 from steplab.core.registry import PluginError, Registry
 
-from .solver_settings import CORRECTIONS, ContactSolver, is_thread_count, threads_allowed
+from .solver_settings import CORRECTIONS, MAX_SWEEPS, ContactSolver, is_thread_count, sweeps_refusal, threads_allowed
 
 
 class CollisionMethod:
@@ -85,9 +85,12 @@ class ContactSolverMethod(CollisionMethod):
         threads = table.raw("threads", d.threads)
         if not is_thread_count(threads):
             table.fail(f"must be {threads_allowed()}, got {threads!r}", "threads")
+        iterations = table.integer("iterations", d.iterations, 1, MAX_SWEEPS)
+        substeps = table.integer("substeps", d.substeps, 1, MAX_SWEEPS)
+        if iterations * substeps > MAX_SWEEPS:
+            table.fail(sweeps_refusal(iterations, substeps).removeprefix("contact solver: "), "iterations")
         return {"solver": ContactSolver(
-            iterations=table.integer("iterations", d.iterations, 1, 10**6),
-            substeps=table.integer("substeps", d.substeps, 1, 10**6),
+            iterations=iterations, substeps=substeps,
             correction=table.string("correction", d.correction, choices=CORRECTIONS),
             contact_hertz=table.number("contact_hertz", d.contact_hertz, positive=True),
             damping_ratio=table.number("damping_ratio", d.damping_ratio, nonnegative=True),

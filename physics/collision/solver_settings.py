@@ -38,6 +38,11 @@ import numba
 
 #: position corrections, the default first
 CORRECTIONS = ("soft", "baumgarte", "none")
+#: the most sweeps over the contacts a step takes, substeps x iterations (each setting alone is
+#: then at most this too): the studies use up to 100 x 16; a sweep of the built-in box column
+#: takes about 8 us, so a step at this bound takes about a second there, where 10^6 x 10^6
+#: would never end
+MAX_SWEEPS = 100_000
 
 
 def is_thread_count(value) -> bool:
@@ -51,6 +56,13 @@ def threads_allowed() -> str:
             "machine, NUMBA_NUM_THREADS)")
 
 
+def sweeps_refusal(iterations: int, substeps: int) -> str:
+    """Why ``iterations`` x ``substeps`` over :data:`MAX_SWEEPS` is refused, in one line."""
+    return (f"contact solver: iterations x substeps must be at most {MAX_SWEEPS:,} sweeps a step "
+            f"(steplab.physics.collision.solver_settings.MAX_SWEEPS), got {iterations:,} x {substeps:,} = "
+            f"{iterations * substeps:,}")
+
+
 @dataclasses.dataclass(frozen=True)
 class ContactSolver:
     """Settings of the contact solver (``[collisions.solver]`` in a scene file).
@@ -62,7 +74,8 @@ class ContactSolver:
         relaxation, and sweeps of the restitution pass at the end of the step (>= 1).
     substeps : int
         Substeps per step (>= 1): forces, contacts and positions are integrated with
-        h = dt / substeps; the contacts are found once per step.
+        h = dt / substeps; the contacts are found once per step. ``substeps x iterations``
+        is at most :data:`MAX_SWEEPS`.
     correction : str
         One of :data:`CORRECTIONS`.
     contact_hertz : float
@@ -110,6 +123,8 @@ class ContactSolver:
             value = getattr(self, name)
             if isinstance(value, bool) or not isinstance(value, int) or value < 1:
                 raise ValueError(f"contact solver: {name} must be an integer >= 1, got {value!r}")
+        if self.iterations * self.substeps > MAX_SWEEPS:
+            raise ValueError(sweeps_refusal(self.iterations, self.substeps))
         if not is_thread_count(self.threads):
             raise ValueError(f"contact solver: threads must be {threads_allowed()}, got {self.threads!r}")
         if self.correction not in CORRECTIONS:
