@@ -19,6 +19,18 @@ from .work_precision import adaptive_point, fixed_step_point
 DT_FLOOR_FRACTION = 2.0**-20
 
 
+def check_dt_max(span: float, dt_max: float | None) -> None:
+    """ValueError, one line, for a ``dt_max`` that leaves no dt to measure: below twice the smallest
+    dt recommend considers (span x DT_FLOOR_FRACTION, the run in 2^20 steps), as a dt is accepted
+    only with its check at dt/2; a step count that overflows a float's (dt_max = 1e-320) among them."""
+    smallest = 2 * span * DT_FLOOR_FRACTION
+    if dt_max is not None and not span / dt_max * (1 - 1e-12) <= span / smallest:
+        shown = next(v for v in (float(f"{smallest * (1 + k * 1e-3):.3g}") for k in range(11)) if v >= smallest)
+        raise ValueError(f"--dt-max {dt_max:g} s is below the smallest recommend measures, {shown:g} s (a dt "
+                         f"and its check at dt/2 within the run of {span:g} s in {round(1 / DT_FLOOR_FRACTION)} "
+                         f"steps); pass --dt-max {shown:g} or more")
+
+
 class NoFixedStepError(RuntimeError):
     """Neither a fixed-step method above the dt floor nor the adaptive reference meets the tolerance."""
 
@@ -36,8 +48,9 @@ def recommend(problem: Problem, tol: float, *, dt_max: float | None = None, inte
     """
     import jax.numpy as jnp
 
-    truth, _ = true_final(problem)
     span = problem.t_end - problem.t_start
+    check_dt_max(span, dt_max)  # before the reference solve
+    truth, _ = true_final(problem)
     most = round(1 / DT_FLOOR_FRACTION)
     # the first dt: a quarter of the run, or the largest whole division not above dt_max
     first = 4 if dt_max is None else max(4, int(np.ceil(span / dt_max * (1 - 1e-12))))

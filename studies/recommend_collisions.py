@@ -35,7 +35,7 @@ from steplab.physics.collision import ImpactCapError, Sphere, collide
 
 from steplab.core.timing import median_time
 
-from .recommend import NoFixedStepError
+from .recommend import NoFixedStepError, check_dt_max
 
 #: the reference's first dt is at most the finer of the scene's dt and --dt-max divided by
 #: this (then halved, and checked): a fixed-step method's error falls at least as dt, so
@@ -56,6 +56,9 @@ ENERGY_RTOL = 0.02
 IMPACT_RTOL = 0.1
 #: wall-time repeats of the recommended run (median)
 TIMING_REPEATS = 3
+#: the most steps of a reference run (the NumPy event loop: a minute or so for a few bodies); a finer
+#: reference, from a small --dt-max or a long run, is refused in one line before any run
+REFERENCE_MAX_STEPS = 2**20
 #: the finest candidate dt, in reference dts: a candidate at the reference's dt is the
 #: reference, and its check at dt/2 needs one more
 FINEST_CANDIDATE = 2
@@ -117,20 +120,35 @@ def recommend_with_collisions(problem: CollisionProblem, tol: float, *, scene_dt
     model, world = problem.model, problem.world
     span = problem.t_end - problem.t_start
     dt_max = span / 4 if dt_max is None else dt_max
+    check_dt_max(span, dt_max)  # also a count too large for a float (dt_max = 1e-320)
     coarsest = max(1, math.ceil(span / dt_max * (1 - 1e-12)))  # steps of the largest candidate dt
-    names = list(integrators) if integrators is not None else [
-        n for n, m in INTEGRATORS.items() if isinstance(m, Stepper)]
+    only = solver_integrator(world)
+    if only is None:
+        names = list(integrators) if integrators is not None else [
+            n for n, m in INTEGRATORS.items() if isinstance(m, Stepper)]
+    else:  # the contact solver steps with one integrator: the candidates and the reference are it
+        other = next((n for n in integrators or () if get_integrator(n).name != only), None)
+        if other is not None:
+            raise ValueError(f"--integrators: this scene's collisions are the contact solver ([collisions] method "
+                             f"= \"solver\"), which steps with {only} only (velocities, contacts, then positions, "
+                             f"per substep), not {other}; give --integrators {only}, or leave it out")
+        names = [only]
     # the reference: its step count is the coarsest count times a power of two, so every
     # candidate's step times are among its step times; at least 4 times the coarsest, so
     # the coarsest candidate and its check at dt/2 are both coarser than the reference
     target = min(scene_dt, dt_max) / REFERENCE_REFINEMENT
     halvings = max(2, math.ceil(math.log2(span / (coarsest * target))))
+    if 2 * coarsest * 2**halvings > REFERENCE_MAX_STEPS:  # its first run and its check at dt/2
+        raise ValueError(f"the reference run at dt = {span / (2 * coarsest * 2**halvings):.3g} s (the smaller of "
+                         f"--dt-max and the scene's dt, halved twice) takes {2 * coarsest * 2**halvings} steps, "
+                         f"more than recommend's limit of {REFERENCE_MAX_STEPS} with collisions: pass a larger "
+                         "--dt-max or an earlier --t-end")
     from tqdm import tqdm
 
     # one tick for the reference, one per candidate method; shown after a second
     bar = tqdm(total=len(names) + 1, desc="recommend: reference", unit="method", disable=not progress,
                leave=False, delay=1.0)
-    reference = _reference(problem, tol, coarsest * 2**halvings)
+    reference = _reference(problem, tol, coarsest * 2**halvings, only or _reference_method())
     bar.update()
     ref_run, ref_energy, ref_steps = reference.pop("run"), reference.pop("energies"), reference["steps"]
     regime = "trajectories" if reference["converged"] else "statistics"
@@ -196,13 +214,13 @@ def _run(problem: CollisionProblem, method, n):
                     collisions=problem.world)
 
 
-def _reference(problem: CollisionProblem, tol, n) -> dict:
-    """Reference runs at n, 2n, ... steps until two agree to tol / REFERENCE_MARGIN (REFERENCE_RUNS at most)."""
+def _reference(problem: CollisionProblem, tol, n, method: str) -> dict:
+    """Reference runs of ``method`` at n, 2n, ... steps until two agree to tol / REFERENCE_MARGIN (REFERENCE_RUNS
+    at most, none beyond REFERENCE_MAX_STEPS)."""
     model, span = problem.model, problem.t_end - problem.t_start
-    method = _reference_method()
     runs = [_run(problem, method, n), _run(problem, method, 2 * n)]
     differences = [_difference(runs[-2], runs[-1])]
-    while len(runs) < REFERENCE_RUNS and differences[-1] > tol / REFERENCE_MARGIN:
+    while len(runs) < REFERENCE_RUNS and differences[-1] > tol / REFERENCE_MARGIN and 4 * n <= REFERENCE_MAX_STEPS:
         n *= 2
         runs.append(_run(problem, method, 2 * n))
         differences.append(_difference(runs[-2], runs[-1]))
@@ -214,6 +232,16 @@ def _reference(problem: CollisionProblem, tol, n) -> dict:
             "convergence": differences[-1], "converged": differences[-1] <= tol,
             "energy_convergence": float(np.max(np.abs(energy_fine[::2] - _energies(model, coarse.y)))) / scale,
             "run": fine, "energies": energy_fine}
+
+
+def solver_integrator(world) -> str | None:
+    """The one integrator ``world``'s collision method steps with (the contact solver's, semi-implicit Euler),
+    or None where any fixed-step method runs with it (the event loop)."""
+    if world.method != "solver":
+        return None
+    from steplab.physics.collision.solver_step import INTEGRATOR
+
+    return INTEGRATOR
 
 
 def _reference_method() -> str:

@@ -23,6 +23,7 @@ minimums settle.
 from __future__ import annotations
 
 import json
+import math
 import os
 import sys
 import time
@@ -123,7 +124,27 @@ def read_record(path: Path) -> dict:
     if not (isinstance(record, dict) and any(all(k in record for k in keys) for keys in RECORD_FIELDS)):
         raise ValueError(f"--from {path}: not a record of `steplab bench --json` (a run's has the fields "
                          f"{', '.join(RECORD_FIELDS[0])}; --repeat's {', '.join(RECORD_FIELDS[1])})")
+    for key, value in _ratios(record):
+        if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
+            raise ValueError(f"--from {path}: {key} is {json.dumps(value)}, not a finite number (a ratio: "
+                             "steplab's median seconds over the peer's)")
     return record
+
+
+def _ratios(node, key: str = "", ratios: bool = False):
+    """``(key, value)`` of every ratio in a bench record, keys dotted from the top: each value of a
+    ``ratios`` table or list (``ratios.<name>``, --repeat's ``summary[0].ratios[2]``), each ``ratio``,
+    each ``ratio_*`` but ``ratio_stable`` that is not null (``ratio_cpu`` is null where a side kept no
+    CPU seconds), and --repeat's ``summary[i]`` min, median and max."""
+    items = node.items() if isinstance(node, dict) else enumerate(node) if isinstance(node, list) else ()
+    for name, value in items:
+        here = f"{key}[{name}]" if isinstance(name, int) else f"{key}.{name}" if key else name
+        if isinstance(value, (dict, list)):
+            yield from _ratios(value, here, ratios=name == "ratios")
+        elif ratios or name == "ratio" or (key.startswith("summary[") and name in ("min", "median", "max")):
+            yield here, value
+        elif isinstance(name, str) and name.startswith("ratio_") and name != "ratio_stable" and value is not None:
+            yield here, value
 
 
 def command(args) -> int:

@@ -4,11 +4,18 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from .args import DETECTORS, count, scene_argument, time_arguments, time_span
+from .args import DETECTORS, count, run_steps, scene_argument, time_arguments, time_span
+
+#: the most steps of dt one panel's run may take (an animation draws at most steplab.animate.MAX_FRAMES
+#: = 150 frames of it: 100,000 steps are already some 670 steps a frame); a longer run is refused, one line
+MAX_STEPS = 100_000
 
 
 def add_parser(sub, name: str) -> None:
-    p = sub.add_parser(name, help="render a simulation as an animation (GIF or MP4), alone or side by side")
+    p = sub.add_parser(name, help="render a simulation as an animation (GIF or MP4), alone or side by side",
+                       description=f"Render a simulation as an animation. Each panel runs at most {MAX_STEPS:,} "
+                       "steps of --dt from the scene's t_start to --t-end, drawn as at most 150 frames "
+                       "(played at --fps).")
     scene_argument(p)
     p.add_argument("--integrator", help="integrator name (default: the scene's)")
     p.add_argument("--compare", metavar="A,B",
@@ -26,13 +33,13 @@ def command(args) -> int:
     from steplab.integrators.simulate import simulate
     from steplab.physics.scene import load_scene
 
-    from .run import collision_world, integrator_named
+    from .run import collision_world, scene_method
 
     check_format(args.out)  # before the runs: a format that cannot be written is one line, status 2
     scene = load_scene(args.scene)
     dt, t_end = time_span(scene, args)
     # each panel: (integrator, detector); --compare varies one of them
-    panels = [(args.integrator or scene.integrator, args.detector)]
+    panels = [(args.integrator, args.detector)]  # None: the scene's, with its [simulation.<integrator>] settings
     if args.compare:
         names = [n.strip() for n in args.compare.split(",")]
         if len(names) < 2:
@@ -42,10 +49,10 @@ def command(args) -> int:
             panels = [(panels[0][0], n) for n in names]
         else:
             panels = [(n, args.detector) for n in names]
-    steps = int((t_end - scene.t_start) / dt)
+    steps = run_steps(scene, dt, t_end, MAX_STEPS, "steplab animate")
+    methods = [scene_method(scene, name) for name, _ in panels]  # every panel's refusals before any run
     runs = []
-    for name, detector in panels:
-        method = integrator_named(name)
+    for method, (_, detector) in zip(methods, panels):
         world = collision_world(scene, detector, "numpy")
         traj = simulate(scene.model, method, scene.y0, scene.t_start, t_end, dt,
                         save_every=max(1, steps // 300), collisions=world)

@@ -104,7 +104,8 @@ def time_span(scene, args) -> tuple[float | None, float]:
     """
     dt = getattr(args, "dt", None)
     dt = scene.dt if dt is None and "dt" in vars(args) else dt
-    t_end = scene.t_end if args.t_end is None else args.t_end
+    t_end = getattr(args, "t_end", None)  # a command without --t-end (check): the scene's
+    t_end = scene.t_end if t_end is None else t_end
     if not t_end > scene.t_start:
         raise ValueError(f"--t-end {t_end:g} must be later than the scene's t_start = {scene.t_start:g}")
     if dt is not None and getattr(args, "steps", None) is None:
@@ -116,9 +117,27 @@ def time_span(scene, args) -> tuple[float | None, float]:
             steps = 1
         if steps < 1:
             ms = f"; a dt in milliseconds? {dt:g} ms is --dt {dt / 1000:g}" if dt >= 1 else ""
+            # what this command takes instead (check has neither --t-end nor --steps, animate no --steps)
+            instead = [f"--t-end {scene.t_start + dt:g} or later"] if "t_end" in vars(args) else []
+            instead += ["--steps N"] if "steps" in vars(args) else []
+            instead = ", or ".join(instead) or f"a --dt of at most {t_end - scene.t_start:g} s"
             raise ValueError(f"dt = {dt:g} s is longer than the run, t_end - t_start = {t_end - scene.t_start:g} s: "
-                             f"pass --t-end {scene.t_start + dt:g} or later, or --steps N{ms}")
+                             f"pass {instead}{ms}")
     return dt, t_end
+
+
+def run_steps(scene, dt: float, t_end: float, max_steps: int | None = None, what: str = "steplab run") -> int:
+    """The steps of dt from the scene's t_start to ``t_end``, refused (ValueError, one line) as
+    ``simulate`` refuses them before running: a dt that does not advance time, a count too large to
+    count; and, given ``max_steps``, more steps than that (``what``: whose limit it is)."""
+    from steplab.integrators.simulate import check_time_advances, step_count
+
+    check_time_advances(scene.t_start, t_end, dt, scene.model.dtype)
+    steps = step_count(scene.t_start, t_end, dt)
+    if max_steps is not None and steps > max_steps:
+        raise ValueError(f"{steps} steps of dt = {dt:g} s to t_end = {t_end:g} s exceed {what}'s limit of "
+                         f"{max_steps} steps: use a larger --dt or an earlier --t-end")
+    return steps
 
 
 def solver_arguments(p) -> None:

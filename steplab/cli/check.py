@@ -5,7 +5,7 @@ from __future__ import annotations
 import dataclasses
 import json
 
-from .args import json_argument, positive, rotation_argument, rotation_named, scene_argument
+from .args import json_argument, positive, rotation_argument, rotation_named, run_steps, scene_argument, time_span
 from .table import table
 
 
@@ -23,10 +23,14 @@ def command(args) -> int:
     from steplab.integrators.stable_dt import stable_steps
     from steplab.physics.scene import load_scene
 
-    from .run import integrator_named
+    from .run import integrator_named, scene_method
 
     scene = load_scene(args.scene)
+    scene_method(scene)  # the scene's [simulation.<integrator>] table, refused as run refuses it
     rotation = rotation_named(scene, args)
+    # the dts run refuses: longer than the run, too small to advance time, more steps than a float counts
+    dt, t_end = time_span(scene, args)
+    run_steps(scene, dt, t_end)
     if args.integrator is not None:
         steppers = [integrator_named(args.integrator)]
         if getattr(steppers[0], "kind", None) == "position-based":  # nothing to predict: no dt limit
@@ -39,7 +43,6 @@ def command(args) -> int:
                              "(it has no step size to limit)")
     else:
         steppers = [m for m in INTEGRATORS.values() if isinstance(m, Stepper)]
-    dt = args.dt if args.dt is not None else scene.dt
     mode, rows = stable_steps(scene.model, scene.y0[0], steppers)
     report = {"scene": scene.name, "dt": dt, "omega_max": mode.omega, "damping_ratio": mode.damping_ratio,
               "integrators": [dataclasses.asdict(r) | {"stable": r.stable(dt)} for r in rows]}

@@ -23,18 +23,23 @@ def command(args) -> int:
     from steplab.engines.mujoco_engine import MujocoRun
     from steplab.physics.scene import load_scene
 
+    from .run import scene_method
+
     scene = load_scene(args.scene)
+    scene_method(scene)  # the scene's [simulation.<integrator>] table, refused as run refuses it
     # MuJoCo's integrator that steps as the scene's integrator does (the engines study's identification)
     equivalent = MujocoRun.integrator_stepping_as(scene.integrator)
     integrator = args.integrator or equivalent or "Euler"
     text = mjcf(scene.model, scene.y0, scene.dt, scene.collisions, MujocoOption(integrator), name=scene.name,
                 bodies=scene.rigid_bodies)
-    if args.integrator is None and equivalent is None:
-        print(f"steplab export: note: MuJoCo has no integrator that steps as {scene.integrator!r} does; "
-              "writing Euler (semi-implicit Euler; choose with --integrator)", file=sys.stderr)
     if args.out is None:
         sys.stdout.write(text)
     else:
         write_atomic(args.out, text.encode())
+    # after the file: a path that cannot be written is its one line of error, with no note before it
+    if args.integrator is None and equivalent is None:
+        print(f"steplab export: note: MuJoCo has no integrator that steps as {scene.integrator!r} does; "
+              "writing Euler (semi-implicit Euler; choose with --integrator)", file=sys.stderr)
+    if args.out is not None:
         print(f"{scene.name}: MJCF written to {args.out} (MuJoCo {integrator}, dt = {scene.dt:g} s)")
     return 0

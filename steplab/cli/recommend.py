@@ -38,9 +38,10 @@ def command(args) -> int:
     from steplab.studies.problems import problem_of
     from steplab.studies.recommend import recommend
 
-    from .run import collision_world
+    from .run import collision_world, scene_method
 
     scene = load_scene(args.scene)
+    scene_method(scene)  # the scene's [simulation.<integrator>] table, refused as run refuses it
     rotation = rotation_named(scene, args)
     from steplab.physics.attachments import attached_forces
 
@@ -114,9 +115,11 @@ def _with_collisions(args, scene, t_end, world, integrators, rotation) -> int:
     ref = r["reference"]
     measured = (f"largest position error {r['error']:.3g} m <= {args.tol:g} m" if r["regime"] == "trajectories"
                 else f"energy error {100 * r['energy_error']:.3g} %, largest penetration {r['penetration']:.3g} m")
-    print(f"{scene.name}: {r['integrator']} with dt = {r['dt']:.6g} s ({r['steps']} steps), {r['detector']} "
-          f"detector: {measured}, {plural(r['impacts'], 'impact')} (reference: {ref['impacts']}), "
-          f"{r['seconds'] * 1e3:.3g} ms (NumPy event loop, median)")
+    how = ("contact solver", "NumPy contact solver") if world.method == "solver" else (
+        f"{r['detector']} detector", "NumPy event loop")
+    print(f"{scene.name}: {r['integrator']} with dt = {r['dt']:.6g} s ({r['steps']} steps), {how[0]}: "
+          f"{measured}, {plural(r['impacts'], 'impact')} (reference: {ref['impacts']}), "
+          f"{r['seconds'] * 1e3:.3g} ms ({how[1]}, median)")
     print(f"  reference: {ref['integrator']} at dt = {ref['dt']:.3g} s, converged to {ref['convergence']:.3g} m "
           f"against dt = {2 * ref['dt']:.3g} s ({plural(ref['impacts_at_2dt'], 'impact')} there)")
     if "note" in r:

@@ -58,12 +58,7 @@ def command(args) -> int:
     if args.out is not None:
         check_trajectory_path(args.out)  # before the run, not after it
     scene = load_scene(args.scene)
-    name = args.integrator or scene.integrator
-    integrator = integrator_named(name)
-    if name == scene.integrator and scene.integrator_settings:  # its [simulation.<integrator>] table
-        from steplab.integrators.settings import configured
-
-        integrator = configured(integrator, scene.integrator_settings, f"scene {scene.name}: [simulation.{name}]")
+    integrator = scene_method(scene, args.integrator)
     rotation_method = rotation_named(scene, args)
     dt, t_end = time_span(scene, args)
     world = collision_world(scene, args.detector, args.backend)
@@ -133,10 +128,33 @@ def command(args) -> int:
     return 0
 
 
+def scene_method(scene, name: str | None = None):
+    """The integrator a run of ``scene`` uses, for every command that runs or judges one: ``name``
+    (--integrator) with its own defaults, or the scene's integrator with its [simulation.<integrator>]
+    settings, checked by ``integrators.settings.scene_integrator`` (an unknown key or a value the
+    method refuses is one line, status 2)."""
+    from steplab.integrators.settings import scene_integrator
+
+    name = name or scene.integrator
+    if name != scene.integrator:
+        return integrator_named(name)
+    importable = _importable(name)
+    if importable != name:  # path/file.py:Name: the module it names, with the scene's settings
+        scene = dataclasses.replace(scene, integrator=importable)
+    return scene_integrator(scene)
+
+
 def integrator_named(name: str):
     """The integrator ``name`` (see ``get_integrator``); ``path/file.py:Name`` is the module
     ``file``, imported from the file's folder, as the natural spelling of a file of one's own."""
-    from steplab.integrators import UnknownIntegratorError, get_integrator
+    from steplab.integrators import get_integrator
+
+    return get_integrator(_importable(name))
+
+
+def _importable(name: str) -> str:
+    """``name``, or for ``path/file.py:Name`` the spelling ``file:Name`` with the file's folder on sys.path."""
+    from steplab.integrators import UnknownIntegratorError
 
     module, colon, attribute = name.partition(":")
     if colon and module.endswith(".py"):
@@ -147,7 +165,7 @@ def integrator_named(name: str):
         if str(path.resolve().parent) not in sys.path:
             sys.path.append(str(path.resolve().parent))
         name = f"{path.stem}:{attribute}"
-    return get_integrator(name)
+    return name
 
 
 def _attached(scene, world) -> bool:

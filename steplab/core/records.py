@@ -9,6 +9,7 @@ the animations and ``steplab run``'s trajectories all write through here.
 from __future__ import annotations
 
 import contextlib
+import errno
 import json
 import os
 import tempfile
@@ -60,19 +61,33 @@ def atomic_path(path: str | Path, keep_suffix: bool = False) -> Iterator[Path]:
     (``.<name>.<random>.tmp.gif``), for writers that choose the format by extension.
     """
     path = Path(path)
+    if path.is_dir():  # else the rename's error, after the work, names the temporary file
+        raise IsADirectoryError(errno.EISDIR, "a folder, not a file: give a file name", str(path))
     path.parent.mkdir(parents=True, exist_ok=True)
     suffix = ".tmp" + (path.suffix if keep_suffix else "")
-    fd, name = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=suffix)
+    try:
+        fd, name = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=suffix)
+    except OSError as err:
+        raise _naming(err, path, f"cannot create a file in {path.parent}") from None
     os.close(fd)
     tmp = Path(name)
     try:
         os.chmod(tmp, 0o666 & ~_umask())  # mkstemp makes 0600; results are for everyone to read
         yield tmp
         os.replace(tmp, path)
-    except BaseException:
+    except BaseException as err:
         with contextlib.suppress(FileNotFoundError):
             os.unlink(tmp)
+        if isinstance(err, OSError) and str(tmp) in (str(err.filename), str(err.filename2)):
+            raise _naming(err, path) from None  # the user's path, never the temporary name
         raise
+
+
+def _naming(err: OSError, path: Path, what: str = "") -> OSError:
+    """``err`` as the same kind of OSError about ``path`` (what an error line names), with ``what`` before
+    its reason."""
+    reason = err.strerror or str(err)
+    return type(err)(err.errno, f"{what} ({reason})" if what else reason, str(path))
 
 
 def _umask() -> int:

@@ -1,0 +1,110 @@
+"""Bad input at the command line: one line naming what, where and what is allowed, status 2; never a
+traceback, a hang, a temporary file's name or a silent non-finite number. Each case is the console
+script in a fresh process; the cases run a few at a time (one fixture starts them all)."""
+
+import json
+import subprocess
+import sys
+from concurrent.futures import ThreadPoolExecutor
+from pathlib import Path
+
+import pytest
+
+STEPLAB = str(Path(sys.executable).parent / "steplab")
+RESULTS = Path(__file__).resolve().parent.parent / "results"
+OSCILLATOR = Path(__file__).resolve().parent.parent / "physics" / "scenes" / "oscillator.toml"
+
+#: scenes whose integrator's [simulation.<integrator>] table run refuses
+BAD_TABLES = {
+    "substeps0.toml": ('integrator = "semi-implicit-euler"', 'integrator = "xpbd"',
+                       "\n[simulation.xpbd]\nsubsteps = 0\n"),
+    "foo.toml": ("", "", "\n[simulation.semi-implicit-euler]\nfoo = 1\n"),
+}
+
+#: name -> (argv, what the one line of error says); the files are made in the fixture's folder
+REFUSALS = {
+    # 1: a --dt-max whose step count overflows (collision-free and with collisions)
+    "recommend-dt-max-overflow": (["recommend", "projectile", "--tol", "0.01", "--dt-max", "1e-320"],
+                                  "is below the smallest recommend measures"),
+    "recommend-collisions-dt-max-overflow": (["recommend", "rolling-sphere", "--tol", "0.01", "--dt-max", "1e-320"],
+                                             "is below the smallest recommend measures"),
+    # 2: animate's step count: too small a dt, an uncountable span, a span beyond its step limit
+    "animate-tiny-dt": (["animate", "projectile", "--dt", "1e-320", "--out", "o/a.gif"], "time would not advance"),
+    "animate-huge-t-end": (["animate", "projectile", "--t-end", "1e308", "--out", "o/a.gif"], "--t-end|dt = "),
+    "animate-long-run": (["animate", "projectile", "--t-end", "1e6", "--out", "o/a.gif"],
+                         "exceed steplab animate's limit of 100000 steps"),
+    # 3: check refuses the dts run refuses
+    "check-dt-longer-than-run": (["check", "oscillator", "--dt", "1e308"], "is longer than the run"),
+    "check-dt-too-small": (["check", "oscillator", "--dt", "1e-320"], "time would not advance"),
+    # 4: the scene's integrator table, as run refuses it
+    "check-bad-table": (["check", "substeps0.toml"], "[simulation.xpbd]"),
+    "recommend-bad-table": (["recommend", "foo.toml", "--tol", "0.01"], "'foo' is not a setting"),
+    "export-bad-table": (["export", "foo.toml", "--to", "mjcf"], "'foo' is not a setting"),
+    "animate-bad-table": (["animate", "substeps0.toml", "--out", "o/a.gif"], "[simulation.xpbd]"),
+    # 5: the contact solver steps with semi-implicit Euler: another candidate is refused in words that say so
+    "recommend-solver-rk4": (["recommend", "rolling-sphere", "--tol", "0.01", "--integrators", "rk4"],
+                             "steps with semi-implicit-euler only"),
+    # 6: the path the user gave, never the temporary file's
+    "export-out-folder": (["export", "projectile", "--to", "mjcf", "--out", "folder"], "folder: "),
+    "run-out-unwritable": (["run", "projectile", "--out", "/proc/x.csv"], "/proc/x.csv: "),
+    # 7: a bench record whose ratio is not a finite number
+    "bench-ratio-string": (["bench", "--from", "x.json"], "x.json: ratios."),
+    "bench-ratio-nan": (["bench", "--from", "nan.json"], "nan.json: ratios."),
+}
+
+#: 5: valid requests on scenes with the contact solver, which a default rk4 reference refused
+SOLVER_REQUESTS = {
+    "recommend-solver-rolling-sphere": ["recommend", "rolling-sphere", "--tol", "0.01", "--integrators",
+                                        "semi-implicit-euler"],
+    "recommend-solver-box-column": ["recommend", "box-column", "--tol", "0.05", "--t-end", "1", "--integrators",
+                                    "semi-implicit-euler"],
+}
+
+
+def _files(folder: Path) -> None:
+    text = OSCILLATOR.read_text()
+    for name, (old, new, table) in BAD_TABLES.items():
+        (folder / name).write_text(text.replace(old, new) + table)
+    (folder / "folder").mkdir()
+    record = json.loads((RESULTS / "bench.json").read_text())
+    edited = json.loads(json.dumps(record))
+    edited["ratios"][edited["order"][0]] = "x"
+    (folder / "x.json").write_text(json.dumps(edited))
+    edited["ratios"] = {name: float("nan") for name in record["ratios"]}
+    (folder / "nan.json").write_text(json.dumps(edited))
+
+
+@pytest.fixture(scope="module")
+def results(tmp_path_factory):
+    folder = tmp_path_factory.mktemp("refusals")
+    _files(folder)
+    cases = {name: argv for name, (argv, _) in REFUSALS.items()} | SOLVER_REQUESTS
+    with ThreadPoolExecutor(max_workers=3) as pool:
+        futures = {name: pool.submit(subprocess.run, [STEPLAB, *argv], cwd=folder, capture_output=True, text=True)
+                   for name, argv in cases.items()}
+        return {name: future.result() for name, future in futures.items()}
+
+
+@pytest.mark.parametrize("name", REFUSALS)
+def test_bad_input_is_one_line_and_status_2(results, name):
+    if name == "run-out-unwritable" and not Path("/proc").is_dir():
+        pytest.skip("no /proc here")
+    done, (argv, message) = results[name], REFUSALS[name]
+    assert done.returncode == 2, (done.returncode, done.stdout[-500:], done.stderr[-2000:])
+    assert "Traceback" not in done.stderr and done.stderr.count("\n") == 1, done.stderr
+    assert done.stderr.startswith(f"steplab {argv[0]}: error: "), done.stderr
+    assert any(m in done.stderr for m in message.split("|")), done.stderr
+    assert ".tmp" not in done.stderr and "nan" not in done.stdout.lower()
+
+
+def test_the_refusal_of_a_solver_candidate_names_what_is_allowed(results):
+    err = results["recommend-solver-rk4"].stderr
+    assert "not rk4" in err and "--integrators semi-implicit-euler" in err and "use integrator" not in err
+
+
+@pytest.mark.parametrize("name", SOLVER_REQUESTS)
+def test_recommend_takes_the_contact_solvers_integrator(results, name):
+    done = results[name]
+    assert done.returncode == 0, done.stderr
+    assert "semi-implicit-euler with dt = " in done.stdout and "contact solver" in done.stdout
+    assert "Traceback" not in done.stderr
