@@ -163,3 +163,14 @@ def test_a_server_that_is_not_dask_is_named_in_one_line(reply, capsys, monkeypat
     out, err = capsys.readouterr()
     assert status == 2 and out == "" and len(err.splitlines()) == 1
     assert f"what answers at {address!r} is not a Dask scheduler" in err
+
+
+def test_more_local_workers_than_a_few_a_core_are_refused(capsys, tmp_path):
+    from steplab.cli.args import MAX_WORKERS_PER_CORE
+
+    too_many = MAX_WORKERS_PER_CORE * (os.cpu_count() or 1) + 1
+    with pytest.raises(SystemExit) as exit_:
+        main(["study", "frame_rate", "--quick", "--out", str(tmp_path), "--workers", str(too_many)])
+    err = capsys.readouterr().err
+    assert exit_.value.code == 2 and len(err.splitlines()) == 1
+    assert f"--workers: must be at most {too_many - 1}" in err and not any(tmp_path.iterdir())

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 import math
+import os
 from collections.abc import Callable, Sequence
 from pathlib import Path
 
@@ -78,6 +79,20 @@ def count(text: str) -> int:
         raise argparse.ArgumentTypeError(f"must be a positive integer, got {text!r}") from None
     if value < 1:
         raise argparse.ArgumentTypeError(f"must be a positive integer, got {text}")
+    return value
+
+
+#: the most local Dask workers a core: one process each, a few hundred MB each (JAX, Numba, the studies), so
+#: more than a few a core only waits and fills memory (99,999 asked for started processes until killed)
+MAX_WORKERS_PER_CORE = 4
+
+
+def worker_count(text: str) -> int:
+    """``--workers``: a positive integer, at most MAX_WORKERS_PER_CORE a core of this machine."""
+    value, cores = count(text), os.cpu_count() or 1
+    if value > MAX_WORKERS_PER_CORE * cores:
+        raise argparse.ArgumentTypeError(f"must be at most {MAX_WORKERS_PER_CORE * cores} ({MAX_WORKERS_PER_CORE} "
+                                         f"a core, {cores} cores here), got {value}")
     return value
 
 
@@ -166,8 +181,9 @@ def study_arguments(p) -> None:
     p.add_argument("--out", type=Path, default=Path("results"), help="results folder (default: results/)")
     p.add_argument("--force", action="store_true", help="re-run even if the cached result is current")
     where = p.add_mutually_exclusive_group()  # on a Dask cluster (studies/distributed.py); default: this process
-    where.add_argument("--workers", type=count, metavar="N", help="run the sweeps' tasks on a local Dask cluster "
-                       "of N worker processes (timing studies run alone afterwards)")
+    where.add_argument("--workers", type=worker_count, metavar="N", help="run the sweeps' tasks on a local Dask "
+                       f"cluster of N worker processes, at most {MAX_WORKERS_PER_CORE} a core (timing studies run "
+                       "alone afterwards)")
     where.add_argument("--scheduler", metavar="ADDRESS", help="run them on the Dask cluster whose scheduler is "
                        "at ADDRESS (e.g. tcp://host:8786; see docs/cluster.md)")
 
