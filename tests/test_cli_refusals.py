@@ -1,16 +1,14 @@
 """Bad input at the command line: one line naming what, where and what is allowed, status 2; never a
-traceback, a hang, a temporary file's name or a silent non-finite number. Each case is the console
-script in a fresh process; the cases run a few at a time (one fixture starts them all)."""
+traceback, a hang, a temporary file's name or a silent non-finite number. Each case is the command
+line's ``main`` in this process (the console script's own path is tests/test_cli.py's)."""
 
 import json
-import subprocess
-import sys
-from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 
 import pytest
 
-STEPLAB = str(Path(sys.executable).parent / "steplab")
+from steplab.cli import main
+
 OSCILLATOR = Path(__file__).resolve().parent.parent / "physics" / "scenes" / "oscillator.toml"
 
 #: scenes whose integrator's [simulation.<integrator>] table run refuses
@@ -74,36 +72,43 @@ def _files(folder: Path) -> None:
 
 
 @pytest.fixture(scope="module")
-def results(tmp_path_factory):
+def folder(tmp_path_factory):
     folder = tmp_path_factory.mktemp("refusals")
     _files(folder)
-    cases = {name: argv for name, (argv, _) in REFUSALS.items()} | SOLVER_REQUESTS
-    with ThreadPoolExecutor(max_workers=3) as pool:
-        futures = {name: pool.submit(subprocess.run, [STEPLAB, *argv], cwd=folder, capture_output=True, text=True)
-                   for name, argv in cases.items()}
-        return {name: future.result() for name, future in futures.items()}
+    return folder
+
+
+def steplab(argv, folder, capsys, monkeypatch) -> tuple[int, str, str]:
+    """``steplab *argv`` in this process, in ``folder``: (status, stdout, stderr)."""
+    monkeypatch.chdir(folder)
+    try:
+        status = main(list(argv))
+    except SystemExit as exit_:  # argparse's refusals
+        status = exit_.code
+    out, err = capsys.readouterr()
+    return status, out, err
 
 
 @pytest.mark.parametrize("name", REFUSALS)
-def test_bad_input_is_one_line_and_status_2(results, name):
+def test_bad_input_is_one_line_and_status_2(folder, capsys, monkeypatch, name):
     if name == "run-out-unwritable" and not Path("/proc").is_dir():
         pytest.skip("no /proc here")
-    done, (argv, message) = results[name], REFUSALS[name]
-    assert done.returncode == 2, (done.returncode, done.stdout[-500:], done.stderr[-2000:])
-    assert "Traceback" not in done.stderr and done.stderr.count("\n") == 1, done.stderr
-    assert done.stderr.startswith(f"steplab {argv[0]}: error: "), done.stderr
-    assert any(m in done.stderr for m in message.split("|")), done.stderr
-    assert ".tmp" not in done.stderr and "nan" not in done.stdout.lower()
+    argv, message = REFUSALS[name]
+    status, out, err = steplab(argv, folder, capsys, monkeypatch)
+    assert status == 2, (status, out[-500:], err[-2000:])
+    assert "Traceback" not in err and err.count("\n") == 1, err
+    assert err.startswith(f"steplab {argv[0]}: error: "), err
+    assert any(m in err for m in message.split("|")), err
+    assert ".tmp" not in err and "nan" not in out.lower()
 
 
-def test_the_refusal_of_a_solver_candidate_names_what_is_allowed(results):
-    err = results["recommend-solver-rk4"].stderr
+def test_the_refusal_of_a_solver_candidate_names_what_is_allowed(folder, capsys, monkeypatch):
+    _, _, err = steplab(REFUSALS["recommend-solver-rk4"][0], folder, capsys, monkeypatch)
     assert "not rk4" in err and "--integrators semi-implicit-euler" in err and "use integrator" not in err
 
 
 @pytest.mark.parametrize("name", SOLVER_REQUESTS)
-def test_recommend_takes_the_contact_solvers_integrator(results, name):
-    done = results[name]
-    assert done.returncode == 0, done.stderr
-    assert "semi-implicit-euler with dt = " in done.stdout and "contact solver" in done.stdout
-    assert "Traceback" not in done.stderr
+def test_recommend_takes_the_contact_solvers_integrator(folder, capsys, monkeypatch, name):
+    status, out, err = steplab(SOLVER_REQUESTS[name], folder, capsys, monkeypatch)
+    assert status == 0, err
+    assert "semi-implicit-euler with dt = " in out and "contact solver" in out
