@@ -92,8 +92,12 @@ def distance_constraints(forces) -> DistanceConstraints:
     j = np.concatenate([np.asarray(s.j, np.int64) for s in springs])
     k = np.concatenate([np.asarray(s.stiffness, float) for s in springs])
     rest = np.concatenate([np.asarray(s.rest_length, float) for s in springs])
-    with np.errstate(divide="ignore"):
+    with np.errstate(divide="ignore", over="ignore"):
         compliance = np.where(np.isinf(k), 0.0, 1.0 / k)
+    if not np.all(np.isfinite(compliance)):  # a subnormal stiffness: alpha = 1 / k overflows
+        raise NotConstraintsError(
+            f"a spring of stiffness {k[~np.isfinite(compliance)][0]:.3g} N/m has no finite compliance 1 / k; the "
+            f"position-based integrators take stiffnesses from {1 / np.finfo(float).max:.3g} N/m (and inf)")
     # a damper joins the constraint on its (unordered) pair
     slot = {(min(a, b), max(a, b)): p for p, (a, b) in enumerate(zip(i.tolist(), j.tolist()))}
     damping = np.zeros(len(i))

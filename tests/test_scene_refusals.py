@@ -98,3 +98,13 @@ def test_a_box_whose_moments_give_no_finite_edges_is_not_exported(capsys, tmp_pa
                                  "angular_velocity = [0.05, 6.283185307179586, 0.05]": "angular_velocity = [0, 0, 0]"}))
     err = one_line_status_2(capsys, ["export", str(path), "--to", "mjcf"])
     assert "has edges beyond float64" in err
+
+
+def test_a_spring_with_no_finite_compliance_is_refused_by_the_position_based_methods(capsys, tmp_path):
+    # k = 1e-320 N/m is a spring of no force for the force-based methods; pbd and xpbd need alpha = 1 / k
+    path = tmp_path / "c.toml"
+    path.write_text(SCENES["cloth"].read_text().replace("stiffness = 100.0", "stiffness = 1e-320"))
+    for method in ("pbd", "xpbd"):
+        err = one_line_status_2(capsys, ["run", str(path), "--integrator", method, "--t-end", "0.01"])
+        assert "a spring of stiffness 1e-320 N/m has no finite compliance 1 / k" in err
+    assert main(["run", str(path), "--integrator", "semi-implicit-euler", "--t-end", "0.01"]) == 0
