@@ -243,3 +243,23 @@ def spring_net(seed, n=8, p=16):
     rest = np.linalg.norm(q[j] - q[i], axis=1) * rng.uniform(0.8, 1.2, p)
     model = Model(rng.uniform(0.5, 2.0, n), np.full(n, 0.01), [Springs(i, j, rng.uniform(10.0, 1000.0, p), rest)])
     return model, np.stack([q, rng.normal(0.0, 1.0, (n, 3))])
+
+
+def run_main(capsys, argv) -> tuple[int, str, str]:
+    """``steplab *argv`` in this process: (status, stdout, stderr); argparse's refusals, which exit, caught."""
+    from steplab.cli import main
+
+    try:
+        status = main(list(argv))
+    except SystemExit as exit_:
+        status = exit_.code
+    out, err = capsys.readouterr()
+    return status, out, err
+
+
+def refused(capsys, argv) -> str:
+    """stderr of ``steplab *argv`` in this process, checked to be one line with status 2 and no traceback."""
+    status, _, err = run_main(capsys, argv)
+    assert status == 2, err
+    assert "Traceback" not in err and err.count("\n") == 1, err
+    return err

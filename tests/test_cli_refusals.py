@@ -6,8 +6,7 @@ import json
 from pathlib import Path
 
 import pytest
-
-from steplab.cli import main
+from helpers import run_main
 
 OSCILLATOR = Path(__file__).resolve().parent.parent / "physics" / "scenes" / "oscillator.toml"
 
@@ -81,12 +80,7 @@ def folder(tmp_path_factory):
 def steplab(argv, folder, capsys, monkeypatch) -> tuple[int, str, str]:
     """``steplab *argv`` in this process, in ``folder``: (status, stdout, stderr)."""
     monkeypatch.chdir(folder)
-    try:
-        status = main(list(argv))
-    except SystemExit as exit_:  # argparse's refusals
-        status = exit_.code
-    out, err = capsys.readouterr()
-    return status, out, err
+    return run_main(capsys, argv)
 
 
 @pytest.mark.parametrize("name", REFUSALS)

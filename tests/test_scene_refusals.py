@@ -7,6 +7,7 @@ inf or NaN with status 0, or silently ignored a key.
 from __future__ import annotations
 
 import pytest
+from helpers import refused
 from steplab.physics.scene import SceneError, parse_scene
 from steplab.physics.scene_library import SCENES
 
@@ -25,14 +26,6 @@ velocity = [{speed}, 0, 0]
 """
 
 
-def one_line_status_2(capsys, argv) -> str:
-    status = main(argv)
-    err = capsys.readouterr().err
-    assert status == 2, err
-    assert err.count("\n") == 1 and "Traceback" not in err
-    return err
-
-
 def dzhanibekov(replace: dict) -> str:
     text = SCENES["dzhanibekov"].read_text()
     for old, new in replace.items():
@@ -45,7 +38,7 @@ def test_a_start_whose_kinetic_energy_overflows_is_refused(capsys, tmp_path):
     # 1/2 1e300 kg (1e5 m/s)^2 = 5e309 J: past float64, though mass and speed are finite
     path = tmp_path / "k.toml"
     path.write_text(POINT.format(mass=1e300, speed=1e5))
-    err = one_line_status_2(capsys, ["run", str(path)])
+    err = refused(capsys, ["run", str(path)])
     assert "the initial kinetic energy, sum of m |v|^2 / 2, is inf J" in err
     # just inside float64 the same body runs
     path.write_text(POINT.format(mass=1e300, speed=1.0))
@@ -87,7 +80,7 @@ def test_a_body_name_must_print_on_one_line(name):
 def test_an_inextensible_spring_is_not_exported_to_mujoco(capsys, tmp_path):
     path = tmp_path / "c.toml"
     path.write_text(SCENES["cloth"].read_text().replace("stiffness = 100.0", "stiffness = inf"))
-    err = one_line_status_2(capsys, ["export", str(path), "--to", "mjcf"])
+    err = refused(capsys, ["export", str(path), "--to", "mjcf"])
     assert "the inextensible spring (stiffness = inf)" in err and "MuJoCo gets springs of finite stiffness" in err
 
 
@@ -96,7 +89,7 @@ def test_a_box_whose_moments_give_no_finite_edges_is_not_exported(capsys, tmp_pa
     path = tmp_path / "d.toml"
     path.write_text(dzhanibekov({"size = [0.3, 0.2, 0.1]": "size = [0.3, 0.2, 0.1]\ninertia = [1e307, 1e307, 1e307]",
                                  "angular_velocity = [0.05, 6.283185307179586, 0.05]": "angular_velocity = [0, 0, 0]"}))
-    err = one_line_status_2(capsys, ["export", str(path), "--to", "mjcf"])
+    err = refused(capsys, ["export", str(path), "--to", "mjcf"])
     assert "has edges beyond float64" in err
 
 
@@ -105,6 +98,6 @@ def test_a_spring_with_no_finite_compliance_is_refused_by_the_position_based_met
     path = tmp_path / "c.toml"
     path.write_text(SCENES["cloth"].read_text().replace("stiffness = 100.0", "stiffness = 1e-320"))
     for method in ("pbd", "xpbd"):
-        err = one_line_status_2(capsys, ["run", str(path), "--integrator", method, "--t-end", "0.01"])
+        err = refused(capsys, ["run", str(path), "--integrator", method, "--t-end", "0.01"])
         assert "a spring of stiffness 1e-320 N/m has no finite compliance 1 / k" in err
     assert main(["run", str(path), "--integrator", "semi-implicit-euler", "--t-end", "0.01"]) == 0

@@ -7,11 +7,10 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from helpers import refused
 from steplab.integrators import implicit_euler, position_based, references
 from steplab.integrators.settings import configured
 from steplab.physics.collision import solver_settings
-
-from steplab.cli import main
 
 HUGE = 99_999_999_999
 
@@ -47,14 +46,6 @@ def refusal(*argv):
     assert done.returncode == 2, done.stderr
     assert "Traceback" not in done.stderr and done.stderr.count("\n") == 1, done.stderr
     return done.stderr
-
-
-def refused_in_process(capsys, *argv):
-    status = main(["run", *argv])
-    err = capsys.readouterr().err
-    assert status == 2, err
-    assert "Traceback" not in err and err.count("\n") == 1, err
-    return err
 
 
 def scene_file(tmp_path, integrator, key, value):
@@ -93,7 +84,7 @@ def test_huge_substeps_flag_is_refused_at_once():
 
 @pytest.mark.parametrize("integrator,key", [("xpbd", "substeps"), ("pbd", "iterations"), ("vbd", "substeps")])
 def test_huge_sweeps_in_a_scene_are_one_line(capsys, tmp_path, integrator, key):
-    err = refused_in_process(capsys, scene_file(tmp_path, integrator, key, HUGE))
+    err = refused(capsys, ["run", scene_file(tmp_path, integrator, key, HUGE)])
     assert f"[simulation.{integrator}]: {integrator}: {key} must be a whole number from 1 to 10,000" in err
 
 
@@ -160,7 +151,7 @@ def test_reference_tolerances_at_their_bounds_are_kept(name):
 @pytest.mark.parametrize("integrator,key,value", [("scipy-dop853", "atol", "0.0"), ("scipy-dop853", "rtol", "nan"),
                                                   ("scipy-radau", "rtol", "-1.0"), ("diffrax-tsit5", "rtol", '"x"')])
 def test_bad_reference_tolerances_in_a_scene_are_one_line(capsys, tmp_path, integrator, key, value):
-    err = refused_in_process(capsys, scene_file(tmp_path, integrator, key, value))
+    err = refused(capsys, ["run", scene_file(tmp_path, integrator, key, value)])
     assert f"[simulation.{integrator}]: {integrator}: {key} must be " in err
 
 
@@ -199,7 +190,7 @@ def test_contact_solver_sweeps_per_step_have_an_upper_bound():
 
 
 def test_contact_solver_flags_within_their_caps_but_not_together_are_refused(capsys):
-    err = refused_in_process(capsys, "box-column", "--iterations", "1000000", "--substeps", "1000000", "--steps", "1")
+    err = refused(capsys, ["run", "box-column", "--iterations", "1000000", "--substeps", "1000000", "--steps", "1"])
     assert "contact solver: iterations x substeps must be at most 100,000 sweeps a step" in err
 
 
@@ -208,5 +199,5 @@ def test_contact_solver_scene_settings_are_bounded_together(capsys, tmp_path):
     assert "[collisions.solver]" not in text
     path = tmp_path / "column.toml"
     path.write_text(text + "\n[collisions.solver]\niterations = 1000\nsubsteps = 1000\n")
-    err = refused_in_process(capsys, str(path), "--steps", "1")
+    err = refused(capsys, ["run", str(path), "--steps", "1"])
     assert "collisions.solver.iterations: iterations x substeps must be at most 100,000 sweeps a step" in err
