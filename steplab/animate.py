@@ -34,6 +34,16 @@ PANEL_WIDTH, PANEL_HEIGHT, ENERGY_HEIGHT = 5.2, 5.0, 1.7
 #: at most this many labelled ticks per axis (more crowd into each other on a 5-inch panel)
 MAX_TICKS = 5
 FORMATS = (".gif", ".mp4")
+#: the fastest frame rate: a GIF's frame delay is counted in hundredths of a second, so 100 frames a
+#: second is its shortest (a faster rate rounded to a delay of 0, which viewers play at a pace of their own)
+MAX_FPS = 100
+
+
+def check_fps(fps: int) -> None:
+    """Raise ``ValueError`` (one line) unless ``fps`` is an integer from 1 to MAX_FPS."""
+    if not (isinstance(fps, int) and 1 <= fps <= MAX_FPS):
+        raise ValueError(f"--fps must be an integer from 1 to {MAX_FPS} (a GIF's shortest frame delay is "
+                         f"1/100 s), got {fps!r}")
 
 
 def check_format(out: str | Path) -> None:
@@ -87,6 +97,7 @@ def animate(runs: list[tuple[str, object]], model, out: str | Path, fps: int = 3
 
     out = Path(out)
     check_format(out)
+    check_fps(fps)
     if view is not None:
         axes_idx = [AXIS_NAMES.index(a) for a in view]
     else:

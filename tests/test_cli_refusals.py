@@ -29,6 +29,8 @@ REFUSALS = {
     "animate-huge-t-end": (["animate", "projectile", "--t-end", "1e308", "--out", "o/a.gif"], "--t-end|dt = "),
     "animate-long-run": (["animate", "projectile", "--t-end", "1e6", "--out", "o/a.gif"],
                          "exceed steplab animate's limit of 100000 steps"),
+    "animate-fps-too-high": (["animate", "projectile", "--fps", "1000", "--out", "o/a.gif"],
+                             "--fps must be an integer from 1 to 100"),
     # 3: check refuses the dts run refuses
     "check-dt-longer-than-run": (["check", "oscillator", "--dt", "1e308"], "is longer than the run"),
     "check-dt-too-small": (["check", "oscillator", "--dt", "1e-320"], "time would not advance"),

@@ -23,19 +23,20 @@ def add_parser(sub, name: str) -> None:
     p.add_argument("--detector", choices=DETECTORS, metavar="NAME",
                    help="collision detector, one of %(choices)s (default: the scene's)")
     time_arguments(p)
-    p.add_argument("--fps", type=count, default=30, help="frames per second (default: 30)")
+    p.add_argument("--fps", type=count, default=30, help="frames per second, 1 to 100 (default: 30)")
     p.add_argument("--view", choices=("xy", "xz", "yz"), help="plane shown (default: the two axes moved along most)")
     p.add_argument("--out", type=Path, required=True, help="FILE.gif or FILE.mp4 (MP4 through imageio-ffmpeg's ffmpeg)")
 
 
 def command(args) -> int:
-    from steplab.animate import animate, check_format
+    from steplab.animate import animate, check_format, check_fps
     from steplab.integrators.simulate import simulate
     from steplab.physics.scene import load_scene
 
     from .run import collision_world, scene_method
 
     check_format(args.out)  # before the runs: a format that cannot be written is one line, status 2
+    check_fps(args.fps)
     scene = load_scene(args.scene)
     dt, t_end = time_span(scene, args)
     # each panel: (integrator, detector); --compare varies one of them
