@@ -40,16 +40,16 @@ def section_ratios(section: str, **overrides) -> dict[str, float]:
 
 
 class _SectionRatios:
-    """One section's ratios, measured once in ``setup_cache``; a name the section does not
-    record (an older steplab, a peer not installed) shows as n/a."""
+    """One section's ratios, measured once in each class's own ``setup_cache``; a name the section
+    does not record (an older steplab, a peer not installed) shows as n/a.
+
+    asv keys a ``setup_cache`` by the module and line where it is defined, so each class defines
+    its own: one inherited from here would be one cache, the first class's section's ratios, and
+    every other class's names n/a (tests/test_asv_suite.py)."""
 
     unit = "ratio"
     param_names = ["ratio"]
     timeout = 900
-    section = ""
-
-    def setup_cache(self):
-        return section_ratios(self.section)
 
     def track_ratio(self, ratios, ratio):
         return ratios.get(ratio, float("nan"))
@@ -60,7 +60,9 @@ class BenchRatio(_SectionRatios):
 
     params = SMALL_SYSTEM_RATIOS
     timeout = 300
-    section = "small_system"
+
+    def setup_cache(self):
+        return section_ratios("small_system")
 
 
 class LargeSystemRatios(_SectionRatios):
@@ -68,35 +70,45 @@ class LargeSystemRatios(_SectionRatios):
 
     params = ["vs_memory_bound_1e6", "vs_numba_1e6", "vs_memory_bound_cloth_1e5_springs",
               "vs_numba_cloth_1e5_springs"]
-    section = "large_systems"
+
+    def setup_cache(self):
+        return section_ratios("large_systems")
 
 
 class AccuracyMatchedRatios(_SectionRatios):
     """Time to a final error of 1e-8 m against scipy's DOP853 and diffrax's Tsit5 (the worse problem)."""
 
     params = ["vs_scipy_at_1e-8", "vs_diffrax_tsit5_at_1e-8"]
-    section = "accuracy_matched"
+
+    def setup_cache(self):
+        return section_ratios("accuracy_matched")
 
 
 class BroadphaseRatio(_SectionRatios):
     """The fastest broadphase method on 10^5 spheres against scipy's cKDTree."""
 
     params = ["vs_ckdtree_1e5"]
-    section = "broadphase"
+
+    def setup_cache(self):
+        return section_ratios("broadphase")
 
 
 class BatchingRatios(_SectionRatios):
     """Many simulations in one vmapped call against a Python loop of single compiled runs."""
 
     params = ["batched_vs_loop_initial_conditions", "batched_vs_loop_dt", "batched_vs_loop_springs"]
-    section = "batching"
+
+    def setup_cache(self):
+        return section_ratios("batching")
 
 
 class ImplicitClothRatios(_SectionRatios):
     """One implicit Euler step of the cloth (Newton to rtol, and one Newton iteration) against a semi-implicit one."""
 
     params = ["implicit_euler_cloth_step", "implicit_euler_one_newton_cloth_step"]
-    section = "implicit_euler_cloth"
+
+    def setup_cache(self):
+        return section_ratios("implicit_euler_cloth")
 
 
 class BallPitRatios(_SectionRatios):
