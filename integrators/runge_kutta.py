@@ -43,10 +43,13 @@ class ButcherTableau:
             raise ValueError(f"Butcher tableau with {stages} weights needs {stages - 1} rows "
                              f"of a and nodes c, got {len(self.a_lower)} and {len(self.c)}")
         for i, (row, ci) in enumerate(zip(self.a_lower, self.c), start=1):
+            # named as in Python and as in the textbook, which counts stages from 1: a_lower[0] is a_21
+            entries = f"a_lower[{i - 1}] ({f'a_{i + 1}1' if i == 1 else f'a_{i + 1}1 .. a_{i + 1}{i}'})"
             if len(row) != i:
-                raise ValueError(f"Butcher tableau row {i} of a must have {i} entries, got {len(row)}")
+                raise ValueError(f"Butcher tableau: {entries} must have {i} entries, got {len(row)}")
             if abs(sum(row) - ci) > TABLEAU_TOLERANCE:
-                raise ValueError(f"Butcher tableau row {i} of a sums to {sum(row)}, not c_{i} = {ci}")
+                raise ValueError(f"Butcher tableau: {entries} sums to {sum(row):.6g}, not its node c[{i - 1}] "
+                                 f"(c_{i + 1}) = {ci:.6g}")
         if abs(sum(self.b) - 1) > TABLEAU_TOLERANCE:
             raise ValueError(f"Butcher tableau weights b sum to {sum(self.b)}, not 1")
 

@@ -16,9 +16,11 @@ import numpy as np
 ORDER_TOLERANCE = 0.1
 #: relative tolerance of a predicted number (a height, a speed): generous, it is a prediction
 RELATIVE_TOLERANCE = 0.02
-#: an experimental stability limit, bisected over a finite run, may lie this far outside the
-#: predicted interval (slow growth near the limit takes long to show)
+#: an experimental stability limit is found to within this fraction: a run at the answer holds, one
+#: at a step this much longer diverges
 LIMIT_TOLERANCE = 0.03
+#: the stability exercise's run: a dt is stable when this many steps end without DivergenceError
+STABILITY_STEPS = 2000
 #: Ralston's method, the 2-stage 2nd order method with the smallest error constant: its
 #: entries a_21, b_1, b_2, c_2
 RALSTON_ENTRIES = (2 / 3, 1 / 4, 3 / 4, 2 / 3)
@@ -30,8 +32,10 @@ def _verdict(ok: bool, correct: str, hint: str) -> bool:
 
 
 def _number(x) -> float | None:
+    """``x`` as a finite float (a number, or an array of one element, as an answer read from a scene's
+    arrays is), or None."""
     try:
-        value = float(x)
+        value = float(np.asarray(x, dtype=float).reshape(()))
     except (TypeError, ValueError):
         return None
     return value if np.isfinite(value) else None
@@ -42,13 +46,13 @@ def _close(x, target: float, rtol: float) -> bool:
     return value is not None and abs(value - target) <= rtol * abs(target)
 
 
-def check_bounce_height(height, restitution: float = 0.858, drop_height: float = 0.92) -> bool:
-    """The height of the second bounce: each bounce keeps eps^2 of the height before."""
-    expected = restitution**4 * drop_height
+def check_bounce_height(height, bounce: int = 3, restitution: float = 0.858, drop_height: float = 0.92) -> bool:
+    """The height the ``bounce``-th bounce reaches: each bounce keeps eps^2 of the height before."""
+    expected = restitution ** (2 * bounce) * drop_height
     return _verdict(_close(height, expected, RELATIVE_TOLERANCE),
-                    f"the second bounce reaches eps^4 H = {expected:.4f} m",
+                    f"bounce {bounce} reaches eps^{2 * bounce} H = {expected:.4f} m",
                     f"{height!r} m is not it: the speed after a bounce is eps times the speed before, and "
-                    "the height goes as the speed squared; now bounce twice")
+                    f"the height goes as the speed squared; now bounce {bounce} times")
 
 
 def check_ralston(tableau, measured_order) -> bool:
@@ -69,41 +73,58 @@ def check_ralston(tableau, measured_order) -> bool:
         hint = ("second order, but not Ralston's: Ralston takes c_2 = 2/3" if second_order else
                 "two stages, sum(b) = 1 and b_2 c_2 = 1/2 for second order; Ralston takes c_2 = 2/3")
         return _verdict(False, "", hint)
-    return _verdict(_close(measured_order, 2.0, ORDER_TOLERANCE / 2),
-                    f"Ralston's tableau, and a measured order of {_number(measured_order):.2f}: second order",
+    order_ok = _close(measured_order, 2.0, ORDER_TOLERANCE / 2)
+    return _verdict(order_ok,
+                    f"Ralston's tableau, and a measured order of {_number(measured_order):.2f}: second order"
+                    if order_ok else "",
                     f"the tableau is right; the measured order {measured_order!r} is not about 2: fit log(error) "
                     "against log(dt) (fit_order(error_curve(...)))")
 
 
-def check_stability_limit(dt_found, scene: str = "soft-cube", integrator: str = "semi-implicit-euler") -> bool:
-    """An experimental largest stable dt against ``steplab check``'s prediction for the scene.
+def check_stability_limit(dt_found, scene: str = "soft-cube", integrator: str = "semi-implicit-euler",
+                          steps: int = STABILITY_STEPS) -> bool:
+    """An experimental largest stable dt, by the exercise's definition, set beside ``steplab check``'s prediction.
 
-    ``steplab check`` predicts from the stiffest mode: ``dt_max`` if that mode were undamped,
-    ``damped dt_max`` at its damping ratio. The other modes are damped differently, so a
-    measured limit lies between the two (within LIMIT_TOLERANCE).
+    The answer is right when a run of ``steps`` steps at ``dt_found`` ends without
+    ``DivergenceError`` and one at a step LIMIT_TOLERANCE longer does not: the limit the
+    experiment defines, found to within LIMIT_TOLERANCE. The verdict then sets it beside the
+    prediction from the stiffest mode that ``steplab check`` prints: ``dt_max`` if that mode were
+    undamped, ``damped dt_max`` at its damping ratio (on the soft cube the measured limit lies
+    between the two; the other modes are damped differently). Copying a predicted limit is not
+    an answer: the undamped one is past the limit the experiment finds.
     """
-    from steplab.integrators import get_integrator
+    from steplab.integrators import DivergenceError, get_integrator, simulate
     from steplab.integrators.stable_dt import stable_steps
     from steplab.physics.scene import load_scene
 
-    model = load_scene(scene)
-    _, (row,) = stable_steps(model.model, model.y0[0], [get_integrator(integrator)])
-    lo, hi = sorted([row.dt_max_damped, row.dt_max])
     value = _number(dt_found)
-    ok = value is not None and lo * (1 - LIMIT_TOLERANCE) <= value <= hi * (1 + LIMIT_TOLERANCE)
-    if ok:
-        return _verdict(True, f"{value:.4g} s, between steplab check's damped ({lo:.4g} s) and undamped "
-                        f"({hi:.4g} s) limits", "")
-    # a hint guides the experiment; it never prints the interval, which is the answer
-    if value is None:
-        hint = ("no dt yet: start from a dt that runs (the scene's) and one that diverges, and bisect "
-                "between them, calling a run stable when it finishes without DivergenceError")
-    elif value < lo:
-        hint = f"{value:.4g} s runs, but so do larger steps: the limit is higher; keep bisecting upwards"
-    else:
-        hint = (f"{value:.4g} s is past the limit: over enough steps a run there diverges (try more steps, "
-                "or a smaller dt)")
-    return _verdict(False, "", hint)
+    if value is None or value <= 0:
+        # a hint guides the experiment; it never prints the limit, which is the answer
+        return _verdict(False, "", "no dt yet: start from a dt that runs (the scene's) and one that diverges, "
+                        "and bisect between them, calling a run stable when it finishes without DivergenceError")
+    loaded = load_scene(scene)
+
+    def diverges(dt: float) -> int | None:
+        """The step at which a run of ``steps`` steps of ``dt`` diverges, or None when it holds."""
+        try:
+            simulate(loaded.model, integrator, loaded.y0, 0.0, dt=dt, n_steps=steps)
+        except DivergenceError as err:
+            return err.step
+        return None
+
+    failed = diverges(value)
+    if failed is not None:
+        return _verdict(False, "", f"{value:.4g} s is past the limit: a run of {steps} steps there diverges at "
+                        f"step {failed}; keep bisecting downwards")
+    longer = value * (1 + LIMIT_TOLERANCE)
+    if diverges(longer) is None:
+        return _verdict(False, "", f"{value:.4g} s runs, but so does a step {LIMIT_TOLERANCE:.0%} longer: the limit "
+                        "is higher; keep bisecting upwards")
+    _, (row,) = stable_steps(loaded.model, loaded.y0[0], [get_integrator(integrator)])
+    lo, hi = sorted([row.dt_max_damped, row.dt_max])
+    where = "between" if lo <= value <= hi else "outside"
+    return _verdict(True, f"{value:.4g} s: {steps} steps there hold, {longer:.4g} s diverges; {where} steplab "
+                    f"check's damped ({lo:.4g} s) and undamped ({hi:.4g} s) limits", "")
 
 
 def check_tunnelling_speed(speed, scene: str = "tunnelling") -> bool:
@@ -135,6 +156,6 @@ def check_position_verlet(stepper, measured_order) -> bool:
     if not np.allclose(mine, theirs, rtol=0, atol=1e-12):
         return _verdict(False, "", "its steps differ from drift-kick-drift: drift the positions half a step, "
                         "kick the velocity a whole step with the force there, drift half a step again")
-    return _verdict(_close(measured_order, 2.0, ORDER_TOLERANCE / 2),
-                    f"drift-kick-drift, order {_number(measured_order):.2f}",
+    order_ok = _close(measured_order, 2.0, ORDER_TOLERANCE / 2)
+    return _verdict(order_ok, f"drift-kick-drift, order {_number(measured_order):.2f}" if order_ok else "",
                     f"the steps are right; the measured order {measured_order!r} is not about 2")

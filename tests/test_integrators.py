@@ -401,8 +401,8 @@ def test_references_are_tight_in_absolute_terms(reference_run):
 
 
 def test_butcher_tableau_rejects_inconsistent_coefficients():
-    with pytest.raises(ValueError, match="row 1"):
-        ButcherTableau(a_lower=((0.5,),), b=(0.5, 0.5), c=(1.0,))  # row sum 0.5 != c_1
+    with pytest.raises(ValueError, match=r"a_lower\[0\] \(a_21\) sums to 0.5"):
+        ButcherTableau(a_lower=((0.5,),), b=(0.5, 0.5), c=(1.0,))  # row sum 0.5 != c_2
     with pytest.raises(ValueError, match="sum to"):
         ButcherTableau(a_lower=((1.0,),), b=(0.5, 0.4), c=(1.0,))  # sum(b) = 0.9
     with pytest.raises(ValueError, match="entries"):
