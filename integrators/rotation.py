@@ -27,8 +27,8 @@ import numpy as np
 from steplab.physics import quaternion as quat
 from steplab.physics._array import is_numpy, norm
 
-from .base import Integrator
-from .simulate import DIVERGENCE_FACTOR, DivergenceError
+from .base import Integrator, check_count, check_real
+from .simulate import DIVERGENCE_FACTOR, MAX_STEPS, DivergenceError
 
 #: Newton iterations the implicit midpoint rule may take; it converges quadratically, to
 #: round-off in 3-5 iterations for h |omega| < 1, so needing more means the step is too large
@@ -374,7 +374,19 @@ def simulate_rotation(method: RotationMethod, model, q0, omega0, dt: float, n_st
         omega became non-finite or grew beyond :data:`.simulate.DIVERGENCE_FACTOR` times
         its start (or 1 rad/s).
     """
+    if isinstance(method, str):  # a registry name, as simulate takes one
+        from .rotation_registry import get_rotation
+
+        method = get_rotation(method)
+    if backend not in ("numpy", "jax", "numba"):
+        raise ValueError(f"simulate_rotation: backend must be 'numpy', 'jax' or 'numba', got {backend!r}")
+    check_count("simulate_rotation", "n_steps", n_steps, MAX_STEPS, "steplab.integrators.simulate.MAX_STEPS")
+    check_count("simulate_rotation", "save_every", save_every, MAX_STEPS, "steplab.integrators.simulate.MAX_STEPS")
+    check_real("simulate_rotation", "dt", dt, lambda h: h > 0, "a step > 0 s")
     q, omega = np.asarray(q0, float), np.asarray(omega0, float)
+    if q.ndim != 2 or q.shape[1:] != (4,) or omega.shape != (len(q), 3):
+        raise ValueError(f"simulate_rotation: q0 must have shape (R, 4) (unit quaternions) and omega0 (R, 3), "
+                         f"got {q.shape} and {omega.shape}")
     limit = DIVERGENCE_FACTOR * max(1.0, float(np.max(np.abs(omega), initial=0.0)))
     if backend == "jax":
         ts, qs, omegas = _compiled_rotation(method, model, q, omega, dt, n_steps, t0, save_every)

@@ -6,8 +6,9 @@ import dataclasses
 import time
 
 import numpy as np
+from steplab.physics.attachments import attached_forces
 
-from .base import Solver, Stepper
+from .base import Solver, Stepper, check_count
 from .loop import compiled_loop, run_once
 from .position_based import PositionBased
 
@@ -166,10 +167,19 @@ def simulate(model, integrator, y0, t_start: float, t_end: float | None = None, 
         raise ValueError(f"backend must be 'numpy' or 'jax', got {backend!r}")
     if dt is None:
         raise ValueError("simulate needs the step dt")
+    check_count("simulate", "save_every", save_every, max(max_steps, 1), "max_steps")
+    if np.shape(y0) != (2, model.n_bodies, 3):
+        raise ValueError(f"simulate: y0 must have shape (2, {model.n_bodies}, 3) for this model ({model.n_bodies} "
+                         f"bodies; positions and velocities, x y z), got {np.shape(y0)}")
     if collisions is not None:
         if stepper is not None:
             raise ValueError("give collisions or stepper, not both")
         stepper = collisions.stepper
+    if stepper is None and attached_forces(model):
+        # their lever arms turn with the bodies: only the attached step moves them; the plain step would freeze them
+        raise ValueError("simulate: this model has springs or dampers at body-frame points (offsets), which turn "
+                         "with the bodies: pass stepper=attached_stepper(scene.rigid_bodies, rotation) "
+                         "(steplab.integrators.attached), as steplab run does")
     dtype = np.dtype(dtype or model.dtype)
     n = _requested_steps(t_start, t_end, n_steps, dt, dtype)
     if n > max_steps:

@@ -97,12 +97,18 @@ def check_stability_limit(dt_found, scene: str = "soft-cube", integrator: str = 
     from steplab.integrators.stable_dt import stable_steps
     from steplab.physics.scene import load_scene
 
+    loaded = load_scene(scene)
+    rows = stable_steps(loaded.model, loaded.y0[0], [get_integrator(integrator)])[1]
+    if not rows or rows[0].dt_max is None:  # a solver, an unconditionally stable method, or no spring to limit it
+        raise ValueError(f"check_stability_limit: {integrator} has no stability limit on {scene} to find (steplab "
+                         "check predicts none); the exercise is for an explicit fixed-step method on a scene "
+                         "with springs, such as semi-implicit-euler on soft-cube")
+    lo, hi = sorted([rows[0].dt_max_damped, rows[0].dt_max])
     value = _number(dt_found)
     if value is None or value <= 0:
         # a hint guides the experiment; it never prints the limit, which is the answer
         return _verdict(False, "", "no dt yet: start from a dt that runs (the scene's) and one that diverges, "
                         "and bisect between them, calling a run stable when it finishes without DivergenceError")
-    loaded = load_scene(scene)
 
     def diverges(dt: float) -> int | None:
         """The step at which a run of ``steps`` steps of ``dt`` diverges, or None when it holds."""
@@ -120,8 +126,6 @@ def check_stability_limit(dt_found, scene: str = "soft-cube", integrator: str = 
     if diverges(longer) is None:
         return _verdict(False, "", f"{value:.4g} s runs, but so does a step {LIMIT_TOLERANCE:.0%} longer: the limit "
                         "is higher; keep bisecting upwards")
-    _, (row,) = stable_steps(loaded.model, loaded.y0[0], [get_integrator(integrator)])
-    lo, hi = sorted([row.dt_max_damped, row.dt_max])
     where = "between" if lo <= value <= hi else "outside"
     return _verdict(True, f"{value:.4g} s: {steps} steps there hold, {longer:.4g} s diverges; {where} steplab "
                     f"check's damped ({lo:.4g} s) and undamped ({hi:.4g} s) limits", "")
@@ -133,7 +137,11 @@ def check_tunnelling_speed(speed, scene: str = "tunnelling") -> bool:
     from steplab.physics.scene import load_scene
 
     shot = load_scene(scene)
-    (wall,) = [s for s in shot.collisions.shapes if isinstance(s, Box)]
+    walls = [] if shot.collisions is None else [s for s in shot.collisions.shapes if isinstance(s, Box)]
+    if len(walls) != 1:
+        raise ValueError(f"check_tunnelling_speed: the scene {scene!r} has {len(walls)} box walls; the exercise's "
+                         "scene has one (tunnelling)")
+    (wall,) = walls
     thickness, radius = float(wall.hi[0] - wall.lo[0]), float(shot.model.radii[0])
     expected = (thickness + 2 * radius) / shot.dt
     return _verdict(_close(speed, expected, RELATIVE_TOLERANCE),

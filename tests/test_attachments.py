@@ -296,9 +296,18 @@ def test_the_free_rotation_beside_the_translation_refuses_an_attached_scene():
     from steplab.integrators.scene_rotation import rotate_scene
 
     scene = load_scene("spring-pendulum")
-    trajectory = simulate(scene.model, "semi-implicit-euler", scene.y0, 0.0, dt=scene.dt, n_steps=2)
+    stepper = attached_stepper(scene.rigid_bodies, get_rotation(scene.rotation))
+    trajectory = simulate(scene.model, "semi-implicit-euler", scene.y0, 0.0, dt=scene.dt, n_steps=2, stepper=stepper)
     with pytest.raises(ValueError, match="step its translation and rotation together"):
         rotate_scene(scene, trajectory)
+
+
+def test_simulate_without_the_attached_step_refuses_an_attached_scene():
+    # the plain step would keep the lever arms at their start: a wrong answer (y after 1 s 6.9e-5 m, not 1.66e-3)
+    scene = load_scene("spring-pendulum")
+    for method in ("semi-implicit-euler", "rk4", "xpbd"):
+        with pytest.raises(ValueError, match="springs or dampers at body-frame points.*attached_stepper"):
+            simulate(scene.model, method, scene.y0, 0.0, dt=scene.dt, n_steps=2)
 
 
 def random_attached_scene(seed: int):

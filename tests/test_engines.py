@@ -189,6 +189,23 @@ def test_what_an_engine_cannot_express_is_one_line_naming_it():
         build("havok", drag)
 
 
+@pytest.mark.parametrize("engine", ["mujoco", "bullet", "box2d", "chipmunk"])
+def test_advance_refuses_a_step_a_save_and_a_state_it_cannot_take(engine):
+    # dt = 0 or NaN: MuJoCo and Box2D returned the start, Bullet and Chipmunk stepped backwards at dt < 0;
+    # save_every = 2.5 kept uninitialised memory as states; a state of another scene ran on
+    needs(engine)
+    problem = oscillator_problem()
+    run = build(engine, problem.model, None, 0.01, problem.y0)
+    for dt in (0.0, -0.01, float("nan")):
+        with pytest.raises(ValueError, match="dt must be a step > 0 s"):
+            run.advance(problem.y0, dt, 10)
+    with pytest.raises(ValueError, match="save_every must be a whole number"):
+        run.advance(problem.y0, 0.01, 10, save_every=2.5)
+    with pytest.raises(ValueError, match=r"y0 must have shape \(2, 2, 3\)"):
+        run.advance(np.zeros((2, 5, 3)), 0.01, 10)
+    assert run.advance(problem.y0, 0.01, 10, save_every=5).y.shape == (3, 2, 2, 3)
+
+
 def test_engines_study_says_how_to_install_the_extra(monkeypatch, capsys):
     import steplab.engines
     from steplab import studies

@@ -173,6 +173,19 @@ def test_exact_integrator_refuses_a_spring_scene():
         simulate(problem.model, "exact", problem.y0, 0.0, 1.0, 0.1)
 
 
+@pytest.mark.parametrize("backend", ["numpy", "jax"])
+def test_simulate_refuses_a_state_of_another_shape_and_a_save_every_that_is_not_a_count(backend):
+    # a y0 of another model ran on, silently, where the forces broadcast; save_every = 2.5 returned
+    # uninitialised memory as states (NumPy) or a while_loop type error (JAX)
+    problem = oscillator()
+    for y0 in (problem.y0[0], np.zeros((2, 5, 3)), problem.y0.ravel()):
+        with pytest.raises(ValueError, match=r"y0 must have shape \(2, 2, 3\) .* got \("):
+            simulate(problem.model, "rk4", y0, 0.0, 0.1, 0.01, backend=backend)
+    for save_every in (2.5, 0, -1, True):
+        with pytest.raises(ValueError, match="save_every must be a whole number"):
+            simulate(problem.model, "rk4", problem.y0, 0.0, 0.1, 0.01, backend=backend, save_every=save_every)
+
+
 # --- (5) energy behaviour on the oscillator ---------------------------------------------------
 
 

@@ -117,6 +117,16 @@ def test_checks_accept_the_closed_forms_and_say_not_yet_otherwise(capsys):
     assert not any(ch.isdigit() for ch in blank), blank
 
 
+def test_a_check_called_on_what_it_cannot_judge_says_so_in_one_line():
+    # scipy-dop853 ran 2000-step experiments for minutes, then said "keep bisecting upwards"; a scene
+    # without the wall was "not enough values to unpack"
+    for integrator in ("scipy-dop853", "implicit-euler"):
+        with pytest.raises(ValueError, match=f"{integrator} has no stability limit on soft-cube"):
+            exercises.check_stability_limit(0.01, integrator=integrator)
+    with pytest.raises(ValueError, match="the scene 'drop' has 0 box walls"):
+        exercises.check_tunnelling_speed(10.0, scene="drop")
+
+
 def test_a_tableau_whose_rows_miss_their_nodes_is_named_as_the_exercise_names_it():
     # notebook 2 writes Ralston's entries as a_21, b_1, b_2, c_2 (stages from 1); Python counts from 0
     with pytest.raises(ValueError, match=r"a_lower\[0\] \(a_21\) sums to 0.5, not its node c\[0\] \(c_2\) = 0.666667"):

@@ -471,3 +471,19 @@ def test_every_methods_flip_period_converges_to_the_closed_form_at_its_order(nam
     expected = PERIOD_ORDER.get(name, method.order)
     assert slope == pytest.approx(expected, abs=0.2 if expected < 4 else 0.45), errors
     assert errors[1] < 5e-3  # near the closed form already
+
+
+def test_simulate_rotation_refuses_what_simulate_refuses_and_takes_a_name():
+    # backend "torch" ran NumPy; dt < 0 ran backwards; n_steps 0 or -5 returned the start; a name was
+    # "'str' object has no attribute 'step'"; a 1-D q0 an inhomogeneous-array error
+    q0, omega0 = Q0[None], FLIP[None]
+    bad = {"backend must be 'numpy', 'jax' or 'numba'": dict(backend="torch"),
+           "dt must be a step > 0 s": dict(dt=-0.01), "n_steps must be a whole number": dict(n_steps=0),
+           "save_every must be a whole number": dict(save_every=2.5),
+           r"q0 must have shape \(R, 4\)": dict(q0=Q0)}
+    for message, change in bad.items():
+        arguments = dict(q0=q0, omega0=omega0, dt=0.01, n_steps=10) | change
+        with pytest.raises(ValueError, match=message):
+            simulate_rotation(get_rotation("exponential-map"), FREE, **arguments)
+    named = simulate_rotation("exponential-map", FREE, q0, omega0, 0.01, 10)
+    assert np.array_equal(named[1], simulate_rotation(get_rotation("exponential-map"), FREE, q0, omega0, 0.01, 10)[1])

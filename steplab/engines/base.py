@@ -25,8 +25,9 @@ from typing import ClassVar
 
 import numpy as np
 
+from steplab.integrators.base import check_count, check_real
 from steplab.integrators.scene_rotation import RotationTrajectory
-from steplab.integrators.simulate import DivergenceError, Trajectory, divergence_limit, saved_steps
+from steplab.integrators.simulate import MAX_STEPS, DivergenceError, Trajectory, divergence_limit, saved_steps
 from steplab.physics import Dampers, Gravity, Springs
 from steplab.physics.collision import Box, Collision, CollisionLog, OrientedBox, Plane
 from steplab.physics.rigid_body import RigidBodies, principal_inertia
@@ -423,8 +424,12 @@ class EngineRun:
         built without ``bodies``): orientations and world-frame angular velocities as the engine
         reports them. DivergenceError also when an angular velocity becomes non-finite or absurd."""
         y0 = np.asarray(y0, dtype=float)
-        if n_steps < 1:
-            raise ValueError(f"n_steps must be >= 1, got {n_steps}")
+        if y0.shape != (2, self.parts.n, 3):
+            raise ValueError(f"{self.name}: y0 must have shape (2, {self.parts.n}, 3) (positions and velocities "
+                             f"of the scene's bodies), got {y0.shape}")
+        check_count(self.name, "n_steps", n_steps, MAX_STEPS, "steplab.integrators.simulate.MAX_STEPS")
+        check_count(self.name, "save_every", save_every, MAX_STEPS, "steplab.integrators.simulate.MAX_STEPS")
+        check_real(self.name, "dt", dt, lambda h: h > 0, "a step > 0 s")
         log_contacts = self.parts.collisions is not None if log_contacts is None else log_contacts
         saves = saved_steps(n_steps, save_every)
         out = np.empty((len(saves),) + y0.shape)
