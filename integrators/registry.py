@@ -85,8 +85,11 @@ def get_integrator(method: str | Integrator) -> Integrator:
         One line: an unknown name (with the valid ones, and any plugin that failed to
         load), or a ``module:Name`` that cannot be imported or is not an integrator.
     """
-    if isinstance(method, Integrator):
-        return method
+    if isinstance(method, Integrator):  # an object of the caller's: checked as a plugin's is
+        try:
+            return _as_integrator(method)[1]
+        except PluginError as err:
+            raise UnknownIntegratorError(str(err)) from None
     if isinstance(method, str) and ":" in method:
         try:
             obj = import_object(method)

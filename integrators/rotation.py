@@ -28,7 +28,7 @@ from steplab.physics import quaternion as quat
 from steplab.physics._array import is_numpy, norm
 
 from .base import Integrator, check_count, check_real
-from .simulate import DIVERGENCE_FACTOR, MAX_STEPS, DivergenceError
+from .simulate import ANY_COUNT, DIVERGENCE_FACTOR, MAX_STEPS, DivergenceError
 
 #: Newton iterations the implicit midpoint rule may take; it converges quadratically, to
 #: round-off in 3-5 iterations for h |omega| < 1, so needing more means the step is too large
@@ -381,7 +381,7 @@ def simulate_rotation(method: RotationMethod, model, q0, omega0, dt: float, n_st
     if backend not in ("numpy", "jax", "numba"):
         raise ValueError(f"simulate_rotation: backend must be 'numpy', 'jax' or 'numba', got {backend!r}")
     check_count("simulate_rotation", "n_steps", n_steps, MAX_STEPS, "steplab.integrators.simulate.MAX_STEPS")
-    check_count("simulate_rotation", "save_every", save_every, MAX_STEPS, "steplab.integrators.simulate.MAX_STEPS")
+    check_count("simulate_rotation", "save_every", save_every, ANY_COUNT, "a 64-bit integer")
     check_real("simulate_rotation", "dt", dt, lambda h: h > 0, "a step > 0 s")
     q, omega = np.asarray(q0, float), np.asarray(omega0, float)
     if q.ndim != 2 or q.shape[1:] != (4,) or omega.shape != (len(q), 3):

@@ -14,6 +14,8 @@ from .position_based import PositionBased
 
 #: default step budget of one run; a larger run must ask for it explicitly
 MAX_STEPS = 10_000_000
+#: save_every takes any whole number from 1 (one beyond the run's steps keeps the first state and the last)
+ANY_COUNT = 2**63 - 1
 #: a state this many times larger than the initial one (or than 1) has diverged
 DIVERGENCE_FACTOR = 1e12
 #: relative slack when dividing the interval by dt, so 0.2 / 0.2 is one step, not zero
@@ -167,7 +169,7 @@ def simulate(model, integrator, y0, t_start: float, t_end: float | None = None, 
         raise ValueError(f"backend must be 'numpy' or 'jax', got {backend!r}")
     if dt is None:
         raise ValueError("simulate needs the step dt")
-    check_count("simulate", "save_every", save_every, max(max_steps, 1), "max_steps")
+    check_count("simulate", "save_every", save_every, ANY_COUNT, "a 64-bit integer")
     if np.shape(y0) != (2, model.n_bodies, 3):
         raise ValueError(f"simulate: y0 must have shape (2, {model.n_bodies}, 3) for this model ({model.n_bodies} "
                          f"bodies; positions and velocities, x y z), got {np.shape(y0)}")
@@ -288,7 +290,10 @@ def _run_numpy(run: _FixedStepRun) -> Trajectory:
     start = time.perf_counter()
     carry = integrator.init(model, t_start, y)
     for k in range(n):
-        y, carry = step(t_start + k * dt, y, dt, carry)
+        result = step(t_start + k * dt, y, dt, carry)
+        if k == 0:
+            _check_step_result(integrator, result, y.shape)
+        y, carry = result
         # one reduction: NaN fails the comparison, so this also catches non-finite states
         if not np.abs(y).max() <= limit:
             raise DivergenceError(integrator.name, dt, k + 1, t_start + (k + 1) * dt)
@@ -301,6 +306,17 @@ def _run_numpy(run: _FixedStepRun) -> Trajectory:
     if bar is not None:
         bar.close()
     return Trajectory(run.ts, out, integrator.name, dt, n, "numpy", wall, collisions=getattr(step, "log", None))
+
+
+def _check_step_result(integrator, result, shape) -> None:
+    """Refuse (one line) a first step that is not ``(y, carry)`` with y of the state's shape: a Stepper of the
+    user's that returns y alone was unpacked along its first axis, and failed steps later, deep in a force."""
+    if not (isinstance(result, tuple) and len(result) == 2 and np.shape(result[0]) == shape):
+        got = (f"a tuple of {len(result)}" if isinstance(result, tuple) and len(result) != 2 else
+               f"y of shape {np.shape(result[0])}" if isinstance(result, tuple) else
+               f"a {type(result).__name__}" + (f" of shape {np.shape(result)}" if hasattr(result, "shape") else ""))
+        raise TypeError(f"{integrator.name}: step(model, t, y, dt, carry) must return (y_next, carry) with y_next "
+                        f"of shape {shape}; it returned {got}")
 
 
 def _progress_bar(n, enabled):

@@ -35,6 +35,7 @@ from steplab.integrators import (
     Integrator,
     NotConstantForceError,
     Stepper,
+    UnknownIntegratorError,
     get_integrator,
     simulate,
 )
@@ -184,6 +185,33 @@ def test_simulate_refuses_a_state_of_another_shape_and_a_save_every_that_is_not_
     for save_every in (2.5, 0, -1, True):
         with pytest.raises(ValueError, match="save_every must be a whole number"):
             simulate(problem.model, "rk4", problem.y0, 0.0, 0.1, 0.01, backend=backend, save_every=save_every)
+
+
+def test_a_users_stepper_that_returns_the_state_alone_or_has_no_name_is_one_line():
+    # notebook 5's likeliest slip: return y_next without the carry; the state was unpacked along its
+    # first axis and a force failed steps later ("invalid index to scalar variable"); no name failed
+    # only when the trajectory was made, after the whole run
+    import dataclasses
+
+    @dataclasses.dataclass(frozen=True)
+    class Forgetful(Stepper):
+        name, order, evaluations = "forgetful", 1, 1
+
+        def step(self, model, t, y, dt, carry):
+            return model.xp.stack([y[0] + dt * y[1], y[1]])
+
+    @dataclasses.dataclass(frozen=True)
+    class Nameless(Stepper):
+        order, evaluations = 1, 1
+
+        def step(self, model, t, y, dt, carry):
+            return y, carry
+
+    problem = oscillator()
+    with pytest.raises(TypeError, match=r"forgetful: step\(model, t, y, dt, carry\) must return \(y_next, carry\)"):
+        simulate(problem.model, Forgetful(), problem.y0, 0.0, 0.1, 0.01)
+    with pytest.raises(UnknownIntegratorError, match='Nameless needs a class attribute name = "..."'):
+        simulate(problem.model, Nameless(), problem.y0, 0.0, 0.1, 0.01)
 
 
 # --- (5) energy behaviour on the oscillator ---------------------------------------------------

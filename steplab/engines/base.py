@@ -27,7 +27,14 @@ import numpy as np
 
 from steplab.integrators.base import check_count, check_real
 from steplab.integrators.scene_rotation import RotationTrajectory
-from steplab.integrators.simulate import MAX_STEPS, DivergenceError, Trajectory, divergence_limit, saved_steps
+from steplab.integrators.simulate import (
+    ANY_COUNT,
+    MAX_STEPS,
+    DivergenceError,
+    Trajectory,
+    divergence_limit,
+    saved_steps,
+)
 from steplab.physics import Dampers, Gravity, Springs
 from steplab.physics.collision import Box, Collision, CollisionLog, OrientedBox, Plane
 from steplab.physics.rigid_body import RigidBodies, principal_inertia
@@ -428,7 +435,7 @@ class EngineRun:
             raise ValueError(f"{self.name}: y0 must have shape (2, {self.parts.n}, 3) (positions and velocities "
                              f"of the scene's bodies), got {y0.shape}")
         check_count(self.name, "n_steps", n_steps, MAX_STEPS, "steplab.integrators.simulate.MAX_STEPS")
-        check_count(self.name, "save_every", save_every, MAX_STEPS, "steplab.integrators.simulate.MAX_STEPS")
+        check_count(self.name, "save_every", save_every, ANY_COUNT, "a 64-bit integer")
         check_real(self.name, "dt", dt, lambda h: h > 0, "a step > 0 s")
         log_contacts = self.parts.collisions is not None if log_contacts is None else log_contacts
         saves = saved_steps(n_steps, save_every)
