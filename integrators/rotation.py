@@ -374,10 +374,9 @@ def simulate_rotation(method: RotationMethod, model, q0, omega0, dt: float, n_st
         omega became non-finite or grew beyond :data:`.simulate.DIVERGENCE_FACTOR` times
         its start (or 1 rad/s).
     """
-    if isinstance(method, str):  # a registry name, as simulate takes one
-        from .rotation_registry import get_rotation
-
-        method = get_rotation(method)
+    if not isinstance(method, RotationMethod):  # the registry imports this module: a name is the caller's to look up
+        raise TypeError(f"simulate_rotation: method must be a RotationMethod (get_rotation({method!r}) for a name), "
+                        f"got a {type(method).__name__}")
     if backend not in ("numpy", "jax", "numba"):
         raise ValueError(f"simulate_rotation: backend must be 'numpy', 'jax' or 'numba', got {backend!r}")
     check_count("simulate_rotation", "n_steps", n_steps, MAX_STEPS, "steplab.integrators.simulate.MAX_STEPS")

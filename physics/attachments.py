@@ -29,6 +29,7 @@ from typing import NamedTuple
 import numpy as np
 
 from . import quaternion as quat
+from . import rules
 from .rigid_body import torque_of_forces
 
 #: what a scene is told when it attaches off-centre to a point mass
@@ -119,12 +120,13 @@ def model_at(model, orientations, angular_velocities, xp=np, dtype=np.float64):
     this with jax.numpy); the other forces are the same objects. The result is a model of the same
     class: the model imports the forces, which import this module, so it is not imported here.
     """
-    forces = [dataclasses.replace(f, attachment=attachment_at(xp, f.attachment.offsets, f.i, f.j, orientations,
-                                                              angular_velocities))
-              if getattr(f, "attachment", None) is not None else f for f in model.forces]
-    with contextlib.nullcontext() if xp is np else _constants_folded():
-        return type(model)(np.asarray(model.masses), np.asarray(model.radii), forces, model.pinned, model.names,
-                           xp, dtype)
+    with rules.trusted():  # the parts of a checked model, every step: not checked again
+        forces = [dataclasses.replace(f, attachment=attachment_at(xp, f.attachment.offsets, f.i, f.j, orientations,
+                                                                  angular_velocities))
+                  if getattr(f, "attachment", None) is not None else f for f in model.forces]
+        with contextlib.nullcontext() if xp is np else _constants_folded():
+            return type(model)(np.asarray(model.masses), np.asarray(model.radii), forces, model.pinned, model.names,
+                               xp, dtype)
 
 
 def _constants_folded():

@@ -12,6 +12,7 @@ from ._array import dot, inverse_length, norm, rows, safe_unit, scatter_pair_blo
 from .force import Force
 from .jacobian_blocks import PairJacobian
 from .pair_laws import damper_position_block, damper_tension, damper_velocity_block
+from .rules import require_indices, require_pairs, skip_checks
 from .scene_toml import REQUIRED
 
 
@@ -40,6 +41,14 @@ class Dampers(Force):
 
     name: ClassVar[str] = "dampers"
     array_of_tables: ClassVar[bool] = True
+
+    def __post_init__(self):
+        if not skip_checks(self.i, self.j, self.damping):  # a scene file's rules: two different bodies, damping >= 0
+            require_pairs("Dampers", self.i, self.j, damping=(self.damping, {"nonnegative": True}))
+
+    def check_bodies(self, n_bodies: int) -> None:
+        require_indices("Dampers", self.i, n_bodies)
+        require_indices("Dampers", self.j, n_bodies)
 
     @classmethod
     def from_scene(cls, tables, bodies) -> Dampers:

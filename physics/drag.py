@@ -9,6 +9,7 @@ import numpy as np
 
 from ._array import block_diagonal, norm
 from .force import Force
+from .rules import number_problem, require, skip_checks
 
 #: density of air at sea level and 15 C, kg/m^3
 AIR_DENSITY = 1.225
@@ -32,6 +33,17 @@ class Drag(Force):
 
     name: ClassVar[str] = "drag"
 
+    def __post_init__(self):
+        if not skip_checks(self.beta):
+            require("Drag: beta", number_problem(self.beta, nonnegative=True))
+            if np.ndim(self.beta) != 1:
+                raise ValueError(f"Drag: beta must be one value per body, shape (N,), got shape {np.shape(self.beta)}")
+
+    def check_bodies(self, n_bodies: int) -> None:
+        if np.shape(self.beta) != (n_bodies,):
+            raise ValueError(f"Drag: beta must be one value per body, shape ({n_bodies},), got shape "
+                             f"{np.shape(self.beta)}")
+
     @classmethod
     def from_scene(cls, table, bodies) -> Drag:
         """``[forces.drag]``: ``density`` (kg/m^3, default air), ``drag_coefficient`` (default 0.4)
@@ -44,6 +56,10 @@ class Drag(Force):
     @classmethod
     def from_coefficients(cls, radii, density=AIR_DENSITY, drag_coefficient=0.4, mask=None):
         """Drag on spheres of the given radii in a fluid of ``density`` (kg/m^3)."""
+        # a scene file's [forces.drag] rules: density > 0, drag_coefficient >= 0; radii as a model's
+        require("Drag: density", number_problem(density, positive=True))
+        require("Drag: drag_coefficient", number_problem(drag_coefficient, nonnegative=True))
+        require("Drag: radii", number_problem(radii, positive=True))
         radii = np.asarray(radii, dtype=float)
         beta = 0.5 * density * drag_coefficient * np.pi * radii**2
         if mask is not None:

@@ -47,6 +47,11 @@ class Force:
         """
         raise NotImplementedError(f"{cls.__qualname__} cannot be declared in a scene file")
 
+    def check_bodies(self, n_bodies: int) -> None:
+        """Refuse (ValueError, one line) what does not fit a model of ``n_bodies``: a body index out
+        of range, an array of one value per body of another length. The model calls it once,
+        when it is built; the default checks nothing."""
+
     def force(self, xp, q, v, m):
         """Force on each body, shape (N, 3), for positions ``q`` and velocities ``v`` (N, 3)."""
         raise NotImplementedError

@@ -9,6 +9,7 @@ import numpy as np
 
 from ._array import norm, safe_unit
 from .force import Force
+from .rules import direction, number_problem, require, skip_checks
 from .scene_toml import REQUIRED
 
 #: a body whose surface is within this distance of the plane touches it, m
@@ -52,6 +53,22 @@ class Friction(Force):
 
     name: ClassVar[str] = "friction"
     reactive: ClassVar[bool] = True
+
+    def __post_init__(self):
+        if skip_checks(self.mu_static, self.mu_dynamic, self.normal, self.height, self.radii):
+            return
+        # a scene file's [forces.friction] rules: mu_static, mu_dynamic >= 0; the normal normalised
+        # (a unit one kept to the byte), not zero; height finite
+        require("Friction: mu_static", number_problem(self.mu_static, nonnegative=True))
+        require("Friction: mu_dynamic", number_problem(self.mu_dynamic, nonnegative=True))
+        object.__setattr__(self, "normal", direction("Friction: normal", self.normal))
+        require("Friction: height", number_problem(self.height))
+        require("Friction: radii", number_problem(self.radii, positive=True))
+
+    def check_bodies(self, n_bodies: int) -> None:
+        if np.shape(self.radii) != (n_bodies,):
+            raise ValueError(f"Friction: radii must be one per body, shape ({n_bodies},), got shape "
+                             f"{np.shape(self.radii)}")
 
     @classmethod
     def from_scene(cls, table, bodies) -> Friction:

@@ -8,6 +8,7 @@ from typing import ClassVar
 import numpy as np
 
 from .force import Force
+from .rules import require, skip_checks, vector_problem
 
 #: standard gravity on Earth with +z up, m/s^2 (the lecture's g)
 EARTH_GRAVITY = (0.0, 0.0, -9.81)
@@ -27,6 +28,10 @@ class Gravity(Force):
 
     name: ClassVar[str] = "gravity"
     constant: ClassVar[bool] = True
+
+    def __post_init__(self):
+        if not skip_checks(self.g):  # as a scene file's g: 3 finite numbers
+            require("Gravity: g", vector_problem(self.g))
 
     @classmethod
     def from_scene(cls, table, bodies) -> Gravity:

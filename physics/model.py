@@ -15,6 +15,7 @@ import numpy as np
 
 from . import constraints
 from .force import Force
+from .rules import mass_problem, number_problem, numeric, require, short, skip_checks
 
 
 class Model:
@@ -38,9 +39,9 @@ class Model:
 
     def __init__(self, masses, radii, forces: Sequence[Force] = (), pinned=None, names=None,
                  xp=np, dtype=np.float64):
-        masses = np.asarray(masses, dtype=float)
+        forces = tuple(forces)
+        masses, pinned, names = self._checked(masses, radii, forces, pinned, names)
         n = masses.shape[0]
-        pinned = np.zeros(n, bool) if pinned is None else np.asarray(pinned, bool)
         self.xp = xp
         self.dtype = np.dtype(dtype)
         self.names = tuple(names) if names is not None else tuple(f"body{i}" for i in range(n))
@@ -72,6 +73,45 @@ class Model:
         if self.inextensible:
             self._energy_forces = constraints.without_inextensible(self.forces)
             self.acceleration = self._refuse_inextensible
+
+    @staticmethod
+    def _checked(masses, radii, forces, pinned, names):
+        """The bodies as a scene file's rules allow them (ValueError or TypeError, one line, else):
+        at least one body; masses > 0 with a finite inverse, radii > 0, finite, one of each per
+        body; ``pinned`` booleans and ``names`` strings, one per body; forces that fit them
+        (unchecked inside :func:`.rules.trusted`: the parts of a model already checked)."""
+        if skip_checks():
+            masses = np.asarray(masses, dtype=float)
+            pinned = np.zeros(masses.shape[0], bool) if pinned is None else np.asarray(pinned, bool)
+            return masses, pinned, names
+        arr = numeric(masses)
+        if arr is None or arr.ndim != 1 or arr.size == 0:
+            raise ValueError(f"Model: masses must be one mass per body, numbers of shape (N,) with N >= 1, got "
+                             f"{short(masses)}")
+        require("Model: masses", mass_problem(arr))
+        masses = np.asarray(masses, dtype=float)
+        n = masses.shape[0]
+        require("Model: radii", number_problem(radii, positive=True))
+        if np.shape(radii) != (n,):
+            raise ValueError(f"Model: radii must be one radius per body, shape ({n},) as masses, got shape "
+                             f"{np.shape(radii)}")
+        if pinned is None:
+            pinned = np.zeros(n, bool)
+        else:
+            pinned = np.asarray(pinned)
+            if pinned.dtype != bool or pinned.shape != (n,):
+                raise ValueError(f"Model: pinned must be one boolean per body, shape ({n},), got {short(pinned)}")
+        if names is not None:
+            if isinstance(names, str) or not all(isinstance(name, str) for name in names):
+                raise TypeError(f"Model: names must be a sequence of strings, one per body, got {short(names)}")
+            names = tuple(names)
+            if len(names) != n:
+                raise ValueError(f"Model: names must name each of the {n} bodies, got {len(names)} names")
+        for f in forces:
+            check = getattr(f, "check_bodies", None)
+            if check is not None:
+                check(n)
+        return masses, pinned, names
 
     @property
     def n_bodies(self) -> int:

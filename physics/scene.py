@@ -23,6 +23,7 @@ from steplab.core.registry import BUILTIN
 from . import rigid_body, soft_body, stacks
 from .forces import FORCES
 from .model import Model
+from .rules import mass_problem, restitution_problem
 from .scene_library import SCENES
 from .scene_toml import MAX_BODIES as MAX_BODIES
 from .scene_toml import MAX_PAIRS as MAX_PAIRS
@@ -252,9 +253,9 @@ class _SceneBuilder:
             table.fail(f"duplicate body name {name!r}", "name")
         if len(self.names) >= MAX_BODIES:
             table.fail(f"more than {MAX_BODIES} bodies")
-        if not np.float64(1.0) / mass < np.inf:  # a subnormal mass: a = F / m would overflow
-            table.fail(f"a body of mass {mass:.3g} kg has no finite inverse mass (the smallest mass is "
-                       f"{1 / np.finfo(float).max:.3g} kg)", "mass")
+        problem = mass_problem(mass)  # a subnormal mass: a = F / m would overflow
+        if problem:
+            table.fail(problem, "mass")
         if not (np.all(np.isfinite(position)) and np.all(np.isfinite(velocity))):
             table.fail(f"body {name!r} would be placed at a non-finite position or velocity (the numbers "
                        "overflow)")
@@ -320,9 +321,12 @@ class _SceneBuilder:
         for k, vertex in enumerate(mesh.vertices):  # pinned vertices stay put: no velocity
             self._append(t, f"{name}[{k}]", mass / n, radius, vertex, 0 * velocity if k in pinned else velocity,
                          k in pinned)
-        springs, dampers = soft_body.connect(mesh.vertices, pairs, self._stiffness(t),
-                                             t.number("damping", 0.0, nonnegative=True), offset)
-        if not np.all(np.isfinite(springs.rest_length)):
+        stiffness, damping = self._stiffness(t), t.number("damping", 0.0, nonnegative=True)
+        try:  # Springs refuses a non-finite rest length: vertices so far apart that it overflows
+            springs, dampers = soft_body.connect(mesh.vertices, pairs, stiffness, damping, offset)
+        except ValueError as err:
+            if "rest_length must be finite" not in str(err):
+                raise
             t.fail("vertices so far apart that a spring's rest length overflows")
         self.forces += [f for f in (springs, dampers) if f is not None]
 
@@ -482,8 +486,10 @@ class _SceneBuilder:
         method_fields = COLLISION_METHODS[method].from_scene(c.table(method))
         restitution = self._restitution(c, "restitution", 1.0)
         friction = c.number("friction", 0.0, nonnegative=True)
-        iterations = c.integer("bisection_iterations", collision_world.DEFAULT_BISECTION_ITERATIONS, 0, 60)
-        max_impacts = (c.integer("max_impacts_per_step", None, 1, 10**9) if "max_impacts_per_step" in c.data
+        iterations = c.integer("bisection_iterations", collision_world.DEFAULT_BISECTION_ITERATIONS, 0,
+                               collision_world.MAX_BISECTION_ITERATIONS)
+        max_impacts = (c.integer("max_impacts_per_step", None, 1, collision_world.MAX_IMPACTS_PER_STEP)
+                       if "max_impacts_per_step" in c.data
                        else collision_world.DEFAULT_MAX_IMPACTS_PER_STEP)  # None: scaled with the bodies
         broadphase = c.string("broadphase", DEFAULT_BROADPHASE, choices=tuple(METHODS))
         rest_speed = c.number("rest_speed", collision_world.DEFAULT_REST_SPEED, nonnegative=True)
@@ -537,6 +543,7 @@ class _SceneBuilder:
     @staticmethod
     def _restitution(t: Table, key: str, default):
         value = t.number(key, default)
-        if not 0 <= value <= 1:
-            t.fail(f"must be between 0 and 1 (a coefficient of restitution), got {value:g}", key)
+        problem = restitution_problem(value)
+        if problem:
+            t.fail(problem, key)
         return value

@@ -11,10 +11,14 @@ changes a study. The scene builder (:mod:`.scene`) and each force's ``from_scene
 
 from __future__ import annotations
 
-import math
 import tomllib
 
 import numpy as np
+
+from .rules import ZERO_DIRECTION, integer_problem, number_problem, unit_vector, vector_problem
+from .rules import kind as kind
+from .rules import short as short
+from .rules import to_float as to_float
 
 #: largest scene the loader builds (bodies; all-pairs soft bodies count their pairs)
 MAX_BODIES = 1_000_000
@@ -101,20 +105,18 @@ class Table:
         if isinstance(value, bool) or not isinstance(value, (int, float)):
             self.fail(f"must be a number, got {kind(value)}", key)
         value = to_float(value)
-        if not math.isfinite(value):
-            self.fail(f"must be finite, got {value}", key)
-        if positive and not value > 0:
-            self.fail(f"must be > 0, got {value:g}", key)
-        if nonnegative and not value >= 0:
-            self.fail(f"must be >= 0, got {value:g}", key)
+        problem = number_problem(value, positive, nonnegative)
+        if problem:
+            self.fail(problem, key)
         return value
 
     def integer(self, key, default=None, minimum=0, maximum=MAX_BODIES):
         value = self.raw(key, default)
-        if isinstance(value, bool) or not isinstance(value, int):
+        if not isinstance(value, int):  # a TOML integer, not a NumPy one
             self.fail(f"must be an integer, got {kind(value)}", key)
-        if not minimum <= value <= maximum:
-            self.fail(f"must be between {minimum} and {maximum}, got {value}", key)
+        problem = integer_problem(value, minimum, maximum)
+        if problem:
+            self.fail(problem, key)
         return value
 
     def string(self, key, default=None, choices=None):
@@ -147,10 +149,9 @@ class Table:
                 or any(isinstance(x, bool) or not isinstance(x, (int, float)) for x in value)):
             self.fail(f"must be a list of 3 numbers [x, y, z], got {short(value)}", key)
         vec = np.array([to_float(x) for x in value])
-        if not np.all(np.isfinite(vec)):
-            self.fail(f"must be finite, got {short(value)}", key)
-        if positive and not np.all(vec > 0):
-            self.fail(f"must be > 0 in every component, got {short(value)}", key)
+        problem = vector_problem(vec, positive, shown=value)
+        if problem:
+            self.fail(problem, key)
         return vec
 
     def direction(self, key, default=None) -> np.ndarray:
@@ -183,30 +184,8 @@ class Table:
 
 
 def unit(t: Table, key: str, vec: np.ndarray) -> np.ndarray:
-    """``vec`` normalised; scaled by its largest component first, so that neither a huge
-    ([1e200, 1e200, 0]) nor a subnormal vector over- or underflows to a zero direction."""
-    scale = np.max(np.abs(vec))
-    if not scale > 0:
-        t.fail("must be a non-zero vector", key)
-    vec = vec / scale
-    return vec / np.linalg.norm(vec)
-
-
-def to_float(value) -> float:
-    """A TOML number as a float; an integer too large for a float becomes inf (then refused)."""
-    try:
-        return float(value)
-    except OverflowError:
-        return math.inf if value > 0 else -math.inf
-
-
-def kind(value) -> str:
-    """What a TOML value is, for messages: "a string", "a list", ..."""
-    return {bool: "a boolean", int: "an integer", float: "a number", str: "a string",
-            list: "a list", dict: "a table"}.get(type(value), type(value).__name__)
-
-
-def short(value) -> str:
-    """``repr(value)`` cut to 60 characters, for messages."""
-    text = repr(value)
-    return text if len(text) <= 60 else text[:57] + "..."
+    """``vec`` normalised (:func:`.rules.unit_vector`); a zero vector fails."""
+    direction = unit_vector(vec)
+    if direction is None:
+        t.fail(ZERO_DIRECTION, key)
+    return direction

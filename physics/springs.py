@@ -12,6 +12,7 @@ from ._array import inverse_length, norm, rows, safe_unit, scatter_pair_blocks, 
 from .force import Force
 from .jacobian_blocks import PairJacobian
 from .pair_laws import spring_block, spring_potential, spring_tension, spring_transverse
+from .rules import require_indices, require_pairs, skip_checks
 from .scene_toml import REQUIRED
 
 
@@ -47,6 +48,18 @@ class Springs(Force):
 
     name: ClassVar[str] = "springs"
     array_of_tables: ClassVar[bool] = True
+
+    def __post_init__(self):
+        # a scene file's rules: two different bodies, stiffness > 0 (here also 0, and inf: an
+        # inextensible constraint, as a soft body's), rest_length >= 0
+        if not skip_checks(self.i, self.j, self.stiffness, self.rest_length):
+            require_pairs("Springs", self.i, self.j,
+                          stiffness=(self.stiffness, {"nonnegative": True, "infinite": True}),
+                          rest_length=(self.rest_length, {"nonnegative": True}))
+
+    def check_bodies(self, n_bodies: int) -> None:
+        require_indices("Springs", self.i, n_bodies)
+        require_indices("Springs", self.j, n_bodies)
 
     @classmethod
     def from_scene(cls, tables, bodies) -> Springs:

@@ -31,6 +31,7 @@ import dataclasses
 
 import numpy as np
 
+from ..rules import number_problem, require, restitution_problem, short
 from .compiled_response import impulse_rows, no_spin, resolve_rows
 from .shapes import DEFAULT_MATERIAL
 
@@ -83,6 +84,21 @@ class PairProperties:
     restitution: float = 1.0
     friction: float = 0.0
     table: dict = dataclasses.field(default_factory=dict)
+
+    def __post_init__(self):
+        # the rules of a scene file's [collisions] restitution and friction (physics/scene.py)
+        rules = [("", (self.restitution, self.friction))]
+        if not isinstance(self.table, dict):
+            raise TypeError(f"PairProperties: table must be a dict {{frozenset of materials: (restitution, "
+                            f"friction)}}, got {short(self.table)}")
+        for pair, value in self.table.items():
+            if not isinstance(value, (tuple, list)) or len(value) != 2:
+                raise TypeError(f"PairProperties: table[{short(pair)}] must be (restitution, friction), "
+                                f"got {short(value)}")
+            rules.append((f"table[{short(pair)}] ", value))
+        for where, (restitution, friction) in rules:
+            require(f"PairProperties: {where}restitution", restitution_problem(restitution))
+            require(f"PairProperties: {where}friction", number_problem(friction, nonnegative=True))
 
     def lookup(self, material_a: str = DEFAULT_MATERIAL, material_b: str = DEFAULT_MATERIAL) -> tuple[float, float]:
         return self.table.get(frozenset((material_a, material_b)), (self.restitution, self.friction))

@@ -17,6 +17,8 @@ from typing import ClassVar
 
 import numpy as np
 
+from ..rules import direction, number_problem, require, short, vector_problem
+
 #: the material of a body or shape that declares none
 DEFAULT_MATERIAL = "default"
 
@@ -68,6 +70,12 @@ class Plane(Shape):
 
     kind: ClassVar[str] = "plane"
 
+    def __post_init__(self):
+        # as a scene file's [[collisions.planes]] normal: 3 finite numbers, not zero, normalised
+        # (a unit normal is kept as it is, to the byte)
+        object.__setattr__(self, "normal", direction("Plane: normal", self.normal))
+        require("Plane: offset", number_problem(self.offset))
+
     def bounds(self):
         return None
 
@@ -83,6 +91,13 @@ class Box(Shape):
     trigger: bool = False
 
     kind: ClassVar[str] = "box"
+
+    def __post_init__(self):
+        require("Box: lo", vector_problem(self.lo))
+        require("Box: hi", vector_problem(self.hi))
+        if not np.all(np.asarray(self.hi) > np.asarray(self.lo)):
+            raise ValueError(f"Box: hi must exceed lo in every component, got lo = {short(self.lo)}, "
+                             f"hi = {short(self.hi)}")
 
     @classmethod
     def from_center(cls, center, size, **kwargs) -> Box:

@@ -7,6 +7,7 @@ from collections.abc import Callable
 
 import numpy as np
 
+from ..rules import integer_problem, number_problem, require, short
 from .detectors import DETECTORS
 from .events import cancel_triggers
 from .impact_cap import default_cap
@@ -18,6 +19,11 @@ from .solver_settings import ContactSolver
 
 #: bisection iterations of overlap testing (the lecture: "usually 5 iterations is pretty close")
 DEFAULT_BISECTION_ITERATIONS = 5
+#: the most bisection iterations a world takes (a scene file's bound too): 60 halvings resolve
+#: the collision time of any step to float64 round-off, and more would only spin
+MAX_BISECTION_ITERATIONS = 60
+#: the largest bound on the impacts of one step a world takes (a scene file's bound too)
+MAX_IMPACTS_PER_STEP = 10**9
 #: collisions resolved per step at most when a scene names no bound: None, scaled with the
 #: bodies (:func:`.impact_cap.default_cap`); a step that holds more raises ImpactCapError
 DEFAULT_MAX_IMPACTS_PER_STEP = None
@@ -95,15 +101,32 @@ class CollisionWorld:
 
     def __post_init__(self):
         DETECTORS.lookup(self.detector)
-        if self.bisection_iterations < 0:
-            raise ValueError(f"bisection_iterations must be >= 0, got {self.bisection_iterations}")
-        if not self.rest_speed >= 0:
-            raise ValueError(f"rest_speed must be >= 0, got {self.rest_speed}")
-        if self.max_impacts_per_step is not None and self.max_impacts_per_step < 1:
-            raise ValueError(f"max_impacts_per_step must be >= 1, got {self.max_impacts_per_step}")
+        # the same bounds as a scene file's [collisions] table (physics/scene.py), by the same rules
+        require("CollisionWorld: bisection_iterations",
+                integer_problem(self.bisection_iterations, 0, MAX_BISECTION_ITERATIONS))
+        require("CollisionWorld: rest_speed", number_problem(self.rest_speed, nonnegative=True))
+        if self.max_impacts_per_step is not None:
+            require("CollisionWorld: max_impacts_per_step",
+                    integer_problem(self.max_impacts_per_step, 1, MAX_IMPACTS_PER_STEP))
+        # a list is taken as the tuple it stands for; anything else is refused here, not at run time
+        for key, kind, what in (("shapes", Shape, "static shapes (Plane, Box, ...)"),
+                                ("materials", str, "material names, one per body")):
+            value = getattr(self, key)
+            if not isinstance(value, (tuple, list)) or not all(isinstance(x, kind) for x in value):
+                raise TypeError(f"CollisionWorld: {key} must be a tuple of {what}, got {short(value)}")
+            object.__setattr__(self, key, tuple(value))
+        if not isinstance(self.pair_properties, PairProperties):
+            raise TypeError(f"CollisionWorld: pair_properties must be a PairProperties, "
+                            f"got {short(self.pair_properties)}")
         if self.event_loop not in EVENT_LOOPS:
             raise ValueError(f"unknown event loop {self.event_loop!r}; valid: {', '.join(EVENT_LOOPS)}")
         COLLISION_METHODS.lookup(self.method)
+
+    def check_bodies(self, n_bodies: int) -> None:
+        """Refuse (ValueError, one line) materials that are not one per body of a model of ``n_bodies``."""
+        if self.materials and len(self.materials) != n_bodies:
+            raise ValueError(f"CollisionWorld: materials must name one material per body, or none (all "
+                             f"{DEFAULT_MATERIAL!r}): got {len(self.materials)} for {n_bodies} bodies")
 
     def impact_cap(self, n_bodies: int) -> int:
         """Impacts resolved per step at most, for a scene of ``n_bodies``."""
@@ -129,6 +152,7 @@ class CollisionWorld:
         detector "none": the integrator's own step, on any backend. ValueError for what
         collision handling cannot serve: a solver, or a model on another backend than NumPy.
         """
+        self.check_bodies(model.n_bodies)
         if self.detector == "none":
             return None
         if not hasattr(integrator, "step"):  # a solver: it has no steps to put collisions between

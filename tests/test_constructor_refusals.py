@@ -1,0 +1,127 @@
+"""The Python API refuses, in one line at construction, what a scene file refuses (physics/rules.py)."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from steplab.physics import Dampers, Drag, Friction, Gravity, Model, Springs
+from steplab.physics.collision.response import PairProperties
+from steplab.physics.collision.shapes import Box, Plane
+from steplab.physics.collision.world import CollisionWorld
+
+NAN = float("nan")
+UP = np.array([0.0, 0.0, 1.0])
+FLOOR = Plane(UP, 0.0, "floor")
+
+
+def pair(k=10.0, rest=1.0, i=0, j=1):
+    return Springs(np.array([i]), np.array([j]), np.array([k]), np.array([rest]))
+
+
+REFUSALS = [
+    # 1. gravity: 3 finite numbers
+    (lambda: Gravity(-9.81), ValueError, "Gravity: g must be 3 numbers"),
+    (lambda: Gravity(np.array([0, -9.81])), ValueError, "Gravity: g must be 3 numbers"),
+    (lambda: Gravity(np.array([0, 0, NAN])), ValueError, "Gravity: g must be finite"),
+    # 2. restitution in [0, 1], friction >= 0, finite
+    (lambda: PairProperties(2.0), ValueError, "PairProperties: restitution must be between 0 and 1"),
+    (lambda: PairProperties(-0.5), ValueError, "PairProperties: restitution must be between 0 and 1"),
+    (lambda: PairProperties(NAN), ValueError, "PairProperties: restitution must be finite"),
+    (lambda: PairProperties(0.5, -1.0), ValueError, "PairProperties: friction must be >= 0"),
+    (lambda: PairProperties(0.5, NAN), ValueError, "PairProperties: friction must be finite"),
+    (lambda: PairProperties(0.5, 0.0, {frozenset({"a"}): (1.5, 0.0)}), ValueError,
+     "PairProperties: table[frozenset({'a'})] restitution must be between 0 and 1"),
+    # 3. shapes
+    (lambda: Plane(np.zeros(3)), ValueError, "Plane: normal must be a non-zero vector"),
+    (lambda: Plane(np.array([0, NAN, 1.0])), ValueError, "Plane: normal must be finite"),
+    (lambda: Plane(UP, NAN), ValueError, "Plane: offset must be finite"),
+    (lambda: Box(np.array([1.0, 1, 1]), np.zeros(3)), ValueError, "Box: hi must exceed lo"),
+    (lambda: Box(np.zeros(2), np.ones(3)), ValueError, "Box: lo must be 3 numbers"),
+    # 4. the collision world
+    (lambda: CollisionWorld("overlap", (FLOOR,), bisection_iterations=10**7), ValueError,
+     "CollisionWorld: bisection_iterations must be between 0 and 60"),
+    (lambda: CollisionWorld("overlap", (FLOOR,), bisection_iterations=2.5), ValueError,
+     "CollisionWorld: bisection_iterations must be an integer"),
+    (lambda: CollisionWorld(shapes=FLOOR), TypeError, "CollisionWorld: shapes must be a tuple of static shapes"),
+    (lambda: CollisionWorld(shapes=(FLOOR,), materials="golf"), TypeError,
+     "CollisionWorld: materials must be a tuple of material names"),
+    (lambda: CollisionWorld(max_impacts_per_step=0.5), ValueError,
+     "CollisionWorld: max_impacts_per_step must be an integer"),
+    (lambda: CollisionWorld(rest_speed=NAN), ValueError, "CollisionWorld: rest_speed must be finite"),
+    (lambda: CollisionWorld(pair_properties=0.5), TypeError, "CollisionWorld: pair_properties must be"),
+    # 5. the model's bodies
+    (lambda: Model([1.0, 1.0], [0.1]), ValueError, "Model: radii must be one radius per body"),
+    (lambda: Model(1.0, [0.1]), ValueError, "Model: masses must be one mass per body"),
+    (lambda: Model(None, [0.1]), ValueError, "Model: masses must be one mass per body"),
+    (lambda: Model([], []), ValueError, "Model: masses must be one mass per body"),
+    (lambda: Model([1.0, 1.0], [0.1, 0.1], pinned="no"), ValueError, "Model: pinned must be one boolean per body"),
+    (lambda: Model([1.0, 1.0], [0.1, 0.1], pinned=[True]), ValueError, "Model: pinned must be one boolean per body"),
+    (lambda: Model([1.0, 1.0], [0.1, 0.1], names=["a"]), ValueError, "Model: names must name each of the 2"),
+    (lambda: Model([1.0, -1.0], [0.1, 0.1]), ValueError, "Model: masses must be > 0, got -1 (element 1)"),
+    (lambda: Model([0.0], [0.1]), ValueError, "Model: masses must be > 0"),
+    (lambda: Model([NAN], [0.1]), ValueError, "Model: masses must be finite"),
+    (lambda: Model([np.inf], [0.1], pinned=[True]), ValueError, "Model: masses must be finite"),
+    (lambda: Model([1e-320], [0.1]), ValueError, "Model: masses: a body of mass 1e-320 kg has no finite inverse mass"),
+    (lambda: Model([1.0], [-0.1]), ValueError, "Model: radii must be > 0"),
+    # 6. forces
+    (lambda: Springs(0, 1, 10.0, 1.0), ValueError, "Springs: i must be a 1-D array of body indices"),
+    (lambda: pair(i=-1), ValueError, "Springs: i must be body indices >= 0"),
+    (lambda: pair(i=1, j=1), ValueError, "Springs: a pair must join two different bodies"),
+    (lambda: Model([1.0, 1.0], [0.1, 0.1], [pair(j=5)]), ValueError, "Springs: body index 5 out of range"),
+    (lambda: pair(k=-1.0), ValueError, "Springs: stiffness must be >= 0"),
+    (lambda: pair(k=NAN), ValueError, "Springs: stiffness must be finite"),
+    (lambda: pair(rest=-1.0), ValueError, "Springs: rest_length must be >= 0"),
+    (lambda: Springs(np.array([0]), np.array([1]), np.array([1.0, 2.0]), np.array([1.0])), ValueError,
+     "Springs: stiffness must have one value per pair"),
+    (lambda: Dampers(np.array([0]), np.array([1]), np.array([-1.0])), ValueError, "Dampers: damping must be >= 0"),
+    (lambda: Model([1.0, 1.0], [0.1, 0.1], [Dampers(np.array([0]), np.array([2]), np.array([1.0]))]), ValueError,
+     "Dampers: body index 2 out of range"),
+    (lambda: Drag.from_coefficients(np.array([0.1]), density=-1), ValueError, "Drag: density must be > 0"),
+    (lambda: Drag.from_coefficients(np.array([0.1]), drag_coefficient=NAN), ValueError,
+     "Drag: drag_coefficient must be finite"),
+    (lambda: Drag(np.array([-0.1])), ValueError, "Drag: beta must be >= 0"),
+    (lambda: Model([1.0, 1.0], [0.1, 0.1], [Drag(np.array([0.1]))]), ValueError, "Drag: beta must be one value"),
+    (lambda: Friction(-0.5, 0.3, UP, 0.0, np.array([0.1])), ValueError, "Friction: mu_static must be >= 0"),
+    (lambda: Friction(0.5, NAN, UP, 0.0, np.array([0.1])), ValueError, "Friction: mu_dynamic must be finite"),
+    (lambda: Friction(0.5, 0.3, np.zeros(3), 0.0, np.array([0.1])), ValueError,
+     "Friction: normal must be a non-zero vector"),
+]
+
+
+@pytest.mark.parametrize("build, error, message", REFUSALS, ids=[m for _, _, m in REFUSALS])
+def test_refused_in_one_line(build, error, message):
+    with pytest.raises(error) as info:
+        build()
+    text = str(info.value)
+    assert message in text and "\n" not in text
+
+
+def test_materials_must_match_the_bodies_where_the_world_meets_the_model():
+    from steplab.integrators import get_integrator
+
+    model = Model([1.0, 1.0], [0.1, 0.1], [Gravity()])
+    world = CollisionWorld("swept", (FLOOR,), materials=("golf",))
+    with pytest.raises(ValueError, match="CollisionWorld: materials must name one material per body.*got 1 for 2"):
+        world.stepper(model, get_integrator("semi-implicit-euler"))
+
+
+def test_a_non_unit_normal_is_normalised_as_a_scene_file_does_and_a_unit_one_kept_to_the_byte():
+    assert np.array_equal(Plane(np.array([0, 0, 5.0])).normal, UP)
+    assert np.array_equal(Friction(0.5, 0.3, np.array([0.0, 3.0, 4.0]), 0.0, np.array([0.1])).normal, [0, 0.6, 0.8])
+    tilted = np.array([0.6, 0.8, 0.0])
+    assert Plane(tilted).normal is tilted
+
+
+def test_valid_construction_still_works_on_numpy_and_jax():
+    forces = [Gravity(), pair(k=np.inf), pair(k=0.0), Dampers(np.array([0]), np.array([1]), np.array([0.0])),
+              Drag.from_coefficients(np.array([0.1, 0.2])),
+              Friction(0.5, 0.3, UP, 0.0, np.array([0.1, 0.2]))]
+    model = Model([1.0, 2.0], [0.1, 0.2], forces, pinned=[True, False], names=["a", "b"])
+    world = CollisionWorld("overlap", [FLOOR, Box(np.zeros(3), np.ones(3))], materials=["a", "b"],
+                           pair_properties=PairProperties(0.0, 0.0, {frozenset({"a", "b"}): (1.0, 2.0)}),
+                           bisection_iterations=60)
+    assert world.shapes[0] is FLOOR and world.materials == ("a", "b")
+    jnp = pytest.importorskip("jax.numpy")
+    jax_model = Model([1.0, 2.0], [0.1, 0.2], forces[:1] + forces[3:], xp=jnp).cast(jnp, np.float32)
+    assert jax_model.xp is jnp and jax_model.n_bodies == 2
+    assert model.cast(jnp).xp is jnp
