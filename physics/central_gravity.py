@@ -9,6 +9,7 @@ import numpy as np
 
 from ._array import block_diagonal, norm
 from .force import Force
+from .rules import number_problem, require, skip_checks, vector_problem
 from .scene_toml import REQUIRED
 
 
@@ -44,6 +45,9 @@ class CentralGravity(Force):
         return cls(table.number("mu", REQUIRED, positive=True), table.vector("center", [0.0, 0.0, 0.0]))
 
     def __post_init__(self):
+        if not skip_checks(self.mu, self.center):  # a scene file's rules: mu > 0, the center 3 finite numbers
+            require("CentralGravity: mu", number_problem(self.mu, positive=True))
+            require("CentralGravity: center", vector_problem(self.center))
         for field in ("mu", "center"):  # plain numbers become arrays, so cast() changes their precision
             if not hasattr(getattr(self, field), "dtype"):
                 object.__setattr__(self, field, np.asarray(getattr(self, field), dtype=float))

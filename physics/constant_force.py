@@ -8,6 +8,7 @@ from typing import ClassVar
 import numpy as np
 
 from .force import Force
+from .rules import number_problem, require, skip_checks
 from .scene_toml import REQUIRED
 
 
@@ -31,6 +32,18 @@ class ConstantForce(Force):
     name: ClassVar[str] = "constant"
     constant: ClassVar[bool] = True
     array_of_tables: ClassVar[bool] = True
+
+    def __post_init__(self):
+        if not skip_checks(self.f):  # a scene file's rule: finite forces, one [x, y, z] a body
+            require("ConstantForce: f", number_problem(self.f))
+            if np.ndim(self.f) != 2 or np.shape(self.f)[1] != 3:
+                raise ValueError(f"ConstantForce: f must be one force [x, y, z] a body, shape (N, 3), got shape "
+                                 f"{np.shape(self.f)}")
+
+    def check_bodies(self, n_bodies: int) -> None:
+        if np.shape(self.f)[0] != n_bodies:
+            raise ValueError(f"ConstantForce: f must be one force a body, shape ({n_bodies}, 3), got shape "
+                             f"{np.shape(self.f)}")
 
     @classmethod
     def from_scene(cls, tables, bodies) -> ConstantForce:

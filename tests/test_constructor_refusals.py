@@ -5,9 +5,11 @@ from __future__ import annotations
 import numpy as np
 import pytest
 from steplab.physics import Dampers, Drag, Friction, Gravity, Model, Springs
+from steplab.physics.central_gravity import CentralGravity
 from steplab.physics.collision.response import PairProperties
 from steplab.physics.collision.shapes import Box, Plane
 from steplab.physics.collision.world import CollisionWorld
+from steplab.physics.constant_force import ConstantForce
 
 NAN = float("nan")
 UP = np.array([0.0, 0.0, 1.0])
@@ -49,6 +51,13 @@ REFUSALS = [
      "CollisionWorld: max_impacts_per_step must be an integer"),
     (lambda: CollisionWorld(rest_speed=NAN), ValueError, "CollisionWorld: rest_speed must be finite"),
     (lambda: CollisionWorld(pair_properties=0.5), TypeError, "CollisionWorld: pair_properties must be"),
+    # central gravity and constant forces, as a scene file's [forces.central_gravity] and [[forces.constant]]
+    (lambda: CentralGravity(-1.0), ValueError, "CentralGravity: mu must be > 0, got -1"),
+    (lambda: CentralGravity(1.0, np.zeros(2)), ValueError, "CentralGravity: center must be 3 numbers"),
+    (lambda: ConstantForce(np.array([1.0, 0.0, 0.0])), ValueError, "ConstantForce: f must be one force [x, y, z] a"),
+    (lambda: ConstantForce(np.array([[NAN, 0.0, 0.0]])), ValueError, "ConstantForce: f must be finite"),
+    (lambda: Model([1.0, 1.0], [0.1, 0.1], [ConstantForce(np.zeros((3, 3)))]), ValueError,
+     "ConstantForce: f must be one force a body, shape (2, 3)"),
     # 5. the model's bodies
     (lambda: Model([1.0, 1.0], [0.1]), ValueError, "Model: radii must be one radius per body"),
     (lambda: Model(1.0, [0.1]), ValueError, "Model: masses must be one mass per body"),
