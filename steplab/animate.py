@@ -41,7 +41,7 @@ MAX_FPS = 100
 
 def check_fps(fps: int) -> None:
     """Raise ``ValueError`` (one line) unless ``fps`` is an integer from 1 to MAX_FPS."""
-    if not (isinstance(fps, int) and 1 <= fps <= MAX_FPS):
+    if isinstance(fps, bool) or not (isinstance(fps, (int, np.integer)) and 1 <= fps <= MAX_FPS):
         raise ValueError(f"--fps must be an integer from 1 to {MAX_FPS} (a GIF's shortest frame delay is "
                          f"1/100 s), got {fps!r}")
 
