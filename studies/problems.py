@@ -70,6 +70,10 @@ def oscillator_problem(damping_ratio: float = 0.0, t_end: float = 1.125) -> Prob
     x(t) = l_rest + A e^{-zeta w t} (cos(w_d t) + zeta w / w_d sin(w_d t)), w_d = w sqrt(1 - zeta^2),
     for release from rest at amplitude A (underdamped, zeta < 1).
     """
+    if isinstance(damping_ratio, bool) or not (isinstance(damping_ratio, (int, float)) and 0 <= damping_ratio < 1):
+        # the closed form below is the underdamped one: w_d = w sqrt(1 - zeta^2) is 0 or imaginary beyond
+        raise ValueError(f"oscillator_problem: damping_ratio must be in [0, 1) (underdamped: its exact solution "
+                         f"is the one given), got {damping_ratio!r}")
     omega, amplitude, rest = 2 * np.pi, 0.5, 1.0
     k, m = omega**2, 1.0
     forces = [Springs(np.array([0]), np.array([1]), np.array([k]), np.array([rest]))]

@@ -314,3 +314,11 @@ def test_diverged_runs_are_crosses_in_a_band_above_every_curve(scale, methods):
     shaded = [p for p in ax.patches if p.get_facecolor()[:3] != (1.0, 1.0, 1.0)]
     assert len(shaded) == 1
     plt.close(fig)
+
+
+def test_the_oscillator_problem_is_the_underdamped_one_its_exact_solution_is():
+    # zeta = 1 gave w_d = 0 and an exact solution of NaN, with only RuntimeWarnings; 2 an imaginary w_d
+    for zeta in (1.0, 2.0, -0.1, float("nan"), "0.1"):
+        with pytest.raises(ValueError, match=r"damping_ratio must be in \[0, 1\)"):
+            oscillator_problem(zeta)
+    assert np.all(np.isfinite(true_final(oscillator_problem(0.99))[0]))
