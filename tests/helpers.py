@@ -10,6 +10,7 @@ from __future__ import annotations
 import dataclasses
 import math
 from collections.abc import Callable
+from pathlib import Path
 
 import numpy as np
 import steplab.physics  # noqa: F401  (turns on jax_enable_x64 before any JAX array exists)
@@ -263,3 +264,17 @@ def refused(capsys, argv) -> str:
     assert status == 2, err
     assert "Traceback" not in err and err.count("\n") == 1, err
     return err
+
+
+#: the built-in oscillator scene (a pinned anchor and a mass on a spring), as a file
+OSCILLATOR_SCENE = Path(__file__).resolve().parent.parent / "physics" / "scenes" / "oscillator.toml"
+
+
+def oscillator_scene(integrator: str | None = None, table: str = "") -> str:
+    """The oscillator scene's TOML, stepped by ``integrator`` (default: its own), with ``table`` appended
+    (a ``[simulation.<integrator>]`` table of settings, say)."""
+    text = OSCILLATOR_SCENE.read_text()
+    if integrator is not None:
+        text = text.replace('integrator = "semi-implicit-euler"', f'integrator = "{integrator}"')
+    return text + table
+

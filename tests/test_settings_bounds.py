@@ -7,37 +7,12 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from helpers import refused
+from helpers import oscillator_scene, refused
 from steplab.integrators import implicit_euler, position_based, references
 from steplab.integrators.settings import configured
 from steplab.physics.collision import solver_settings
 
 HUGE = 99_999_999_999
-
-#: a pinned body and a free one on a spring; ``{integrator}`` runs it with ``{key} = {value}``
-SCENE = """
-[simulation]
-integrator = "{integrator}"
-dt = 0.01
-t_end = 0.5
-[simulation.{integrator}]
-{key} = {value}
-[[bodies]]
-name = "a"
-mass = 1.0
-radius = 0.05
-position = [0, 0, 0]
-pinned = true
-[[bodies]]
-name = "b"
-mass = 1.0
-radius = 0.05
-position = [1.5, 0, 0]
-[[forces.springs]]
-bodies = ["a", "b"]
-stiffness = 39.478
-rest_length = 1.0
-"""
 
 
 def refusal(*argv):
@@ -49,8 +24,9 @@ def refusal(*argv):
 
 
 def scene_file(tmp_path, integrator, key, value):
+    """The oscillator scene stepped by ``integrator`` with ``key = value`` in its settings table."""
     path = tmp_path / "r.toml"
-    path.write_text(SCENE.format(integrator=integrator, key=key, value=value))
+    path.write_text(oscillator_scene(integrator, f"\n[simulation.{integrator}]\n{key} = {value}\n"))
     return str(path)
 
 
