@@ -253,7 +253,8 @@ def from_scene_body(t, mass: float, radius: float):
     """
     if not any(key in t.data for key in SCENE_KEYS):  # a point mass, as before: nothing more to read
         return None
-    from .scene_toml import REQUIRED, short
+    from .rules import short
+    from .scene_toml import REQUIRED
 
     shape = t.string("shape", "sphere", choices=SHAPES)
     if "size" in t.data and shape != "box":

@@ -23,12 +23,12 @@ from steplab.core.registry import BUILTIN
 from . import rigid_body, soft_body, stacks
 from .forces import FORCES
 from .model import Model
-from .rules import mass_problem, restitution_problem
+from .rules import mass_problem, restitution_problem, short
 from .scene_library import SCENES
 from .scene_toml import MAX_BODIES as MAX_BODIES
 from .scene_toml import MAX_PAIRS as MAX_PAIRS
 from .scene_toml import MAX_SCENE_BYTES as MAX_SCENE_BYTES
-from .scene_toml import REQUIRED, Table, read_toml, short
+from .scene_toml import REQUIRED, Table, read_toml
 from .scene_toml import SceneError as SceneError
 
 DEFAULT_MATERIAL = "default"  # as physics.collision.shapes.DEFAULT_MATERIAL

@@ -15,10 +15,7 @@ import tomllib
 
 import numpy as np
 
-from .rules import ZERO_DIRECTION, integer_problem, number_problem, unit_vector, vector_problem
-from .rules import kind as kind
-from .rules import short as short
-from .rules import to_float as to_float
+from .rules import ZERO_DIRECTION, integer_problem, kind, number_problem, short, to_float, unit_vector, vector_problem
 
 #: largest scene the loader builds (bodies; all-pairs soft bodies count their pairs)
 MAX_BODIES = 1_000_000
