@@ -4,8 +4,9 @@ Every check prints one line, ``correct: ...`` or ``not yet: ...`` (with a hint),
 whether the answer is right, so a notebook can be run top to bottom with the exercises still
 open, and its solutions variant can ``assert`` each check. The answers are never the code's
 own earlier output: they come from closed forms (a bounce loses eps^2 of its height, a ball
-tunnels when v dt exceeds the wall plus its diameter), from order conditions, and from the
-stiffest-mode prediction that ``steplab check`` prints.
+tunnels when v dt exceeds the wall plus its diameter), from order conditions, and, for the
+stability limit, from the exercise's own experiment (the check runs it at the answer and a step
+3 % longer), set beside the stiffest-mode prediction that ``steplab check`` prints.
 """
 
 from __future__ import annotations
@@ -46,7 +47,7 @@ def _close(x, target: float, rtol: float) -> bool:
     return value is not None and abs(value - target) <= rtol * abs(target)
 
 
-def check_bounce_height(height, bounce: int = 3, restitution: float = 0.858, drop_height: float = 0.92) -> bool:
+def check_bounce_height(height, bounce: int = 3, *, restitution: float = 0.858, drop_height: float = 0.92) -> bool:
     """The height the ``bounce``-th bounce reaches: each bounce keeps eps^2 of the height before."""
     expected = restitution ** (2 * bounce) * drop_height
     return _verdict(_close(height, expected, RELATIVE_TOLERANCE),
