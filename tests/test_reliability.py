@@ -367,7 +367,7 @@ TOY_SCRIPT = textwrap.dedent("""
             return {"k": k, "t_end": 2.0 if quick else 4.0}
 
         def compute(params, progress=None):
-            p = oscillator_problem(params["t_end"])
+            p = oscillator_problem(t_end=params["t_end"])
             traj = simulate(p.model, "rk4", p.y0, 0.0, params["t_end"], 0.002 * (1 + k % 3))
             return {"x": traj.positions[::25, 1, 0].tolist()}
 
