@@ -9,7 +9,7 @@ import numpy as np
 
 from ._array import norm, safe_unit
 from .force import Force
-from .rules import direction, number_problem, require, skip_checks
+from .rules import direction, friction_problem, number_problem, require, skip_checks
 from .scene_toml import REQUIRED
 
 #: a body whose surface is within this distance of the plane touches it, m
@@ -38,6 +38,7 @@ class Friction(Force):
     Parameters
     ----------
     mu_static, mu_dynamic : float
+        Coulomb coefficients, 0 <= mu_dynamic <= mu_static.
     normal : ndarray, shape (3,)
         Unit normal of the plane, pointing out of the ground.
     height : float
@@ -57,10 +58,11 @@ class Friction(Force):
     def __post_init__(self):
         if skip_checks(self.mu_static, self.mu_dynamic, self.normal, self.height, self.radii):
             return
-        # a scene file's [forces.friction] rules: mu_static, mu_dynamic >= 0; the normal normalised
+        # a scene file's [forces.friction] rules: 0 <= mu_dynamic <= mu_static; the normal normalised
         # (a unit one kept to the byte), not zero; height finite
         require("Friction: mu_static", number_problem(self.mu_static, nonnegative=True))
         require("Friction: mu_dynamic", number_problem(self.mu_dynamic, nonnegative=True))
+        require("Friction: mu_dynamic", friction_problem(self.mu_static, self.mu_dynamic))
         object.__setattr__(self, "normal", direction("Friction: normal", self.normal))
         require("Friction: height", number_problem(self.height))
         require("Friction: radii", number_problem(self.radii, positive=True))
@@ -78,6 +80,9 @@ class Friction(Force):
         normal = table.direction("normal", [0, 0, 1])
         mu_s = table.number("mu_static", REQUIRED, nonnegative=True)
         mu_d = table.number("mu_dynamic", REQUIRED, nonnegative=True)
+        problem = friction_problem(mu_s, mu_d)
+        if problem:
+            table.fail(problem, "mu_dynamic")
         return cls(mu_s, mu_d, normal, table.number("height", 0.0), np.array(bodies.radii))
 
     def force(self, xp, q, v, m, applied):

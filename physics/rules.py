@@ -214,3 +214,47 @@ def require_indices(where: str, indices, n_bodies: int) -> None:
     if arr.size and arr.max() >= n_bodies:
         raise ValueError(f"{where}: body index {int(arr.max())} out of range for a model of {n_bodies} bodies "
                          f"(0..{n_bodies - 1})")
+
+
+#: how far from orthonormal a rotation matrix may be: max |R^T R - I| over its entries. Building one in
+#: float64 (Rodrigues' formula, a quaternion's matrix) leaves ~1e-16; 1e-9 turns a point 1 km out by
+#: under 1 micrometre. A float32 matrix (which rounding alone leaves ~1e-7 off) gets 1e-5.
+ORTHONORMAL_TOLERANCE = {8: 1e-9, 4: 1e-5}
+
+
+def rotation_problem(value) -> str | None:
+    """A rotation matrix: 3 x 3, finite, orthonormal (max |R^T R - I| within :data:`ORTHONORMAL_TOLERANCE`:
+    1e-9 for float64 and integers, 1e-5 for float32) and proper (det +1: a reflection, det -1, turns
+    nothing)."""
+    arr = numeric(value)
+    if arr is None or arr.shape != (3, 3):
+        shown = f"shape {arr.shape}" if arr is not None else short(value)
+        return f"must be a 3 x 3 rotation matrix, got {shown}"
+    if not np.all(np.isfinite(arr)):
+        return f"must be finite, got {short(arr.tolist())}"
+    tol = ORTHONORMAL_TOLERANCE[4 if arr.dtype.kind == "f" and arr.dtype.itemsize <= 4 else 8]
+    rot = arr.astype(float)
+    off = float(np.max(np.abs(rot.T @ rot - np.eye(3))))
+    if not off <= tol:
+        return f"must be orthonormal (max |R^T R - I| <= {tol:.2g}), got {off:.3g}"
+    if np.linalg.det(rot) < 0:
+        return "must be a rotation (det +1), got a reflection (det -1)"
+    return None
+
+
+def friction_problem(mu_static, mu_dynamic) -> str | None:
+    """Coulomb friction: the sliding coefficient ``mu_dynamic`` at most the static one, ``mu_static``
+    (both already numbers >= 0): sliding resisted harder than sticking can hold would chatter between
+    the two. The message, of mu_dynamic, names both values."""
+    s, d = np.asarray(mu_static, dtype=float), np.asarray(mu_dynamic, dtype=float)
+    try:
+        ok = d <= s
+    except ValueError:  # shapes that do not broadcast
+        return f"must have the shape of mu_static, {s.shape}, got {d.shape}"
+    if np.all(ok):
+        return None
+    k = int(np.argmin(ok.ravel()))
+    where = f" (element {k})" if ok.ndim else ""
+    bad_s, bad_d = float(np.broadcast_to(s, ok.shape).flat[k]), float(np.broadcast_to(d, ok.shape).flat[k])
+    return (f"must be <= mu_static (Coulomb friction: sliding cannot be resisted harder than sticking holds), "
+            f"got mu_dynamic = {bad_d:g} > mu_static = {bad_s:g}{where}")

@@ -507,6 +507,11 @@ class _SceneBuilder:
                       "material": b.string("material", DEFAULT_MATERIAL), "trigger": b.boolean("trigger")}
             angle = b.number("angle", 0.0)
             axis = b.direction("axis", [0, 0, 1])
+            # what Box (lo < hi, finite) and OrientedBox (size / 2 > 0) refuse, said of this file's key
+            lo, hi = center - 0.5 * size, center + 0.5 * size
+            if not (np.all(0.5 * size > 0) if angle != 0.0 else np.all(np.isfinite(lo) & np.isfinite(hi) & (hi > lo))):
+                b.fail(f"gives a box float64 cannot represent at center {short(center.tolist())}: its faces, "
+                       f"center -/+ size / 2, are {short(lo.tolist())} and {short(hi.tolist())}", "size")
             if angle == 0.0:
                 shapes.append((b, Box.from_center(center, size, **common)))
             else:

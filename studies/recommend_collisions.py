@@ -298,7 +298,7 @@ def largest_penetration(world, radii, q) -> float:
     """
     deepest = 0.0
     k, n = q.shape[:2]
-    flat = Sphere(q.reshape(-1, 3), np.tile(radii, k))
+    flat = Sphere.unchecked(q.reshape(-1, 3), np.tile(radii, k))
     for shape in world.shapes:  # trigger volumes are meant to be entered
         if not shape.trigger:
             deepest = max(deepest, float(np.max(collide(flat, shape).penetration_depth, initial=0.0)))

@@ -4,16 +4,23 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from helpers import refused
 from steplab.physics import Dampers, Drag, Friction, Gravity, Model, Springs
 from steplab.physics.central_gravity import CentralGravity
+from steplab.physics.collision.narrow_phase import collide
 from steplab.physics.collision.response import PairProperties
-from steplab.physics.collision.shapes import Box, Plane
+from steplab.physics.collision.shapes import Box, OrientedBox, Plane, Sphere, rotation_matrix
 from steplab.physics.collision.world import CollisionWorld
 from steplab.physics.constant_force import ConstantForce
 
 NAN = float("nan")
 UP = np.array([0.0, 0.0, 1.0])
 FLOOR = Plane(UP, 0.0, "floor")
+TURN = rotation_matrix([1.0, 2.0, 3.0], 40.0)
+
+
+def tilted(center=None, half=None, rotation=TURN):
+    return OrientedBox(np.zeros(3) if center is None else center, np.ones(3) if half is None else half, rotation)
 
 
 def pair(k=10.0, rest=1.0, i=0, j=1):
@@ -39,6 +46,33 @@ REFUSALS = [
     (lambda: Plane(UP, NAN), ValueError, "Plane: offset must be finite"),
     (lambda: Box(np.array([1.0, 1, 1]), np.zeros(3)), ValueError, "Box: hi must exceed lo"),
     (lambda: Box(np.zeros(2), np.ones(3)), ValueError, "Box: lo must be 3 numbers"),
+    (lambda: Sphere(np.zeros(2), 0.1), ValueError, "Sphere: center must be one point [x, y, z], shape (3,), or K"),
+    (lambda: Sphere(np.zeros((2, 4)), np.full(2, 0.1)), ValueError, "Sphere: center must be one point"),
+    (lambda: Sphere("here", 0.1), ValueError, "Sphere: center must be one point"),
+    (lambda: Sphere(np.array([0.0, NAN, 0.0]), 0.1), ValueError, "Sphere: center must be finite, got nan (element 1)"),
+    (lambda: Sphere(np.zeros(3), -0.1), ValueError, "Sphere: radius must be > 0, got -0.1"),
+    (lambda: Sphere(np.zeros(3), 0.0), ValueError, "Sphere: radius must be > 0, got 0"),
+    (lambda: Sphere(np.zeros((2, 3)), np.array([0.1, np.inf])), ValueError, "Sphere: radius must be finite"),
+    (lambda: Sphere(np.zeros(3), np.array([0.1, 0.2])), ValueError,
+     "Sphere: radius must be one radius, shape () for a center of shape (3,), got shape (2,)"),
+    (lambda: Sphere(np.zeros((2, 3)), np.array(0.1)), ValueError,
+     "Sphere: radius must be one radius per center, shape (2,) for a center of shape (2, 3), got shape ()"),
+    (lambda: tilted(center=np.array([0.0, 0.0, NAN])), ValueError, "OrientedBox: center must be finite"),
+    (lambda: tilted(center=np.zeros(2)), ValueError, "OrientedBox: center must be 3 numbers"),
+    (lambda: tilted(half=np.array([1.0, 0.0, 1.0])), ValueError, "OrientedBox: half_extents must be > 0"),
+    (lambda: tilted(half=np.array([1.0, -1.0, 1.0])), ValueError, "OrientedBox: half_extents must be > 0"),
+    (lambda: tilted(half=np.array([1.0, np.inf, 1.0])), ValueError, "OrientedBox: half_extents must be finite"),
+    (lambda: tilted(rotation=np.eye(2)), ValueError,
+     "OrientedBox: rotation must be a 3 x 3 rotation matrix, got shape (2, 2)"),
+    (lambda: tilted(rotation=np.full((3, 3), NAN)), ValueError, "OrientedBox: rotation must be finite"),
+    (lambda: tilted(rotation=2 * np.eye(3)), ValueError,
+     "OrientedBox: rotation must be orthonormal (max |R^T R - I| <= 1e-09), got 3"),
+    (lambda: tilted(rotation=TURN + 1e-6), ValueError, "OrientedBox: rotation must be orthonormal"),
+    (lambda: tilted(rotation=np.zeros((3, 3))), ValueError, "OrientedBox: rotation must be orthonormal"),
+    (lambda: tilted(rotation=TURN.astype(np.float32) * np.float32(1.0001)), ValueError,
+     "OrientedBox: rotation must be orthonormal (max |R^T R - I| <= 1e-05)"),
+    (lambda: tilted(rotation=TURN @ np.diag([1.0, 1.0, -1.0])), ValueError,
+     "OrientedBox: rotation must be a rotation (det +1), got a reflection (det -1)"),
     # 4. the collision world
     (lambda: CollisionWorld("overlap", (FLOOR,), bisection_iterations=10**7), ValueError,
      "CollisionWorld: bisection_iterations must be between 0 and 60"),
@@ -94,6 +128,11 @@ REFUSALS = [
     (lambda: Friction(0.5, NAN, UP, 0.0, np.array([0.1])), ValueError, "Friction: mu_dynamic must be finite"),
     (lambda: Friction(0.5, 0.3, np.zeros(3), 0.0, np.array([0.1])), ValueError,
      "Friction: normal must be a non-zero vector"),
+    # Coulomb friction: sliding is resisted no harder than sticking holds
+    (lambda: Friction(0.3, 0.5, UP, 0.0, np.array([0.1])), ValueError,
+     "Friction: mu_dynamic must be <= mu_static (Coulomb friction: sliding cannot be resisted harder than "
+     "sticking holds), got mu_dynamic = 0.5 > mu_static = 0.3"),
+    (lambda: Friction(0.0, 1e-9, UP, 0.0, np.array([0.1])), ValueError, "got mu_dynamic = 1e-09 > mu_static = 0"),
 ]
 
 
@@ -134,3 +173,67 @@ def test_valid_construction_still_works_on_numpy_and_jax():
     jax_model = Model([1.0, 2.0], [0.1, 0.2], forces[:1] + forces[3:], xp=jnp).cast(jnp, np.float32)
     assert jax_model.xp is jnp and jax_model.n_bodies == 2
     assert model.cast(jnp).xp is jnp
+
+
+def test_valid_spheres_and_oriented_boxes_are_kept_as_given():
+    center, radius = np.array([0.0, 0.0, 0.05]), np.array(0.1)
+    sphere = Sphere(center, radius)
+    assert sphere.center is center and sphere.radius is radius
+    assert Sphere(np.zeros((0, 3)), np.zeros(0)).center.shape == (0, 3)  # an empty batch
+    assert Sphere(np.zeros((2, 3)), np.array([0.1, 0.2])).radius.shape == (2,)
+    assert Sphere([0, 0, 1], 1).radius == 1  # lists and integers, as number_problem takes them
+    # a rotation to round-off (1e-12 off orthonormal), a float32 one, an integer permutation
+    for rotation in (TURN + 1e-12, TURN.astype(np.float32), np.array([[0, 1, 0], [0, 0, 1], [1, 0, 0]])):
+        assert tilted(rotation=rotation).rotation is rotation
+    jnp = pytest.importorskip("jax.numpy")
+    assert Sphere(jnp.array([0.0, NAN, 0.0]), jnp.array(-1.0)).radius == -1  # JAX values pass unchecked
+
+
+def test_the_collision_codes_own_spheres_are_not_checked():
+    # bisection and the swept tests build a sphere of a run's positions at every iteration: unchecked
+    # (the checks would nearly triple a contact test), and a diverged run's NaN is the run's to report
+    sphere = Sphere.unchecked(np.array([[0.0, 0.0, NAN]]), np.array([0.1]))
+    assert sphere.name == "sphere" and sphere.material == "default" and not sphere.trigger
+    assert not collide(sphere, FLOOR).touching[0]
+    assert repr(Sphere.unchecked(np.zeros(3), np.array(0.1))) == repr(Sphere(np.zeros(3), np.array(0.1)))
+
+
+FRICTION_SCENE = """
+[simulation]
+dt = 0.01
+t_end = 0.05
+[[bodies]]
+name = "crate"
+mass = 10.0
+radius = 0.1
+position = [0, 0, 0.1]
+[forces.gravity]
+[forces.friction]
+mu_static = {mu_s}
+mu_dynamic = {mu_d}
+"""
+
+
+def test_a_scene_files_friction_is_refused_by_the_same_rule_in_one_line(capsys, tmp_path):
+    from steplab.cli import main
+
+    path = tmp_path / "crate.toml"
+    path.write_text(FRICTION_SCENE.format(mu_s=0.4, mu_d=0.6))
+    err = refused(capsys, ["run", str(path)])
+    assert err.startswith(f"steplab run: error: {path}: forces.friction.mu_dynamic: must be <= mu_static"), err
+    assert "got mu_dynamic = 0.6 > mu_static = 0.4" in err
+    path.write_text(FRICTION_SCENE.format(mu_s=0.5, mu_d=0.5))  # equal coefficients: no stick-slip jump
+    assert main(["run", str(path)]) == 0
+
+
+@pytest.mark.parametrize("center, size, angle", [
+    ("[0, 0, 0]", "[5e-324, 1, 1]", 30.0),   # size / 2 underflows to 0: OrientedBox's half_extents
+    ("[0, 0, 0]", "[5e-324, 1, 1]", 0.0),    # lo = hi: Box
+    ("[1.7e308, 0, 0]", "[1e308, 1, 1]", 0.0),  # hi overflows: Box
+])
+def test_a_scene_files_box_is_refused_at_its_key_before_the_constructor(capsys, tmp_path, center, size, angle):
+    path = tmp_path / "wall.toml"
+    path.write_text(FRICTION_SCENE.format(mu_s=0.5, mu_d=0.3) + f"[collisions]\n[[collisions.boxes]]\n"
+                    f"center = {center}\nsize = {size}\nangle = {angle}\n")
+    err = refused(capsys, ["run", str(path)])
+    assert err.startswith(f"steplab run: error: {path}: collisions.boxes[0].size: gives a box float64 cannot"), err

@@ -50,8 +50,8 @@ class BodyPairs:
 
     def contact(self, radii, q0, q1=None, s=None):
         """Contacts at the start positions ``q0``, or at fraction ``s`` (per pair) of the chords."""
-        return collide_sphere_sphere(Sphere(_lerp(q0, q1, self.i, s), radii[self.i]),
-                                     Sphere(_lerp(q0, q1, self.j, s), radii[self.j]))
+        return collide_sphere_sphere(Sphere.unchecked(_lerp(q0, q1, self.i, s), radii[self.i]),
+                                     Sphere.unchecked(_lerp(q0, q1, self.j, s), radii[self.j]))
 
     def time_of_impact(self, radii, q0, q1):
         return sphere_sphere(q0[self.i], q1[self.i], q0[self.j], q1[self.j], radii[self.i], radii[self.j])
@@ -85,7 +85,7 @@ class ShapePairs:
         return ("shape", self.index, int(self.i[k]))
 
     def contact(self, radii, q0, q1=None, s=None):
-        return collide(Sphere(_lerp(q0, q1, self.i, s), radii[self.i]), self.shape)
+        return collide(Sphere.unchecked(_lerp(q0, q1, self.i, s), radii[self.i]), self.shape)
 
     def time_of_impact(self, radii, q0, q1):
         return time_of_impact(q0[self.i], q1[self.i], radii[self.i], self.shape)

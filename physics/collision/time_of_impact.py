@@ -157,7 +157,8 @@ def _aabb_entry(p1, p2, radius, lo, hi):
 
 def _start_overlap(p1, p2, radius, shape):
     """For spheres already touching ``shape`` at the start: 0 if moving deeper, else inf."""
-    contact = collide(Sphere(np.atleast_2d(p1), np.broadcast_to(radius, np.shape(np.atleast_2d(p1))[:1])), shape)
+    contact = collide(Sphere.unchecked(np.atleast_2d(p1), np.broadcast_to(radius, np.shape(np.atleast_2d(p1))[:1])),
+                      shape)
     deeper = _dot(np.atleast_2d(p2) - np.atleast_2d(p1), contact.normal) > 0
     return contact.touching, np.where(deeper, 0.0, NO_IMPACT)
 
