@@ -47,6 +47,20 @@ def check_real(method: str, key: str, value, ok: Callable[[float], bool], allowe
         raise ValueError(f"{method}: {key} must be {allowed}, got {value!r}")
 
 
+def check_step_result(integrator, result, shape) -> None:
+    """Refuse (one-line TypeError) a step's result that is not ``(y, carry)`` with y of the state's shape.
+
+    A Stepper of the user's that returns y alone had y unpacked along its first axis and failed
+    steps later, deep in a force (NumPy), or in ``lax.scan``'s carry-structure check (JAX). The
+    NumPy loop checks the first step; the compiled loop checks the traced step, at no cost per step."""
+    if not (isinstance(result, tuple) and len(result) == 2 and np.shape(result[0]) == shape):
+        got = (f"a tuple of {len(result)}" if isinstance(result, tuple) and len(result) != 2 else
+               f"y of shape {np.shape(result[0])}" if isinstance(result, tuple) else
+               f"an array of shape {np.shape(result)}" if hasattr(result, "shape") else f"a {type(result).__name__}")
+        raise TypeError(f"{integrator.name}: step(model, t, y, dt, carry) must return (y_next, carry) with y_next "
+                        f"of shape {shape}; it returned {got}")
+
+
 @dataclasses.dataclass(frozen=True)
 class Integrator:
     #: registry name, as typed on the command line

@@ -28,6 +28,8 @@ import functools
 import time
 from collections.abc import Callable
 
+from .base import check_step_result
+
 #: the "no bad step" value of the loop's first-bad-step counter
 NO_BAD_STEP = -1
 #: from this many components a state is checked by a sum of squares first (see within_limit)
@@ -143,7 +145,10 @@ def fixed_step_loop(model, integrator, *, chunks: int | None = None, save_every:
             return parts[0]
 
     def advance(k, parts, carry, t_start, dt):
-        y, carry = integrator.step(model, t_start + k * dt, join(parts), dt, carry)
+        y = join(parts)
+        result = integrator.step(model, t_start + k * dt, y, dt, carry)
+        check_step_result(integrator, result, y.shape)  # at trace time: shapes only
+        y, carry = result
         return split(y), carry
 
     def run(y0, t_start, dt, n, limit):

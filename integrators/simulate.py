@@ -8,7 +8,7 @@ import time
 import numpy as np
 from steplab.physics.attachments import attached_forces
 
-from .base import Solver, Stepper, check_count
+from .base import Solver, Stepper, check_count, check_step_result
 from .loop import compiled_loop, run_once
 from .position_based import PositionBased
 
@@ -292,7 +292,7 @@ def _run_numpy(run: _FixedStepRun) -> Trajectory:
     for k in range(n):
         result = step(t_start + k * dt, y, dt, carry)
         if k == 0:
-            _check_step_result(integrator, result, y.shape)
+            check_step_result(integrator, result, y.shape)
         y, carry = result
         # one reduction: NaN fails the comparison, so this also catches non-finite states
         if not np.abs(y).max() <= limit:
@@ -306,17 +306,6 @@ def _run_numpy(run: _FixedStepRun) -> Trajectory:
     if bar is not None:
         bar.close()
     return Trajectory(run.ts, out, integrator.name, dt, n, "numpy", wall, collisions=getattr(step, "log", None))
-
-
-def _check_step_result(integrator, result, shape) -> None:
-    """Refuse (one line) a first step that is not ``(y, carry)`` with y of the state's shape: a Stepper of the
-    user's that returns y alone was unpacked along its first axis, and failed steps later, deep in a force."""
-    if not (isinstance(result, tuple) and len(result) == 2 and np.shape(result[0]) == shape):
-        got = (f"a tuple of {len(result)}" if isinstance(result, tuple) and len(result) != 2 else
-               f"y of shape {np.shape(result[0])}" if isinstance(result, tuple) else
-               f"a {type(result).__name__}" + (f" of shape {np.shape(result)}" if hasattr(result, "shape") else ""))
-        raise TypeError(f"{integrator.name}: step(model, t, y, dt, carry) must return (y_next, carry) with y_next "
-                        f"of shape {shape}; it returned {got}")
 
 
 def _progress_bar(n, enabled):
