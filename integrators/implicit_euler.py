@@ -63,6 +63,9 @@ class ImplicitEuler(Stepper):
       the matrix leaves out stays in G, so the iteration converges to the same v1, only
       linearly, and stops on an estimate of its error: the update times theta / (1 - theta),
       theta the ratio of successive updates (Hairer and Wanner, Solving ODEs II, IV.8).
+      Where the definite matrix's iteration does not contract either (heavy dampers, whose
+      dependence on positions it leaves out, at a long step), the step is solved again by
+      Newton's method on the exact sparse Jacobian with sparse LU (:func:`_newton_exact`).
       Pinned bodies (infinite mass, v1 = v) are left out of the system: Baraff and
       Witkin's constraint filter with all three directions held. Each iteration evaluates
       the forces and the matrix in one compiled pass over the springs and dampers
@@ -180,7 +183,7 @@ def newton_report(stepper: ImplicitEuler, model, t, y, dt) -> list[dict]:
 
 
 def _newton_cg(model, t1, q, v, dt, settings: NewtonSettings, report=None):
-    """v1 of implicit Euler by Newton's method with CG solves (NumPy); NaN if it never converges.
+    """v1 of implicit Euler by Newton's method with CG solves (NumPy); NaN if neither it nor the fallback converges.
 
     Each iteration: G = v1 - v - dt a(t1, q + dt v1, v1); A delta = -M G over the free
     bodies (:func:`_solve_newton_system`); v1 += delta. Stops when the error estimate
@@ -188,9 +191,10 @@ def _newton_cg(model, t1, q, v, dt, settings: NewtonSettings, report=None):
     the first iteration) is below rtol (1 + |v1|) (``settings``, a :class:`NewtonSettings`).
     An iteration that does not contract (theta >= 1: far from the solution, where compressed
     springs make the symmetric Newton step overshoot) switches to the definite matrix for
-    the rest of the step, whose steps are shorter and safer (projected Newton). With
-    ``settings.iterations``, exactly that many (unless the state stops being finite). ``report``: a list each iteration
-    appends its numbers to (:func:`newton_report`).
+    the rest of the step, whose steps are shorter and safer (projected Newton); where that
+    one does not contract either, or the iterations run out, :func:`_newton_exact` solves the
+    step. With ``settings.iterations``, exactly that many (unless the state stops being finite).
+    ``report``: a list each iteration appends its numbers to (:func:`newton_report`).
     """
     from steplab.physics.sparse_jacobian import newton_matrix, newton_system
 
@@ -234,11 +238,47 @@ def _newton_cg(model, t1, q, v, dt, settings: NewtonSettings, report=None):
             estimate = size
         elif theta < 1:
             estimate = theta / (1 - theta) * size
+        elif definite and iterations is None:  # the definite matrix does not contract either
+            break
         else:
             estimate, definite = np.inf, True
         if estimate <= tolerance or k + 1 == iterations:
             return v1
         previous = size
+    if iterations is not None:  # the state stopped being finite
+        return np.full_like(v, np.nan)
+    return _newton_exact(model, t1, q, v, dt, rtol, report)
+
+
+def _newton_exact(model, t1, q, v, dt, rtol, report=None):
+    """v1 of implicit Euler by Newton's method on the exact sparse Jacobian, each system solved by sparse LU
+    (SuperLU, :func:`scipy.sparse.linalg.spsolve`), from v1 = v; NaN if it never converges.
+
+    The conjugate-gradient step's fallback, where its symmetric or definite matrix leaves out so much that its
+    iteration does not contract: a heavily damped cloth, whose dampers' dependence on positions (not symmetric,
+    c |u| / l per pair) outweighs the masses at a frame's step (c = 3 N s/m on the 12 x 12 cloth at 1/60 s). The
+    exact Newton iteration converges there, quadratically, as the dense solve does; a pinned body's rows are the
+    identity (its acceleration, and so its rows of da/dq and da/dv, are zero), so its v1 stays v.
+    """
+    import scipy.sparse as sp
+    from scipy.sparse.linalg import spsolve
+    from steplab.physics.sparse_jacobian import sparse_jacobian
+
+    eye = sp.identity(v.size, format="csc")
+    v1 = v
+    for _ in range(MAX_NEWTON_ITERATIONS):
+        q1 = q + dt * v1
+        residual = v1 - v - dt * model.acceleration(t1, q1, v1)
+        dadq, dadv = sparse_jacobian(model, t1, q1, v1)
+        delta = spsolve((eye - (dt * dt) * dadq - dt * dadv).tocsc(), -residual.ravel()).reshape(v.shape)
+        if not np.all(np.isfinite(delta)):
+            break
+        size = float(np.max(np.abs(delta)))
+        if report is not None:
+            report.append({"update": size, "cg_iterations": 0, "cg_residual": 0.0, "definite": False, "exact": True})
+        v1 = v1 + delta
+        if size <= rtol * (1 + float(np.max(np.abs(v1)))):
+            return v1
     return np.full_like(v, np.nan)
 
 
