@@ -69,13 +69,21 @@ class SweepCarry(NamedTuple):
 
         return in_rows(np.asarray(y, float), self.rows, axis=1), np.array(bodies(self.external, len(self.rows)))
 
-    def for_substep(self, h: float) -> SweepCarry:
-        """This carry with its ``sweep`` for substeps of ``h`` (itself when it has it)."""
+    def for_substep(self, h: float, method: str = "position-based step") -> SweepCarry:
+        """This carry with its ``sweep`` for substeps of ``h`` (itself when it has it); refuses (one line, naming
+        ``method``) a damper too heavy for h."""
         from .constraint_projection import sweep_columns
 
         if h == self.h:
             return self
-        return self._replace(h=h, sweep=sweep_columns(self.constraints, self.segments, self.inverse_mass, h))
+        sweep = sweep_columns(self.constraints, self.segments, self.inverse_mass, h)
+        if not np.all(np.isfinite(sweep.denominator)):  # gamma = alpha c / h past the float range: NaN moves
+            p = np.flatnonzero(~np.isfinite(sweep.denominator))[0]
+            i, j = (int(np.flatnonzero(self.rows == row)[0]) for row in (sweep.i[p], sweep.j[p]))
+            raise ValueError(f"{method}: the spring between bodies {i} and {j}: its damping {self.constraints.damping[p]:g} "
+                             f"N s/m with compliance {self.constraints.compliance[p]:g} m/N gives gamma = alpha c / h "
+                             f"= {sweep.gamma[p]:g} at the substep h = {h:g} s; it must be finite (a smaller damping)")
+        return self._replace(h=h, sweep=sweep)
 
 
 @dataclasses.dataclass(frozen=True)
@@ -172,7 +180,7 @@ class PositionBased(Integrator):
             from .constraint_projection_jax import advance as traced
 
             return model.xp.stack(traced(carry, y[0], y[1], steps)), carry
-        carry = carry.for_substep(steps.h)
+        carry = carry.for_substep(steps.h, self.name)
         state = bodies(carry.work.state, model.n_bodies)  # (2, N, 3) view of the rows the kernel steps in place
         state[:, carry.rows] = y
         advance(carry.work.state[0], carry.work.state[1], carry.external, carry.inverse_mass, carry.sweep, steps,
