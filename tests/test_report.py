@@ -195,3 +195,23 @@ def test_provenance_names_the_cpus_family_model_and_vector_width(tmp_path):
     assert _cpu_name(info) == "AMD EPYC (family 25 model 1, AVX-512)"
     info.write_text("processor\t: 0\nmodel name\t: Some CPU\n")
     assert _cpu_name(info) == "Some CPU"
+
+
+def test_a_zoomable_figure_says_where_a_method_diverged():
+    """A point whose error is not a finite number (None, as the truncation study records a divergence, or
+    NaN or inf) cannot go on a log axis: the method's legend says where it diverged, not nothing."""
+    from steplab import report_figures
+
+    inf, nan = float("inf"), float("nan")
+    # euler diverged at the two largest steps (None, as the truncation study records it, or inf)
+    points = [{"dt": 0.5, "error": None, "diverged_at_step": 3}, {"dt": 0.25, "error": inf},
+              {"dt": 0.125, "error": 0.1}, {"dt": 0.0625, "error": nan}, {"dt": 0.03125, "error": 0.01}]
+    curves = [{"problem": "oscillator", "integrator": "euler", "points": points},
+              {"problem": "oscillator", "integrator": "rk4", "points": [{"dt": 0.5, "error": 1e-3}]}]
+    (_, _, figure), = report_figures.figures("truncation", {"curves": curves})
+    euler, rk4 = figure.data
+    assert euler.name == "euler (diverged at 3 of its dt)" and rk4.name == "rk4"
+    assert list(euler.x) == [0.125, 0.03125] and list(euler.y) == [0.1, 0.01]
+    points[3]["error"] = 0.05  # only the largest steps diverged: from which dt on
+    (_, _, figure), = report_figures.figures("truncation", {"curves": curves})
+    assert figure.data[0].name == "euler (diverged at dt >= 0.25 s)"
