@@ -140,22 +140,29 @@ def identify(system, params: dict, problems: dict | None = None) -> dict:
     """
     n = params["identification_steps"]
     problems = identification_problems(params) if problems is None else problems
-    differences: dict[str, dict[str, float]] = {}
+    differences: dict[str, dict[str, float | None]] = {}
+    diverged = []
     for label, (problem, dt, references) in problems.items():
         try:
             run = system.build(problem.model, None, dt, problem.y0)
             ys = run.advance(problem.y0, dt, n, t_start=problem.t_start).y
         except DivergenceError:
             ys = None
+        if ys is None or not np.all(np.isfinite(ys)):  # no trajectory to compare: no method is nearer there
+            ys = None
+            diverged.append(label)
         for method, ref in references.items():
-            difference = np.inf if ys is None else float(np.max(np.abs(ys - ref)) / np.max(np.abs(ref)))
+            difference = None if ys is None else float(np.max(np.abs(ys - ref)) / np.max(np.abs(ref)))
             differences.setdefault(method, {})[label] = difference
-    worst = {m: max(d.values()) for m, d in differences.items()}
-    nearest = min(worst, key=worst.get)
+    # judged over the problems the system ran: where it diverged every method is "infinitely far", and the
+    # nearest would be whichever came first
+    worst = {m: max((v for v in d.values() if v is not None), default=None) for m, d in differences.items()}
+    judged = {m: w for m, w in worst.items() if w is not None and np.isfinite(w)}
+    nearest = min(judged, key=judged.get) if judged else None
     tolerance = SAME_METHOD[system.precision]
-    equal = [m for m in params["integrators"] if worst[m] <= tolerance]
-    return {"nearest": nearest, "difference": worst[nearest], "equals": equal, "tolerance": tolerance,
-            "differences": differences, "precision": system.precision}
+    equal = [] if diverged else [m for m in params["integrators"] if m in judged and judged[m] <= tolerance]
+    return {"nearest": nearest, "difference": None if nearest is None else judged[nearest], "equals": equal,
+            "tolerance": tolerance, "differences": differences, "diverged": diverged, "precision": system.precision}
 
 
 def order(system, params: dict) -> dict:
@@ -573,11 +580,15 @@ def plot(record: dict, out) -> list[str]:
 
 
 def verdict(identification: dict) -> str:
-    """"equals NAME (difference)" or "none (nearest NAME, difference)"."""
+    """"equals NAME (difference)" or "none (nearest NAME, difference)", and the problems the system diverged on."""
     d = identification["difference"]
     if identification["equals"]:
         return f"{' = '.join(identification['equals'])} ({d:.0e})"
-    return f"none (nearest {identification['nearest']}, {d:.1e})"
+    diverged = identification.get("diverged")  # absent from records written before it was kept
+    lost = f"; diverged on {', '.join(diverged)}" if diverged else ""
+    if identification["nearest"] is None:
+        return f"none{lost}"
+    return f"none (nearest {identification['nearest']}, {d:.1e}{lost})"
 
 
 def summary(record: dict) -> list[tuple[str, str]]:

@@ -129,7 +129,7 @@ def identify(setting, params: dict, references: dict | None = None) -> dict:
     n = params["identification_steps"]
     cases = problems()
     references = reference_runs(params) if references is None else references
-    differences, unsupported = {}, {}
+    differences, unsupported, diverged = {}, {}, []
     for label, (model, bodies, dt) in cases.items():
         try:
             run = engine_run(setting, model, bodies, dt, n)
@@ -137,19 +137,21 @@ def identify(setting, params: dict, references: dict | None = None) -> dict:
             unsupported[label] = str(err)
             continue
         except DivergenceError:
-            run = None
-        differences[label] = {m: float("inf") if run is None else distance(run, ref)
-                              for m, ref in references[label].items()}
+            diverged.append(label)
+            continue
+        differences[label] = {m: _finite(distance(run, ref)) for m, ref in references[label].items()}
+    # judged over the problems the engine ran: where it diverged every method is "infinitely far", and the
+    # nearest would be whichever came first
     methods = list(next(iter(references.values())))
-    worst = {m: max(d[m] for d in differences.values()) for m in methods}
-    nearest = min(worst, key=worst.get)
+    worst = {m: max((d[m] for d in differences.values() if d[m] is not None), default=None) for m in methods}
+    judged = {m: w for m, w in worst.items() if w is not None}
+    nearest = min(judged, key=judged.get) if judged else None
     tolerance = SAME_METHOD[setting.adapter.precision]
     return {"key": setting.key, "label": setting.label, "engine": setting.engine, "expected": setting.equals,
             "note": setting.deviation, "precision": setting.adapter.precision, "tolerance": tolerance,
-            "nearest": nearest, "difference": _finite(worst[nearest]),
-            "equals": [m for m in methods if worst[m] <= tolerance],
-            "differences": {label: {m: _finite(x) for m, x in d.items()} for label, d in differences.items()},
-            "unsupported": unsupported}
+            "nearest": nearest, "difference": None if nearest is None else judged[nearest],
+            "equals": [] if diverged else [m for m in methods if m in judged and judged[m] <= tolerance],
+            "differences": differences, "diverged": diverged, "unsupported": unsupported}
 
 
 def reference_runs(params: dict) -> dict:
@@ -326,7 +328,9 @@ def setting_styles(settings, colours: dict) -> dict:
 
 
 def _identified(row: dict) -> str:
-    return ", ".join(row["equals"]) if row["equals"] else "none"
+    if row["equals"]:
+        return ", ".join(row["equals"])
+    return f"none (diverged on {', '.join(row['diverged'])})" if row.get("diverged") else "none"
 
 
 def _at_end(rows, body, name, key):
@@ -345,7 +349,8 @@ def engines_table(data: dict) -> str:
     rows = []
     for row in data["identification"]:
         rows.append([row["label"], row["expected"] or "none", _identified(row),
-                     f"{row['nearest']} ({format_value(row['difference'], '.0e')})",
+                     "none" if row["nearest"] is None
+                     else f"{row['nearest']} ({format_value(row['difference'], '.0e')})",
                      *(_at_end(data["drift"], b, row["key"], k) for b in ("flip box", "Bullet demo body")
                        for k in ("energy", "momentum"))])
     for name in dict.fromkeys(r["name"] for r in data["drift"] if r["kind"] == "steplab"):

@@ -105,6 +105,29 @@ def test_identification_names_the_method_each_engine_steps(key, identification):
     assert min(others) > 1e-4  # every other method is measurably different
 
 
+def test_a_system_that_diverges_is_judged_on_the_problems_it_ran(identification):
+    # a divergence made every method's worst difference inf, and the nearest whichever came first
+    from steplab.integrators import DivergenceError
+    from steplab.studies.engines import identify, verdict
+    from steplab.studies.system import SteplabRun, SystemUnderTest
+
+    class Diverging(SteplabRun):
+        def advance(self, y0, dt, n_steps, t_start=0.0, save_every=1):
+            if self.model.forces and any(type(f).__name__ == "Springs" for f in self.model.forces):
+                raise DivergenceError("fake", dt, 1, t_start + dt)
+            return super().advance(y0, dt, n_steps, t_start, save_every)
+
+    params, problems = identification
+    system = SystemUnderTest("diverges on springs", lambda model, collisions, dt, y0: Diverging(
+        model, "semi-implicit-euler"))
+    result = identify(system, params, problems)
+    oscillators = [label for label in problems if label.startswith("oscillator")]
+    assert result["diverged"] == oscillators and result["equals"] == []
+    assert result["nearest"] == "semi-implicit-euler" and result["difference"] == 0.0
+    assert all(result["differences"][m][label] is None for m in params["integrators"] for label in oscillators)
+    assert verdict(result) == f"none (nearest semi-implicit-euler, 0.0e+00; diverged on {', '.join(oscillators)})"
+
+
 def test_mujoco_euler_and_rk4_differ_from_steplab_by_round_off_not_bits():
     """"bit for bit" was never true of the oscillator: MuJoCo computes the tendon's length and
     force in its own order; free fall (no tendon) is exact."""

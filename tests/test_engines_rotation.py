@@ -94,6 +94,26 @@ def test_identification_names_the_rotation_method_each_setting_declares(key, ref
     assert found["equals"] != list(ROTATION_SETTINGS) and "explicit" not in found["equals"]
 
 
+def test_an_engine_that_diverges_is_judged_on_the_problems_it_ran(references, monkeypatch):
+    # a divergence made every method's worst difference inf, and the nearest whichever came first
+    from steplab.integrators import DivergenceError
+
+    labels = iter(rotation_engines.problems())  # identify runs them in this order
+
+    def engine_run(setting, model, bodies, dt, n):
+        label = next(labels)
+        if label == "tumble":
+            raise DivergenceError("fake", dt, 1, dt)
+        return references[label]["exponential-map"]
+
+    monkeypatch.setattr(rotation_engines, "engine_run", engine_run)
+    setting = ROTATION_SETTINGS["mujoco-euler"]
+    found = rotation_engines.identify(setting, rotation_engines.parameters(True), references)
+    assert found["diverged"] == ["tumble"] and found["equals"] == [] and "tumble" not in found["differences"]
+    assert found["nearest"] == "exponential-map" and found["difference"] == 0.0
+    assert rotation_engines._identified(found) == "none (diverged on tumble)"
+
+
 def test_mujoco_euler_on_a_free_body_is_the_exponential_map_to_round_off(references):
     """The finding itself: MuJoCo's Euler is steplab's exponential-map, alone of the eight, to 1e-13."""
     needs("mujoco")
