@@ -13,9 +13,8 @@ the backends differ by no more than ten times that, or by 1e-12 where neither gr
 from __future__ import annotations
 
 import numpy as np
-from steplab.integrators import get_rotation, simulate
-from steplab.integrators.attached import attached_stepper
-from steplab.physics.attachments import attached_forces
+from steplab.integrators import simulate
+from steplab.integrators.attached import scene_stepper
 from steplab.physics.scene import builtin_scenes, load_scene
 
 from .runner import Study, run_tasks
@@ -54,7 +53,7 @@ def task(params: dict, name: str) -> list[dict]:
     for backend in backends:
         kept = []
         traj = simulate(scene.model, scene.integrator, scene.y0, scene.t_start, t_end, scene.dt,
-                        backend=backend, save_every=10**9, collisions=world, stepper=_attached(scene, kept))
+                        backend=backend, save_every=10**9, collisions=world, stepper=scene_stepper(scene, kept))
         finals[backend] = traj.y[-1]
         # springs at body-frame points: the end's energy with their lever arms where the bodies turned them
         end_model = kept[0].final_model() if kept else scene.model
@@ -73,21 +72,13 @@ def task(params: dict, name: str) -> list[dict]:
         y0 = scene.y0.copy()
         y0[0] *= 1 + PERTURBATION * rng.standard_normal(y0[0].shape)
         finals["perturbed"] = simulate(scene.model, scene.integrator, y0, scene.t_start, t_end, scene.dt,
-                                       save_every=10**9, stepper=_attached(scene, [])).y[-1]
+                                       save_every=10**9, stepper=scene_stepper(scene)).y[-1]
         # (position, velocity) differences from NumPy's final state: JAX's, and the perturbed start's
         jax, perturbed = (np.abs(finals["numpy"] - finals[other]).max(axis=(1, 2)) for other in ("jax", "perturbed"))
         differences = {"backend_difference": float(max(jax)), "position_difference": float(jax[0]),
                        "velocity_difference": float(jax[1]), "perturbed_position_difference": float(perturbed[0]),
                        "perturbed_velocity_difference": float(perturbed[1])}
     return [row | differences for row in rows]
-
-
-def _attached(scene, kept: list):
-    """The attached step for a scene with springs at body-frame points, as ``steplab run`` takes it (its
-    step appended to ``kept``), or None: their lever arms turn with the bodies' rotation."""
-    if not attached_forces(scene.model):
-        return None
-    return attached_stepper(scene.rigid_bodies, get_rotation(scene.rotation), kept)
 
 
 def reduce(params: dict, results: list) -> dict:

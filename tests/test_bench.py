@@ -26,7 +26,8 @@ from steplab.cli import main
 #: a bench run small enough for a unit test (seconds, not minutes)
 TINY = bench.Config(small_steps=300, particles=500, cloth_side=6, broadphase_n=2_000, periods=1,
                     max_log2_steps=14, batch=3, batch_steps=50, repeats=1, python_repeats=1, python_steps=50,
-                    loop_steps=2, compile_scenes=("projectile",), collision_runs=((30, 3),), max_rounds=4,
+                    loop_steps=2, compile_scenes=("projectile", "spring-pendulum"),  # an attached scene's step
+                    collision_runs=((30, 3),), max_rounds=4,
                     round_budget_seconds=1.0, stack_pyramid_rows=3, stack_steps=1,
                     box_pit_runs=((30, 2),), crowded_pit=(30, 1.0, 2))
 #: final states of the same method, dt and steps agree to this (m, m/s): round-off only

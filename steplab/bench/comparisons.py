@@ -334,6 +334,7 @@ def broadphase(config: Config, record: Record, progress) -> None:
 def compile_times(config: Config, record: Record, progress) -> None:
     """JIT compilation of every built-in scene's compiled loop (simulate's ``compile_time``)."""
     from steplab.integrators import Stepper, get_integrator, simulate
+    from steplab.integrators.attached import scene_stepper
     from steplab.physics.scene import builtin_scenes, load_scene
 
     for name in config.compile_scenes or builtin_scenes():
@@ -341,7 +342,7 @@ def compile_times(config: Config, record: Record, progress) -> None:
         if not isinstance(get_integrator(scene.integrator), Stepper):
             continue
         traj = simulate(scene.model, scene.integrator, scene.y0, scene.t_start, scene.t_start + 4 * scene.dt,
-                        scene.dt, backend="jax")
+                        scene.dt, backend="jax", stepper=scene_stepper(scene))
         record.data["compile_seconds"][f"scene {name} ({scene.integrator})"] = traj.compile_time
     scenes = {k: v for k, v in record.data["compile_seconds"].items() if k.startswith("scene ")}
     worst = max(scenes.values())
