@@ -80,9 +80,10 @@ class SweepCarry(NamedTuple):
         if not np.all(np.isfinite(sweep.denominator)):  # gamma = alpha c / h past the float range: NaN moves
             p = np.flatnonzero(~np.isfinite(sweep.denominator))[0]
             i, j = (int(np.flatnonzero(self.rows == row)[0]) for row in (sweep.i[p], sweep.j[p]))
-            raise ValueError(f"{method}: the spring between bodies {i} and {j}: its damping {self.constraints.damping[p]:g} "
-                             f"N s/m with compliance {self.constraints.compliance[p]:g} m/N gives gamma = alpha c / h "
-                             f"= {sweep.gamma[p]:g} at the substep h = {h:g} s; it must be finite (a smaller damping)")
+            c = self.constraints
+            raise ValueError(f"{method}: the spring between bodies {i} and {j}: its damping {c.damping[p]:g} N s/m "
+                             f"with compliance {c.compliance[p]:g} m/N gives gamma = alpha c / h = {sweep.gamma[p]:g} "
+                             f"at the substep h = {h:g} s; it must be finite (a smaller damping)")
         return self._replace(h=h, sweep=sweep)
 
 

@@ -12,7 +12,8 @@ from helpers import oscillator_scene, run_main
 BAD_TABLES = {
     "substeps0.toml": oscillator_scene("xpbd", "\n[simulation.xpbd]\nsubsteps = 0\n"),
     # a damper whose xpbd gamma = c / (k h) overflows: it ran and reported "diverged at step 1"
-    "heavy-damper.toml": oscillator_scene("xpbd", '\n[[forces.dampers]]\nbodies = ["anchor", "mass"]\ndamping = 1e308\n'),
+    "heavy-damper.toml": oscillator_scene("xpbd", '\n[[forces.dampers]]\nbodies = ["anchor", "mass"]\n'
+                                                  'damping = 1e308\n'),
     "foo.toml": oscillator_scene(table="\n[simulation.semi-implicit-euler]\nfoo = 1\n"),
 }
 
@@ -35,8 +36,9 @@ REFUSALS = {
     "check-dt-too-small": (["check", "oscillator", "--dt", "1e-320"], "time would not advance"),
     # 4: the scene's integrator table, as run refuses it
     "check-bad-table": (["check", "substeps0.toml"], "[simulation.xpbd]"),
-    "run-heavy-damper": (["run", "heavy-damper.toml"], "xpbd: the spring between bodies 0 and 1: its damping 1e+308 "
-                         "N s/m with compliance 0.0253303 m/N gives gamma = alpha c / h = inf at the substep h = 0.01 s"),
+    "run-heavy-damper": (["run", "heavy-damper.toml"], "xpbd: the spring between bodies 0 and 1: its damping "
+                         "1e+308 N s/m with compliance 0.0253303 m/N gives gamma = alpha c / h = inf at the substep "
+                         "h = 0.01 s"),
     "recommend-bad-table": (["recommend", "foo.toml", "--tol", "0.01"], "'foo' is not a setting"),
     "export-bad-table": (["export", "foo.toml", "--to", "mjcf"], "'foo' is not a setting"),
     "animate-bad-table": (["animate", "substeps0.toml", "--out", "o/a.gif"], "[simulation.xpbd]"),
