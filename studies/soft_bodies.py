@@ -65,6 +65,7 @@ def parameters(quick: bool) -> dict:
         "mode_dts": [1 / 60, 1 / 240] if quick else [1 / 60, 1 / 240, 1 / 960],
         "mode_periods": 3,
         "stiffnesses": [1e2, 1e4, 1e6, "inf"] if quick else [1e2, 1e3, 1e4, 1e5, 1e6, 1e8, "inf"],
+        "dampings": [0.05, 1.0, 10.0, 100.0] if quick else [0.05, 0.3, 1.0, 3.0, 10.0, 30.0, 100.0, 1000.0],
         "work_side": 12 if quick else 40,
         "work_t_end": 0.25,
         "work_substeps": [1, 4, 16, 64] if quick else [1, 2, 4, 8, 16, 32, 64, 128, 256],
@@ -221,6 +222,34 @@ def extreme_stiffness(params, progress) -> dict:
     return {"dt": FRAME, "rows": rows}
 
 
+def extreme_damping(params, progress) -> dict:
+    """Each method at one frame on the cloth (k = 100 N/m), its dampers' c up to 10^3 N s/m: the energy
+    E(t_end) - E(0) and the largest stretch at t_end.
+
+    The model's energy (kinetic, gravity's and the springs') cannot grow, whatever c: gravity and the springs
+    conserve it, the dampers take it out, the pinned corners do no work. A method whose energy grows has made
+    it. An xpbd or pbd constraint's damping enters its projection as gamma = c / (k h) (h the substep, the
+    class XPBD): above gamma ~ 1 it is mostly a damper, and its elastic correction -C / ((1 + gamma) w) all
+    but vanishes, so what an unconverged sweep leaves of the stretch is no longer pulled back."""
+    rows, k = [], 100.0
+    for c in params["dampings"]:
+        scene = cloth_scene(stiffness=k, damping=c)
+        start = float(scene.model.energy(scene.y0))
+        constraints = scene.model.distance_constraints()
+        for label, _, settings in METHODS:
+            y = final_state(scene, method(label), FRAME, params["t_end"])
+            finite = y is not None and bool(np.all(np.isfinite(y)))
+            stretch = np.linalg.norm(y[0][constraints.j] - y[0][constraints.i], axis=1) if finite else None
+            position_based = method(label).name in ("pbd", "xpbd")
+            rows.append({"method": label, "damping": c, "finite": finite,
+                         "gamma": c / (k * FRAME / settings["substeps"]) if position_based else None,
+                         "energy_change": float(scene.model.energy(y)) - start if finite else None,
+                         "largest_stretch": float(np.max(np.abs(stretch / constraints.rest_length - 1)))
+                         if finite else None})
+        progress()
+    return {"dt": FRAME, "stiffness": k, "t_end": params["t_end"], "rows": rows}
+
+
 def timed_final(scene, integrator, dt: float, t_end: float):
     """(final state, least wall time of REPEATS runs, s) after a run that loads the kernels."""
     final_state(scene, integrator, dt, min(t_end, 2 * dt))  # compile or load the Numba kernels
@@ -291,6 +320,7 @@ def compute(params, progress=None) -> dict:
               "against_counts": against_counts(params, references["cloth"], tick),
               "effective_stiffness": effective_stiffness(params, tick),
               "extreme_stiffness": extreme_stiffness(params, tick),
+              "extreme_damping": extreme_damping(params, tick),
               "work_precision": work_precision(params, references["cloth"] if same else None, tick)}
     return record | {"findings": findings(record, params)}
 
@@ -317,7 +347,26 @@ def findings(record: dict, params: dict) -> dict:
         "inextensible_stretch_xpbd_10x1": pick(extreme, "largest_stretch", method="xpbd 10x1", stiffness="inf"),
         "stiffest_stable_semi_implicit": max((r["stiffness"] for r in extreme if r["method"] == "semi-implicit Euler"
                                               and r["stable"]), default=None),
-    }
+    } | damping_findings(record["extreme_damping"]["rows"])
+
+
+def damping_findings(rows) -> dict:
+    """Where each xpbd row first makes energy (the least damping c with E(t_end) > E(0), and its gamma), the
+    least c where implicit Euler's Newton iteration failed, and every method's energy change at c = 100 N s/m
+    (``<method>_energy_change_at_100``, "xpbd 1x10" as xpbd_1x10)."""
+    out = {}
+    for label in ("xpbd 1x10", "xpbd 10x1"):
+        gains = [r for r in rows if r["method"] == label and r["energy_change"] is not None and r["energy_change"] > 0]
+        first = min(gains, key=lambda r: r["damping"], default=None)
+        key = label.replace(" ", "_")
+        out[f"{key}_first_gain_damping"] = None if first is None else first["damping"]
+        out[f"{key}_first_gain_gamma"] = None if first is None else first["gamma"]
+    out["implicit_euler_first_failed_damping"] = min(
+        (r["damping"] for r in rows if r["method"] == "implicit Euler" and not r["finite"]), default=None)
+    for r in rows:
+        if r["damping"] == 100.0:
+            out[f"{r['method'].lower().replace(' ', '_').replace('-', '_')}_energy_change_at_100"] = r["energy_change"]
+    return out
 
 
 def _style(label: str) -> dict:
@@ -412,7 +461,39 @@ def plot(record: dict, out) -> list[str]:
     fig.tight_layout()
     names += plotting.save_figure(fig, out, "soft-bodies_stiffness")
 
-    # 4. work-precision
+    # 4. extreme damping: the energy made, and the stretch left; a run without a result is a cross in the band
+    fig, (left, right) = plt.subplots(1, 2, figsize=(13, 5.8))
+    damping = record["extreme_damping"]
+    cs = sorted(dict.fromkeys(r["damping"] for r in damping["rows"]))
+    lost = []
+    for label, _, _ in METHODS:
+        rows = [r for r in damping["rows"] if r["method"] == label]
+        kept = [r for r in rows if r["finite"]]
+        for ax, key in ((left, "energy_change"), (right, "largest_stretch")):
+            ax.plot([r["damping"] for r in kept], [r[key] for r in kept], **_style(label))
+        if failed := [r["damping"] for r in rows if not r["finite"]]:
+            lost.append((failed, _style(label)["color"]))
+    left.axhline(0.0, color="k", lw=0.8)
+    left.set_yscale("symlog", linthresh=0.01)
+    right.set_yscale("log")
+    left.set_ylim(bottom=-10.0)  # the most the cloth can lose is about its start's 10 J
+    plotting.diverged_band(right, lost)  # the left's symmetric log scale has no band above its curves
+    for ax in (left, right):
+        ax.set_xscale("log")
+        ax.set_xticks(cs, [f"{c:g}" for c in cs])
+        ax.grid(True, which="both", alpha=0.3)
+    left.set(xlabel="damper c (N s/m)", ylabel="E(t_end) - E(0) (J; symmetric log, linear within 0.01 J)",
+             title=f"Energy on the damped cloth, dt = 1/60 s, k = {damping['stiffness']:g} N/m, t_end = "
+             f"{damping['t_end']:g} s\n(the model's energy cannot grow: above the line, the method made it)")
+    right.set(xlabel="damper c (N s/m)", ylabel="largest |stretch| at t_end",
+              title="The stretch left at t_end\n(pbd, xpbd: gamma = c / (k h) above 1 all but cancels the "
+              "elastic correction)")
+    plotting.diverged_key(left, "right: diverged, or the solver failed (in the method's colour)")
+    fig.legend(*left.get_legend_handles_labels(), loc="lower center", ncol=4, fontsize=9)
+    fig.tight_layout(rect=(0, 0.08, 1, 1))
+    names += plotting.save_figure(fig, out, "soft-bodies_damping")
+
+    # 5. work-precision
     work = record["work_precision"]
     fig, ax = plt.subplots(figsize=(7, 5))
     for name in dict.fromkeys(r["method"] for r in work["rows"]):

@@ -56,6 +56,36 @@ def test_the_equal_time_claim_interpolates_implicit_euler_in_log_log():
     assert sb.equal_time_claim(slower)["xpbd_always_faster"] is True
 
 
+def test_xpbd_makes_energy_under_heavy_dampers_only_while_its_iterations_have_not_converged():
+    # c = 10 N s/m at a frame: gamma = c / (k h) = 6. The model's energy cannot grow (its dampers take it
+    # out); ten iterations leave the sweep unconverged and the cloth gains energy, converged it loses it
+    scene = sb.cloth_scene(damping=10.0)
+    start = scene.model.energy(scene.y0)
+
+    def change(iterations):
+        y = simulate(scene.model, XPBD(1, iterations), scene.y0, 0.0, 0.25, sb.FRAME).y[-1]
+        return scene.model.energy(y) - start
+
+    converged = change(1000)
+    assert change(10) > 0.1 and converged < -0.1 and abs(change(200) - converged) < 1e-3
+
+
+def test_damping_findings_pick_the_least_damping_that_makes_energy():
+    rows = [{"method": m, "damping": c, "gamma": g, "energy_change": e}
+            for m, c, g, e in (("xpbd 1x10", 1.0, 0.6, -0.2), ("xpbd 1x10", 10.0, 6.0, 3.0),
+                               ("xpbd 1x10", 100.0, 60.0, 11.0), ("xpbd 10x1", 1.0, 6.0, 0.1),
+                               ("xpbd 10x1", 100.0, 600.0, None), ("implicit Euler", 100.0, None, -0.5),
+                               ("implicit Euler", 1000.0, None, None))]
+    for r in rows:
+        r["finite"] = r["energy_change"] is not None
+    f = sb.damping_findings(rows)
+    assert (f["xpbd_1x10_first_gain_damping"], f["xpbd_1x10_first_gain_gamma"]) == (10.0, 6.0)
+    assert (f["xpbd_10x1_first_gain_damping"], f["xpbd_10x1_first_gain_gamma"]) == (1.0, 6.0)
+    assert (f["xpbd_1x10_energy_change_at_100"], f["xpbd_10x1_energy_change_at_100"],
+            f["implicit_euler_energy_change_at_100"]) == (11.0, None, -0.5)
+    assert f["implicit_euler_first_failed_damping"] == 1000.0
+
+
 def test_the_study_is_registered_and_reproduced():
     assert STUDIES["soft-bodies"] is sb.STUDY and sb.STUDY in builtin_studies()
 
@@ -64,9 +94,11 @@ def test_the_study_is_registered_and_reproduced():
 def test_the_quick_study_runs_and_plots(tmp_path):
     params = sb.parameters(True)
     record = sb.compute(params) | {"parameters": params}
-    assert len(sb.plot(record, tmp_path)) == 8
+    assert len(sb.plot(record, tmp_path)) == 10
     f = record["findings"]
     # XPBD's converged iterations keep k; PBD's make the cloth about as many times stiffer as it iterates
     assert abs(f["xpbd_stiffness_ratio_small_dt"] - 1) < 0.01 and f["pbd_stiffness_ratio_small_dt"] > 3
     assert f["xpbd_substeps_error"] < f["xpbd_iterations_error"]  # small steps beat many iterations
     assert f["inextensible_stretch_xpbd_10x1"] < 0.05
+    # heavy dampers: unconverged xpbd makes energy, implicit Euler does not
+    assert f["xpbd_1x10_first_gain_damping"] is not None and f["implicit_euler_energy_change_at_100"] < 0
