@@ -228,19 +228,19 @@ def extreme_damping(params, progress) -> dict:
 
     The model's energy (kinetic, gravity's and the springs') cannot grow, whatever c: gravity and the springs
     conserve it, the dampers take it out, the pinned corners do no work. A method whose energy grows has made
-    it. An xpbd or pbd constraint's damping enters its projection as gamma = c / (k h) (h the substep, the
-    class XPBD): above gamma ~ 1 it is mostly a damper, and its elastic correction -C / ((1 + gamma) w) all
+    it. An xpbd or pbd constraint's damping enters its projection as gamma = c / (k h) (h the substep; see
+    the class XPBD): above gamma ~ 1 it is mostly a damper, and its elastic correction -C / ((1 + gamma) w) all
     but vanishes, so what an unconverged sweep leaves of the stretch is no longer pulled back."""
     rows, k = [], 100.0
     for c in params["dampings"]:
         scene = cloth_scene(stiffness=k, damping=c)
         start = float(scene.model.energy(scene.y0))
         constraints = scene.model.distance_constraints()
-        for label, _, settings in METHODS:
+        for label, name, settings in METHODS:
             y = final_state(scene, method(label), FRAME, params["t_end"])
             finite = y is not None and bool(np.all(np.isfinite(y)))
             stretch = np.linalg.norm(y[0][constraints.j] - y[0][constraints.i], axis=1) if finite else None
-            position_based = method(label).name in ("pbd", "xpbd")
+            position_based = name in ("pbd", "xpbd")
             rows.append({"method": label, "damping": c, "finite": finite,
                          "gamma": c / (k * FRAME / settings["substeps"]) if position_based else None,
                          "energy_change": float(scene.model.energy(y)) - start if finite else None,
