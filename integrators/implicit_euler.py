@@ -8,6 +8,7 @@ import warnings
 from typing import NamedTuple
 
 import numpy as np
+from steplab.physics.model import DENSE_MAX_MATRIX_BYTES
 
 from .base import Stepper, check_count, check_real
 
@@ -20,9 +21,6 @@ MAX_NEWTON_ITERATIONS = 50
 #: (3N)^2 Jacobian of its 25,600 particles would take 47 GB), but every built-in scene and study is
 #: below this size, so their numbers stay the dense solve's (CG's agree to its tolerance)
 DENSE_MAX_BODIES = 200
-#: the dense solve refuses a (3N)^2 float64 matrix larger than this (it holds about six:
-#: the Jacobians, their scatter, the Newton matrix): 1 GiB is N = 3,862 bodies
-DENSE_MAX_MATRIX_BYTES = 2**30
 LINEAR_SOLVERS = ("auto", "dense", "cg")
 
 

@@ -17,6 +17,10 @@ from . import constraints
 from .force import Force
 from .rules import mass_problem, number_problem, numeric, require, short, skip_checks
 
+#: the largest (3N)^2 float64 matrix :meth:`Model.jacobian` builds (it holds about six: the Jacobians,
+#: their scatter, a method's Newton matrix): 1 GiB is N = 3,862 bodies
+DENSE_MAX_MATRIX_BYTES = 2**30
+
 
 class Model:
     """Bodies and forces on one array backend and precision.
@@ -215,6 +219,11 @@ class Model:
         """
         self.require_forces()
         xp, n = self.xp, self.n_bodies
+        if 8 * (3 * n) ** 2 > DENSE_MAX_MATRIX_BYTES:  # a MemoryError (671 GiB at 10^5 bodies), or swapping
+            raise ValueError(f"the dense Jacobian of {n:,} bodies needs (3N)^2 matrices of "
+                             f"{8 * (3 * n)**2 / 2**30:.3g} GiB each (at most {DENSE_MAX_MATRIX_BYTES / 2**30:g} GiB, "
+                             "steplab.physics.model.DENSE_MAX_MATRIX_BYTES); implicit-euler solves such a model "
+                             "by conjugate gradients on the sparse Jacobian (linear_solver 'auto' or 'cg')")
         dq = xp.zeros((n, 3, n, 3), dtype=self.dtype)
         dv = xp.zeros((n, 3, n, 3), dtype=self.dtype)
         for term in self._applied:

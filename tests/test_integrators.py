@@ -586,3 +586,17 @@ def test_helper_exact_solutions_solve_their_equations():
             derivative = (problem.exact(t + h) - problem.exact(t - h)) / (2 * h)
             assert_allclose(derivative, problem.model.vector_field(t, problem.exact(t)), atol=1e-7)
     assert_allclose(projectile_solution([5.0], (1, 2, 3), (0, 0, 0), (0, 0, -1), 5.0)[0, 0, 0], [1, 2, 3])
+
+
+@pytest.mark.parametrize("name", ["implicit-damping-euler", "exponential-damping-euler"])
+def test_a_dense_jacobian_too_large_to_hold_is_one_line(name):
+    # 10^5 bodies: (3N)^2 matrices of 671 GiB each, a MemoryError from NumPy before
+    from steplab.physics import Dampers, Gravity
+
+    n = 100_000
+    model = Model(np.ones(n), np.full(n, 0.1), [Gravity(), Dampers(np.arange(n - 1), np.arange(1, n), np.ones(n - 1))])
+    y0 = np.zeros((2, n, 3))
+    y0[0, :, 0] = np.arange(n)
+    with pytest.raises(ValueError, match=r"the dense Jacobian of 100,000 bodies needs \(3N\)\^2 matrices of 671 GiB "
+                                         r"each \(at most 1 GiB"):
+        simulate(model, name, y0, 0.0, dt=0.01, n_steps=1)
