@@ -8,12 +8,16 @@ scene with collisions is measured with them instead (:mod:`.recommend_collisions
 
 from __future__ import annotations
 
+import functools
+
 import numpy as np
 from steplab.integrators import INTEGRATORS, Stepper, get_integrator
 from steplab.integrators.simulate import final_state_function
 
+from steplab.core.timing import interleaved_medians
+
 from .problems import Problem, true_final
-from .work_precision import adaptive_point, fixed_step_point
+from .work_precision import TIMING_REPEATS, adaptive_point, fixed_step_point
 
 #: the smallest step ``recommend`` considers sensible, as a fraction of the run
 DT_FLOOR_FRACTION = 2.0**-20
@@ -31,6 +35,11 @@ def check_dt_max(span: float, dt_max: float | None) -> None:
                          f"steps); pass --dt-max {shown:g} or more")
 
 
+def _final(run, y0, t_start, dt, n):
+    """One compiled run to its final state, waited for (what a candidate's time is)."""
+    return run(y0, t_start, dt, n)[0].block_until_ready()
+
+
 class NoFixedStepError(RuntimeError):
     """Neither a fixed-step method above the dt floor nor the adaptive reference meets the tolerance."""
 
@@ -41,10 +50,11 @@ def recommend(problem: Problem, tol: float, *, dt_max: float | None = None, inte
     For each integrator dt is halved from a quarter of the run (or from the largest whole
     division of the run not above ``dt_max``) until the error is below ``tol`` at that dt
     and at half of it (so a lucky cancellation at one dt is not trusted); its cost is the
-    median compiled wall time. ``integrators`` names the candidates (default: every
-    fixed-step method). Returns ``integrator``, ``dt``, ``error``, ``seconds``; when no
-    method gets there above the dt floor, the result names the reference that does
-    instead (``integrator`` is then that reference).
+    median compiled wall time, every method's answer timed in the same interleaved rounds.
+    ``integrators`` names the candidates (default: every fixed-step method). Returns
+    ``integrator``, ``dt``, ``error``, ``seconds``; when no method gets there above the dt
+    floor, the result names the reference that does instead (``integrator`` is then that
+    reference).
     """
     import jax.numpy as jnp
 
@@ -55,21 +65,27 @@ def recommend(problem: Problem, tol: float, *, dt_max: float | None = None, inte
     # the first dt: a quarter of the run, or the largest whole division not above dt_max
     first = 4 if dt_max is None else max(4, int(np.ceil(span / dt_max * (1 - 1e-12))))
     names = integrators if integrators is not None else [n for n, m in INTEGRATORS.items() if isinstance(m, Stepper)]
-    candidates = []
+    candidates, calls = [], {}
+    y0 = jnp.asarray(problem.y0)
     for method in names:
         run = final_state_function(problem.model.cast(jnp), method)
         previous, n = None, first
         while n <= most:
             point = fixed_step_point(problem, method, n, truth, run, timed=False)
             ok = point["error"] is not None and point["error"] <= tol
-            if ok and previous is not None:  # time only the method's answer
-                candidates.append(fixed_step_point(problem, method, previous["steps"], truth, run))
+            if ok and previous is not None:  # the method's answer: timed below, with the others'
+                candidates.append(previous)
+                calls[method] = functools.partial(_final, run, y0, problem.t_start, previous["dt"], previous["steps"])
                 break
             previous = point if ok else None
             if get_integrator(method).implicit and n >= 2**16:
                 break
             n *= 2
     if candidates:
+        # every answer timed in the same interleaved rounds: a burst of load falls on them alike, where timed one
+        # after another it could make a slower method look the cheapest (midpoint over rk4 at load 4 to 8)
+        seconds = interleaved_medians(calls, TIMING_REPEATS)
+        candidates = [p | {"seconds": seconds[p["method"]]} for p in candidates]
         best = min(candidates, key=lambda p: p["seconds"])
         return {"integrator": best["method"], "dt": best["dt"], "error": best["error"],
                 "seconds": best["seconds"], "steps": best["steps"]}

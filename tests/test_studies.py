@@ -265,6 +265,23 @@ def test_recommend_meets_the_tolerance_when_run_independently():
         assert choice["error"] <= tol and choice["seconds"] > 0
 
 
+def test_recommend_times_every_answer_in_the_same_interleaved_rounds(monkeypatch):
+    # timed one after another, a burst of load on one answer made a slower method the cheapest
+    from steplab.studies import recommend as rec
+    from steplab.studies.problems import scene_problem
+
+    rounds = []
+
+    def interleaved(calls, repeats):
+        rounds.append(sorted(calls))
+        return {m: 1.0 if m == "heun" else 2.0 for m in calls}  # heun the cheapest in these rounds
+
+    monkeypatch.setattr(rec, "interleaved_medians", interleaved)
+    problem = scene_problem("drag-projectile", 2.0, "drag")
+    choice = rec.recommend(problem, 1e-3, integrators=["rk4", "midpoint", "heun"])
+    assert rounds == [["heun", "midpoint", "rk4"]] and choice["integrator"] == "heun" and choice["seconds"] == 1.0
+
+
 def test_recommend_names_the_reference_when_no_fixed_step_gets_there():
     from steplab.studies.recommend import recommend
 
