@@ -24,6 +24,7 @@ reference's. When nothing passes, :class:`NoCollisionStepError` carries the evid
 
 from __future__ import annotations
 
+import functools
 import math
 from typing import NamedTuple
 
@@ -33,7 +34,7 @@ from steplab.integrators.simulate import DivergenceError
 from steplab.physics.broadphase import find_pairs
 from steplab.physics.collision import ImpactCapError, Sphere, collide
 
-from steplab.core.timing import median_time
+from steplab.core.timing import interleaved_medians
 
 from .recommend import NoFixedStepError, check_dt_max
 
@@ -194,8 +195,11 @@ def recommend_with_collisions(problem: CollisionProblem, tol: float, *, scene_dt
         measured = [p for p in tried if "error" in p]
         best = min(measured, key=lambda p: _badness(p, reference, tol, regime), default=None)
         raise NoCollisionStepError(_refusal(reference, regime, tol, best, span / finest), evidence | {"best": best})
-    for point in accepted:
-        point["seconds"] = median_time(lambda p=point: _run(problem, p["integrator"], p["steps"]), TIMING_REPEATS)
+    # every answer timed in the same interleaved rounds: a burst of load falls on them alike
+    seconds = interleaved_medians({k: functools.partial(_run, problem, p["integrator"], p["steps"])
+                                   for k, p in enumerate(accepted)}, TIMING_REPEATS)
+    for k, point in enumerate(accepted):
+        point["seconds"] = seconds[k]
     best = min(accepted, key=lambda p: p["seconds"])
     result = {k: best[k] for k in ("integrator", "dt", "error", "seconds", "steps", "impacts", "energy_error",
                                    "penetration")} | evidence

@@ -53,6 +53,25 @@ def test_recommend_drop_bounces_as_the_ball_does():
     assert r["dt"] >= 1e-3  # an answer, not the reference: a millisecond bounces right already
 
 
+def test_recommend_times_every_answer_in_the_same_interleaved_rounds(monkeypatch):
+    # timed one after another, a burst of load on one answer made a slower method the cheapest
+    from steplab.physics.scene import load_scene
+    from steplab.studies import recommend_collisions as rc
+
+    rounds = []
+
+    def interleaved(calls, repeats):
+        rounds.append(len(calls))
+        return {k: 2.0 - k for k in calls}  # the last answer the cheapest in these rounds
+
+    monkeypatch.setattr(rc, "interleaved_medians", interleaved)
+    scene = load_scene("drop")
+    problem = rc.CollisionProblem(scene.model, scene.y0, scene.t_start, 1.3, scene.collisions)
+    r = rc.recommend_with_collisions(problem, 1e-2, scene_dt=scene.dt,
+                                     integrators=["semi-implicit-euler", "velocity-verlet", "rk4"])
+    assert rounds == [3] and r["integrator"] == "rk4" and r["seconds"] == 0.0  # every one passes at 1 cm
+
+
 def test_recommend_refuses_with_evidence(capsys):
     """Explicit Euler cannot follow the ball to a micrometre: status 1, one line naming the best run."""
     status = main(["recommend", "drop", "--tol", "1e-6", "--t-end", "0.6", "--integrators", "euler"])
