@@ -8,7 +8,7 @@ import warnings
 from typing import NamedTuple
 
 import numpy as np
-from steplab.physics.model import DENSE_MAX_MATRIX_BYTES
+from steplab.physics.model import dense_problem
 
 from .base import Stepper, check_count, check_real
 
@@ -150,10 +150,8 @@ class ImplicitEuler(Stepper):
         q, v = y[0], y[1]
         t1 = t + dt
         n3 = 3 * model.n_bodies
-        if 8 * n3**2 > DENSE_MAX_MATRIX_BYTES:
-            raise ValueError(f"implicit-euler: the dense Newton solve needs (3N)^2 matrices of "
-                             f"{8 * n3**2 / 2**30:.3g} GiB each for {model.n_bodies:,} bodies; on the NumPy backend, "
-                             "linear_solver 'auto' or 'cg' solves it by conjugate gradients on the sparse Jacobian")
+        if problem := dense_problem(model.n_bodies):  # before the identity, as large as the Jacobians
+            raise ValueError(f"implicit-euler: {problem}")
         eye = xp.eye(n3, dtype=y.dtype)
 
         def update(v1):

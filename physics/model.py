@@ -22,6 +22,18 @@ from .rules import mass_problem, number_problem, numeric, require, short, skip_c
 DENSE_MAX_MATRIX_BYTES = 2**30
 
 
+def dense_problem(n_bodies: int) -> str | None:
+    """Why the dense (3N)^2 Jacobians of ``n_bodies`` cannot be built (over :data:`DENSE_MAX_MATRIX_BYTES`: a
+    MemoryError, 671 GiB at 10^5 bodies, or swapping), or None."""
+    size = 8 * (3 * n_bodies) ** 2
+    if size <= DENSE_MAX_MATRIX_BYTES:
+        return None
+    return (f"the dense Jacobian of {n_bodies:,} bodies needs (3N)^2 matrices of {size / 2**30:.3g} GiB each (at "
+            f"most {DENSE_MAX_MATRIX_BYTES / 2**30:g} GiB, steplab.physics.model.DENSE_MAX_MATRIX_BYTES); on the "
+            "NumPy backend implicit-euler solves such a model by conjugate gradients on the sparse Jacobian "
+            "(linear_solver 'auto' or 'cg')")
+
+
 class Model:
     """Bodies and forces on one array backend and precision.
 
@@ -219,11 +231,8 @@ class Model:
         """
         self.require_forces()
         xp, n = self.xp, self.n_bodies
-        if 8 * (3 * n) ** 2 > DENSE_MAX_MATRIX_BYTES:  # a MemoryError (671 GiB at 10^5 bodies), or swapping
-            raise ValueError(f"the dense Jacobian of {n:,} bodies needs (3N)^2 matrices of "
-                             f"{8 * (3 * n)**2 / 2**30:.3g} GiB each (at most {DENSE_MAX_MATRIX_BYTES / 2**30:g} GiB, "
-                             "steplab.physics.model.DENSE_MAX_MATRIX_BYTES); implicit-euler solves such a model "
-                             "by conjugate gradients on the sparse Jacobian (linear_solver 'auto' or 'cg')")
+        if problem := dense_problem(n):
+            raise ValueError(problem)
         dq = xp.zeros((n, 3, n, 3), dtype=self.dtype)
         dv = xp.zeros((n, 3, n, 3), dtype=self.dtype)
         for term in self._applied:

@@ -335,7 +335,8 @@ def test_settings_are_checked():
         ImplicitEuler(linear_solver="cg").step(model.cast(jnp), 0.0, jnp.asarray(y), 0.01, None)
     # the dense solve refuses what would not fit (the bench's cloth: 44 GiB a matrix), before allocating
     big = Model(np.ones(4_000), np.ones(4_000), [Gravity()])
-    with pytest.raises(ValueError, match="dense Newton solve needs .* GiB each for 4,000 bodies"):
+    with pytest.raises(ValueError, match=r"implicit-euler: the dense Jacobian of 4,000 bodies needs \(3N\)\^2 "
+                                         r"matrices of .* GiB each"):
         ImplicitEuler(linear_solver="dense").step(big, 0.0, np.zeros((2, 4_000, 3)), 0.01, None)
 
 
