@@ -251,8 +251,9 @@ def plot(engines: dict, out, styles) -> list[str]:
     ident = engines["identification"]
     if not ident:
         return []
-    measured = next(iter(ident[0]["differences"].values()))
-    methods = [m for m in ROTATIONS if m in measured]  # the registry's order, also from a record read back
+    # the methods measured (an engine that diverged on every problem has none), in the registry's order
+    measured = {m for row in ident for d in row["differences"].values() for m in d}
+    methods = [m for m in ROTATIONS if m in measured]
     fig, axes = plt.subplots(2, 2, figsize=(13.5, 9.4))
     heat = axes[0, 0]
     floor = 1e-17

@@ -170,6 +170,13 @@ def test_the_engines_record_and_its_figure(tmp_path):
     table = rotation_engines.engines_table(record)
     assert "| MuJoCo Euler | exponential-map | exponential-map |" in table
     assert rotation_engines.plot(record, tmp_path, _style) == ["rotation_engines.png", "rotation_engines.svg"]
+    # an engine that diverged on every problem, first: it has no distances, and the figure still draws
+    lost = record["identification"][0] | {"differences": {}, "diverged": ["tumble", "spin"], "nearest": None,
+                                         "difference": None, "equals": []}
+    record["identification"].insert(0, lost)
+    assert rotation_engines.plot(record, tmp_path, _style) == ["rotation_engines.png", "rotation_engines.svg"]
+    assert "| MuJoCo Euler | exponential-map | none (diverged on tumble, spin) | none |" in \
+        rotation_engines.engines_table(record)
 
 
 def test_a_missing_engine_is_one_line_and_the_rest_run(monkeypatch):
