@@ -579,6 +579,10 @@ def plot(record: dict, out) -> list[str]:
 # --- summary and the paper's table ------------------------------------------------------
 
 
+#: what :func:`verdict` reads of an identification
+VERDICT_KEYS = ("nearest", "difference", "equals", "diverged")
+
+
 def verdict(identification: dict) -> str:
     """"equals NAME (difference)" or "none (nearest NAME, difference)", and the problems the system diverged on."""
     d = identification["difference"]
@@ -617,7 +621,8 @@ def select_engines(record: dict) -> dict:
     for r in record["rows"]:
         errors = _bounce_errors(r["drops"])
         rows.append({"label": r["label"], "order": r["order"], "omega_dt_max": r["omega_dt_max"],
-                     "identification": {k: r["identification"][k] for k in ("nearest", "difference", "equals")},
+                     # "diverged": not in the records written before it was kept
+                     "identification": {k: r["identification"][k] for k in VERDICT_KEYS if k in r["identification"]},
                      "max_energy_error": r["energy"]["max_relative_energy_error"],
                      "misses_from": _misses_from(r["miss_rates"]),
                      "worst_bounce_error": None if errors is None else max(errors, key=abs),

@@ -126,6 +126,13 @@ def test_a_system_that_diverges_is_judged_on_the_problems_it_ran(identification)
     assert result["nearest"] == "semi-implicit-euler" and result["difference"] == 0.0
     assert all(result["differences"][m][label] is None for m in params["integrators"] for label in oscillators)
     assert verdict(result) == f"none (nearest semi-implicit-euler, 0.0e+00; diverged on {', '.join(oscillators)})"
+    # the paper's table reads the same verdict from its slice of the record
+    from steplab.studies.engines import engines_table, select_engines
+
+    row = {"label": "diverging", "order": 1.0, "omega_dt_max": {"0": 2.0, "0.1": 2.0}, "identification": result,
+           "energy": {"max_relative_energy_error": 0.1}, "miss_rates": {}, "drops": {}, "cost": {"planar": {}}}
+    table = engines_table(select_engines({"rows": [row], "steplab": {"cost": {}}}))
+    assert f"| diverging | {verdict(result)} |" in table
 
 
 def test_mujoco_euler_and_rk4_differ_from_steplab_by_round_off_not_bits():
