@@ -10,6 +10,11 @@ mmap threshold at its largest (32 MiB) keeps the columns in the heap at all (a t
 is no longer raised by glibc as blocks are freed). The step then faults no pages in.
 
 :func:`keep_freed_memory` is process-wide and idempotent; on another C library it does nothing.
+It keeps the main arena's memory, the one a process's main thread allocates from. A thread whose
+allocation once failed (a MemoryError caught and survived) is moved by glibc to a secondary arena;
+there memory comes in heaps of 64 MiB, and a heap that empties is unmapped whatever the thresholds
+say, so a step whose columns spill into a second heap faults them in again (some 1,500 to 2,000 pages
+a step, measured in a process that had survived one MemoryError).
 """
 
 from __future__ import annotations
