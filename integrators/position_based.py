@@ -69,22 +69,13 @@ class SweepCarry(NamedTuple):
 
         return in_rows(np.asarray(y, float), self.rows, axis=1), np.array(bodies(self.external, len(self.rows)))
 
-    def for_substep(self, h: float, method: str = "position-based step") -> SweepCarry:
-        """This carry with its ``sweep`` for substeps of ``h`` (itself when it has it); refuses (one line, naming
-        ``method``) a damper too heavy for h."""
+    def for_substep(self, h: float) -> SweepCarry:
+        """This carry with its ``sweep`` for substeps of ``h`` (itself when it has it)."""
         from .constraint_projection import sweep_columns
 
         if h == self.h:
             return self
-        sweep = sweep_columns(self.constraints, self.segments, self.inverse_mass, h)
-        if not np.all(np.isfinite(sweep.denominator)):  # gamma = alpha c / h past the float range: NaN moves
-            p = np.flatnonzero(~np.isfinite(sweep.denominator))[0]
-            i, j = (int(np.flatnonzero(self.rows == row)[0]) for row in (sweep.i[p], sweep.j[p]))
-            c = self.constraints
-            raise ValueError(f"{method}: the spring between bodies {i} and {j}: its damping {c.damping[p]:g} N s/m "
-                             f"with compliance {c.compliance[p]:g} m/N gives gamma = alpha c / h = {sweep.gamma[p]:g} "
-                             f"at the substep h = {h:g} s; it must be finite (a smaller damping)")
-        return self._replace(h=h, sweep=sweep)
+        return self._replace(h=h, sweep=sweep_columns(self.constraints, self.segments, self.inverse_mass, h))
 
 
 @dataclasses.dataclass(frozen=True)
@@ -165,6 +156,24 @@ class PositionBased(Integrator):
         return SweepCarry(c, coordinates(in_rows(external, rows)), in_rows(inverse_mass, rows),
                           workspace(model.n_bodies, len(c.i)), segments, rows)
 
+    def check_dt(self, model, dt: float) -> None:
+        """Refuses (one line, naming the spring) a damper too heavy for the substeps of ``dt``: where
+        gamma = alpha c / h passes the float range the projection moves bodies by NaN. Both backends
+        (:func:`.simulate.simulate` calls it for JAX, whose step traces dt)."""
+        from .projection_law import factors
+
+        c, _, inverse_mass = self.constraints(model)
+        h = dt / self.substeps
+        with np.errstate(over="ignore", invalid="ignore"):
+            _, gamma, denominator = factors(c.compliance, c.damping, inverse_mass[c.i] + inverse_mass[c.j], h)
+        bad = np.flatnonzero(~np.isfinite(denominator))
+        if bad.size:
+            p = bad[0]
+            raise ValueError(f"{self.name}: the spring between bodies {c.i[p]} and {c.j[p]}: its damping "
+                             f"{c.damping[p]:g} N s/m with compliance {c.compliance[p]:g} m/N gives "
+                             f"gamma = alpha c / h = {gamma[p]:g} at the substep h = {h:g} s; it must be finite "
+                             "(a smaller damping)")
+
     def substeps_of(self, dt: float):
         """:class:`.constraint_projection.Substeps` of a step of ``dt``."""
         from .constraint_projection import Substeps
@@ -181,7 +190,9 @@ class PositionBased(Integrator):
             from .constraint_projection_jax import advance as traced
 
             return model.xp.stack(traced(carry, y[0], y[1], steps)), carry
-        carry = carry.for_substep(steps.h, self.name)
+        if steps.h != carry.h:
+            self.check_dt(model, dt)
+        carry = carry.for_substep(steps.h)
         state = bodies(carry.work.state, model.n_bodies)  # (2, N, 3) view of the rows the kernel steps in place
         state[:, carry.rows] = y
         advance(carry.work.state[0], carry.work.state[1], carry.external, carry.inverse_mass, carry.sweep, steps,

@@ -218,6 +218,8 @@ def simulate(model, integrator, y0, t_start: float, t_end: float | None = None, 
     assert isinstance(integrator, (Stepper, PositionBased))
     if backend == "jax" and hasattr(step, "compiled"):  # a step that compiles its own loop (attached forces)
         return step.compiled(np.asarray(y0, dtype=dtype), t_start, dt, n, save_every, limit)
+    if backend == "jax" and isinstance(integrator, PositionBased):  # its compiled step traces dt
+        integrator.check_dt(model, dt)
     run = _FixedStepRun(_on_backend(model, backend, dtype), integrator, np.asarray(y0, dtype=dtype), t_start, dt,
                         n, save_every, saves, ts, limit, progress, step)
     return _run_numpy(run) if backend == "numpy" or step is not None else _run_jax(run)

@@ -39,6 +39,8 @@ REFUSALS = {
     "run-heavy-damper": (["run", "heavy-damper.toml"], "xpbd: the spring between bodies 0 and 1: its damping "
                          "1e+308 N s/m with compliance 0.0253303 m/N gives gamma = alpha c / h = inf at the substep "
                          "h = 0.01 s"),
+    "run-heavy-damper-jax": (["run", "heavy-damper.toml", "--backend", "jax"],  # traced dt: checked before the run
+                             "gives gamma = alpha c / h = inf at the substep h = 0.01 s"),
     "recommend-bad-table": (["recommend", "foo.toml", "--tol", "0.01"], "'foo' is not a setting"),
     "export-bad-table": (["export", "foo.toml", "--to", "mjcf"], "'foo' is not a setting"),
     "animate-bad-table": (["animate", "substeps0.toml", "--out", "o/a.gif"], "[simulation.xpbd]"),
