@@ -20,6 +20,7 @@ from __future__ import annotations
 
 import cmath
 import functools
+import math
 
 import numpy as np
 
@@ -115,15 +116,27 @@ def linear_map(stepper, omega_dt: float, zeta: float = 0.0) -> np.ndarray:
 
 def oscillator_eigenvalues(zeta: float) -> tuple[complex, complex]:
     """lambda = -zeta +- sqrt(zeta^2 - 1): the damped oscillator's eigenvalues (omega = 1)."""
-    root = cmath.sqrt(zeta * zeta - 1)  # i sqrt(1 - zeta^2) when underdamped
-    return complex(-zeta) + root, complex(-zeta) - root
+    if zeta <= 1:
+        root = cmath.sqrt(zeta * zeta - 1)  # i sqrt(1 - zeta^2) when underdamped
+        return complex(-zeta) + root, complex(-zeta) - root
+    # overdamped: the larger root without zeta^2 (which overflows from zeta ~ 1e154), the smaller from
+    # their product, 1, without the cancellation of -zeta + sqrt(zeta^2 - 1)
+    fast = -zeta * (1 + math.sqrt((1 - 1 / zeta) * (1 + 1 / zeta)))
+    return complex(1 / fast), complex(fast)
 
 
 def spectral_radius(stepper, omega_dt: float, zeta: float = 0.0) -> float:
-    """Largest |growth factor| per step: |R(omega_dt lambda)| if the method has R, else of its map."""
+    """Largest |growth factor| per step: |R(omega_dt lambda)| if the method has R, else of its map.
+
+    inf where the growth factor or the map is not finite: at a damping ratio near the float range an
+    explicit step's own arithmetic overflows, which is no bounded growth."""
     if stepper.stability_function is not None:
-        return max(float(abs(stepper.stability_function(omega_dt * lam))) for lam in oscillator_eigenvalues(zeta))
-    return float(np.max(np.abs(np.linalg.eigvals(stepper.linear_map(omega_dt, zeta)))))
+        radii = [float(abs(stepper.stability_function(omega_dt * lam))) for lam in oscillator_eigenvalues(zeta)]
+        return max(radii) if all(map(math.isfinite, radii)) else math.inf
+    step = stepper.linear_map(omega_dt, zeta)
+    if not np.all(np.isfinite(step)):
+        return math.inf
+    return float(np.max(np.abs(np.linalg.eigvals(step))))
 
 
 def stability_limit(stepper, zeta: float = 0.0) -> float | None:

@@ -87,7 +87,7 @@ def dt_warning(model, q, stepper, dt: float) -> str | None:
         growth = stepper.spectral_radius(mode.omega * dt, mode.damping_ratio)
         return (f"dt = {dt:g} s exceeds the largest stable dt of {stepper.name} on this scene: there is none, it "
                 f"grows at every dt (stiffest mode: omega_max = {mode.omega:.4g} rad/s{damped}; each step "
-                f"multiplies its amplitude by {growth:.4g}, its energy by {growth ** 2:.4g}); see steplab check")
+                f"multiplies its amplitude by {growth:.4g}, its energy by {growth * growth:.4g}); see steplab check")
     hint = (f" (a dt in milliseconds? {dt:g} ms is --dt {dt / 1000:g})"
             if dt >= 1 and dt / 1000 <= limit.dt_max_damped else "")
     return (f"dt = {dt:g} s exceeds the largest stable dt of {stepper.name} on this scene, "

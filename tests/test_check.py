@@ -112,3 +112,22 @@ def test_run_warns_when_dt_exceeds_the_limit(capsys):
                              "semi-implicit-euler on this scene, 0.318 s") and "--dt 0.016" in err[0]
     assert main(["run", "oscillator", "--dt", "0.3", "--t-end", "1"]) == 0  # just inside 0.3183 s
     assert capsys.readouterr().err == ""
+
+
+def test_a_damper_near_the_float_range_is_checked_and_warned_in_one_line(tmp_path, monkeypatch, capsys):
+    # a damper of 1e308 N s/m (damping ratio 8e306): check printed NumPy's "Array must not contain
+    # infs or NaNs", run a traceback (OverflowError squaring the growth factor of 1e306)
+    from helpers import oscillator_scene
+
+    monkeypatch.chdir(tmp_path)
+    (tmp_path / "heavy.toml").write_text(oscillator_scene("semi-implicit-euler", '\n[[forces.dampers]]\n'
+                                                          'bodies = ["anchor", "mass"]\ndamping = 1e308\n'))
+    assert main(["check", "heavy.toml", "--json"]) == 0
+    rows = {r["integrator"]: r for r in json.loads(capsys.readouterr().out)["integrators"]}
+    assert not rows["rk4"]["stable"] and not rows["semi-implicit-euler"]["stable"]
+    assert rows["implicit-euler"]["stable"] and rows["exponential-damping-euler"]["stable"]
+    assert main(["run", "heavy.toml"]) == 1  # it diverges, as the warning says
+    err = capsys.readouterr().err.splitlines()
+    assert err[0].startswith("steplab run: warning: dt = 0.01 s exceeds the largest stable dt of "
+                             "semi-implicit-euler on this scene: there is none") and "its energy by inf" in err[0]
+    assert len(err) == 2 and "diverged" in err[1]

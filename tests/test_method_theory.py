@@ -212,3 +212,25 @@ def test_a_carry_the_map_cannot_read_is_one_clear_error():
 
     with pytest.raises(TypeError, match="keeps-a-tuple: .*override linear_map"):
         KeepsATuple().linear_map(0.5)
+
+
+@pytest.mark.parametrize("zeta", [2.0, 1e10, 1e200, 1e307])
+def test_overdamped_eigenvalues_are_the_roots_without_overflow(zeta):
+    # lambda^2 + 2 zeta lambda + 1 = 0: the product of the roots is 1, their sum -2 zeta; zeta^2
+    # overflows from 1e154, where the formula with sqrt(zeta^2 - 1) gave inf - inf = NaN
+    slow, fast = oscillator_eigenvalues(zeta)
+    assert slow.imag == fast.imag == 0 and math.isfinite(fast.real)
+    assert slow * fast == pytest.approx(1.0, rel=1e-14)
+    assert slow + fast == pytest.approx(-2 * zeta, rel=1e-14)
+
+
+@pytest.mark.parametrize("name", ["euler", "semi-implicit-euler", "rk4", "heun", "implicit-euler",
+                                  "exponential-damping-euler"])
+def test_a_damping_ratio_near_the_float_range_is_judged_not_raised(name):
+    # zeta = 8e306 (a damper of 1e308 N s/m on the 1 kg oscillator): an explicit step grows by up to
+    # 1e305 or overflows (inf), never a LinAlgError from a non-finite map nor a NaN taken for stable
+    method, zeta = INTEGRATORS[name], 8e306
+    radius = method.spectral_radius(0.01, zeta)
+    damping_implicit = name in ("implicit-euler", "exponential-damping-euler")
+    assert radius <= 1 if damping_implicit else radius > 1e300
+    assert (method.stability_limit(zeta) is None) if damping_implicit else method.stability_limit(zeta) == 0
