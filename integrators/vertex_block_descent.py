@@ -71,12 +71,35 @@ class VBD(PositionBased):
                                 free[np.argsort(colour[free], kind="stable")], mass)
         return DescentCarry(springs, external, None)
 
+    def check_dt(self, model, dt: float) -> None:
+        """Refuses (one line, naming the body) a vertex whose 3x3 Hessian block the cofactor solve cannot take
+        at substeps of ``dt``: its determinant, a sum of six products of three entries, stays below 6 H^3, with
+        H = m / h^2 + the sum of 2 k + c / h over the vertex's springs the largest an entry can be; past the
+        float range the step moves by NaN. Springs of stiffness inf are :meth:`init`'s to refuse."""
+        c, _, inverse_mass = self.constraints(model)
+        h = dt / self.substeps
+        limit = float(np.cbrt(np.finfo(float).max / 6))
+        with np.errstate(over="ignore", divide="ignore"):
+            per_spring = np.where(c.compliance > 0, 2.0 / np.where(c.compliance > 0, c.compliance, 1.0), 0.0)
+            per_spring = per_spring + c.damping / h
+            block = np.divide(1.0, inverse_mass, out=np.zeros_like(inverse_mass), where=inverse_mass > 0) / (h * h)
+            np.add.at(block, c.i, per_spring)
+            np.add.at(block, c.j, per_spring)
+        bad = np.flatnonzero((inverse_mass > 0) & ~(block <= limit))
+        if bad.size:
+            b = int(bad[0])
+            raise ValueError(f"{self.name}: body {b}: its Hessian block (m / h^2 plus 2 k + c / h of each of its "
+                             f"springs) reaches {block[b]:g} at the substep h = {h:g} s, past the {limit:.3g} its 3x3 "
+                             "solve can take (a smaller stiffness, damping or mass, or a longer substep)")
+
     def step(self, model, t, y, dt, carry):
         from .block_descent import descend  # Numba: only when a vbd run steps
 
         if carry is None:
             carry = self.init(model, t, y)
         graph, external, v_before = carry
+        if v_before is None:  # a run's first step
+            self.check_dt(model, dt)
         q, v = np.array(y[0], float), np.array(y[1], float)
         h = dt / self.substeps
         for _ in range(self.substeps):

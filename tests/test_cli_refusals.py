@@ -14,6 +14,8 @@ BAD_TABLES = {
     # a damper whose xpbd gamma = c / (k h) overflows: it ran and reported "diverged at step 1"
     "heavy-damper.toml": oscillator_scene("xpbd", '\n[[forces.dampers]]\nbodies = ["anchor", "mass"]\n'
                                                   'damping = 1e308\n'),
+    "heavy-damper-vbd.toml": oscillator_scene("vbd", '\n[[forces.dampers]]\nbodies = ["anchor", "mass"]\n'
+                                                      'damping = 1e104\n'),
     "foo.toml": oscillator_scene(table="\n[simulation.semi-implicit-euler]\nfoo = 1\n"),
 }
 
@@ -39,6 +41,10 @@ REFUSALS = {
     "run-heavy-damper": (["run", "heavy-damper.toml"], "xpbd: the spring between bodies 0 and 1: its damping "
                          "1e+308 N s/m with compliance 0.0253303 m/N gives gamma = alpha c / h = inf at the substep "
                          "h = 0.01 s"),
+    # vbd's 3x3 solve overflows long before gamma would: its Hessian block cubed (was "diverged at step 1")
+    "run-heavy-damper-vbd": (["run", "heavy-damper-vbd.toml"], "vbd: body 1: its Hessian block (m / h^2 plus "
+                             "2 k + c / h of each of its springs) reaches 1e+106 at the substep h = 0.01 s, past the "
+                             "3.11e+102"),
     "run-heavy-damper-jax": (["run", "heavy-damper.toml", "--backend", "jax"],  # traced dt: checked before the run
                              "gives gamma = alpha c / h = inf at the substep h = 0.01 s"),
     "recommend-bad-table": (["recommend", "foo.toml", "--tol", "0.01"], "'foo' is not a setting"),
