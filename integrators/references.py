@@ -162,8 +162,15 @@ class AdaptiveReference(Solver):
         if self.implicit and self.backend == "numpy":  # scipy's implicit methods take the Jacobian
             shape = np.shape(y0)
             jacobian = lambda t, y: _first_order_jacobian(model, t, y.reshape(shape))  # noqa: E731
-        sol = solve_adaptive(model.vector_field, ts, y0, self.name, self.rtol, self.atol, jacobian=jacobian)
+        sol = solve_adaptive(model.vector_field, ts, y0, self.name, self.rtol, self.atol, jacobian=jacobian,
+                             max_steps=MAX_REFERENCE_STEPS)
         if not sol.success:
+            if sol.steps is not None and int(sol.steps) >= MAX_REFERENCE_STEPS:  # diffrax: "Try increasing
+                # `max_steps`", which no command line can do
+                raise ReferenceFailedError(f"{self.name} failed: it took its budget of {MAX_REFERENCE_STEPS:,} steps "
+                                           "(steplab.integrators.references.MAX_REFERENCE_STEPS) before the end of "
+                                           "the run: a shorter run, or for a stiff scene an implicit reference "
+                                           "(diffrax-kvaerno5, scipy-radau)")
             raise ReferenceFailedError(f"{self.name} failed: {sol.message}")
         return np.asarray(sol.ys)
 

@@ -177,3 +177,14 @@ def test_contact_solver_scene_settings_are_bounded_together(capsys, tmp_path):
     path.write_text(text + "\n[collisions.solver]\niterations = 1000\nsubsteps = 1000\n")
     err = refused(capsys, ["run", str(path), "--steps", "1"])
     assert "collisions.solver.iterations: iterations x substeps must be at most 100,000 sweeps a step" in err
+
+
+def test_a_reference_out_of_steps_says_its_budget_not_diffraxs_advice(capsys, monkeypatch):
+    # diffrax's own words were "Try increasing `max_steps`", which no command line can do
+    monkeypatch.setattr(references, "MAX_REFERENCE_STEPS", 20)
+    from steplab.cli import main
+
+    assert main(["run", "oscillator", "--integrator", "diffrax-tsit5", "--t-end", "10"]) == 1
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "Traceback" not in err and "max_steps" not in err
+    assert "diffrax-tsit5 failed: it took its budget of 20 steps (steplab.integrators.references." in err
