@@ -50,8 +50,13 @@ class Drag(Force):
         and ``bodies`` (default: all)."""
         table.allow("density", "drag_coefficient", "bodies")
         mask = bodies.mask(table, "bodies")
-        return cls.from_coefficients(bodies.radii, table.number("density", AIR_DENSITY, positive=True),
-                                     table.number("drag_coefficient", 0.4, nonnegative=True), mask)
+        density = table.number("density", AIR_DENSITY, positive=True)
+        drag_coefficient = table.number("drag_coefficient", 0.4, nonnegative=True)
+        beta = _beta(bodies.radii, density, drag_coefficient, mask)
+        problem = _beta_problem(beta, bodies.radii, density, drag_coefficient, bodies.names)
+        if problem:
+            table.fail(problem)
+        return cls(beta=beta)
 
     @classmethod
     def from_coefficients(cls, radii, density=AIR_DENSITY, drag_coefficient=0.4, mask=None):
@@ -61,9 +66,8 @@ class Drag(Force):
         require("Drag: drag_coefficient", number_problem(drag_coefficient, nonnegative=True))
         require("Drag: radii", number_problem(radii, positive=True))
         radii = np.asarray(radii, dtype=float)
-        beta = 0.5 * density * drag_coefficient * np.pi * radii**2
-        if mask is not None:
-            beta = np.where(mask, beta, 0.0)
+        beta = _beta(radii, density, drag_coefficient, mask)
+        require("Drag", _beta_problem(beta, radii, density, drag_coefficient))
         return cls(beta=beta)
 
     def force(self, xp, q, v, m):
@@ -85,3 +89,24 @@ class Drag(Force):
         )
         block = -self.beta[:, None, None] * (speed[:, None, None] * xp.eye(3, dtype=v.dtype) + vhat_v)
         return BodyJacobian(None, block)
+
+
+def _beta(radii, density, drag_coefficient, mask):
+    """beta = 1/2 rho C_D pi r^2 per body (0 where ``mask`` is False, and where rho C_D is 0 however
+    large r: 0 x inf would be NaN)."""
+    coefficient = 0.5 * density * drag_coefficient * np.pi
+    with np.errstate(over="ignore", invalid="ignore"):
+        beta = np.where(coefficient == 0, 0.0, coefficient * np.asarray(radii, dtype=float)**2)
+    return beta if mask is None else np.where(mask, beta, 0.0)
+
+
+def _beta_problem(beta, radii, density, drag_coefficient, names=None) -> str | None:
+    """Why beta cannot be drag's factor: it overflowed (a radius of 1e300 m squares to inf), or None."""
+    bad = ~np.isfinite(beta)
+    if not np.any(bad):
+        return None
+    k = int(np.argmax(bad))
+    body = f"body {names[k]!r}" if names is not None else f"body {k}"
+    return (f"the drag factor 1/2 rho C_D pi r^2 of {body} (radius {float(radii[k]):g} m, density {float(density):g} "
+            f"kg/m^3, drag_coefficient {float(drag_coefficient):g}) is {float(beta[k])} kg/m, beyond float64: "
+            "a smaller radius, density or drag_coefficient")

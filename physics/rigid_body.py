@@ -21,6 +21,7 @@ import math
 import numpy as np
 
 from . import quaternion as quat
+from .rules import SMALLEST_INVERTIBLE, invertible
 
 SHAPES = ("sphere", "box", "capsule", "cylinder")
 #: relative slack on the triangle inequality I1 + I2 >= I3: a thin plate has I1 + I2 = I3
@@ -102,12 +103,27 @@ def check_inertia(inertia) -> np.ndarray:
     positive = np.all(inertia > 0, axis=-1)
     if not np.all(positive):
         raise InertiaError(f"inertia must be > 0 kg m^2 in every moment, got {_first_bad(inertia, ~positive)}")
+    inverse = np.all(invertible(inertia), axis=-1)
+    if not np.all(inverse):  # a subnormal moment: I^-1 L overflows on the first step
+        raise InertiaError(f"inertia must be at least {SMALLEST_INVERTIBLE:.3g} kg m^2 in every moment (a smaller one "
+                           f"has no finite inverse), got {_first_bad(inertia, ~inverse)}")
     ordered = np.sort(inertia, axis=-1)
     broken = ordered[..., 0] + ordered[..., 1] < ordered[..., 2] * (1 - TRIANGLE_SLACK)
     if np.any(broken):
         raise InertiaError(f"inertia {_first_bad(inertia, broken)} breaks the triangle inequality (the two smaller "
                            "moments must sum to at least the largest): no body has these moments")
     return inertia
+
+
+def shape_inertia_problem(shape: str, inertia) -> str | None:
+    """Why the principal moments a shape's formula gave (:func:`principal_inertia`) are no body's: they
+    overflowed, or underflowed to 0 or below the smallest moment with a finite inverse; None when fine."""
+    inertia = np.asarray(inertia, dtype=float)
+    if np.all(np.isfinite(inertia) & (inertia > 0) & invertible(inertia)):
+        return None
+    return (f"the {shape}'s principal moments {inertia.tolist()} kg m^2 are not each finite and at least "
+            f"{SMALLEST_INVERTIBLE:.3g} kg m^2 (a smaller one has no finite inverse): the numbers overflow or "
+            "underflow")
 
 
 def check_orientation(orientation) -> np.ndarray:
@@ -273,9 +289,9 @@ def from_scene_body(t, mass: float, radius: float):
             t.fail(str(err), "inertia")
     else:
         inertia = principal_inertia(shape, mass, radius, size, length)
-        if not np.all(np.isfinite(inertia) & (inertia > 0)):
-            t.fail(f"the {shape}'s principal moments {inertia.tolist()} kg m^2 are not finite and positive "
-                   "(the numbers overflow or underflow); give inertia = [I1, I2, I3]")
+        problem = shape_inertia_problem(shape, inertia)
+        if problem:
+            t.fail(f"{problem}; give inertia = [I1, I2, I3]")
     orientation = t.raw("orientation", [1.0, 0.0, 0.0, 0.0])
     if (not isinstance(orientation, list) or len(orientation) != 4
             or any(isinstance(x, bool) or not isinstance(x, (int, float)) for x in orientation)):

@@ -146,17 +146,27 @@ def restitution_problem(value) -> str | None:
     return problem
 
 
+#: the smallest positive float64 whose inverse is finite (1 / x overflows below it: the subnormals)
+SMALLEST_INVERTIBLE = 1 / np.finfo(float).max
+
+
+def invertible(values) -> np.ndarray:
+    """Where ``values`` (> 0) have a finite inverse: a subnormal mass or moment of inertia has none (a = F / m
+    and I^-1 L overflow)."""
+    with np.errstate(divide="ignore", over="ignore"):
+        return np.float64(1.0) / np.asarray(values, dtype=float) < np.inf
+
+
 def mass_problem(masses) -> str | None:
     """Masses, kg: finite, > 0, and with a finite inverse (a subnormal mass: a = F / m would overflow)."""
     problem = number_problem(masses, positive=True)
     if problem is None:
         arr = np.asarray(masses, dtype=float)
-        with np.errstate(divide="ignore", over="ignore"):
-            ok = np.float64(1.0) / arr < np.inf
+        ok = invertible(arr)
         if not np.all(ok):
             mass = float(arr.flat[int(np.argmin(ok.ravel()))])
             problem = (f"a body of mass {mass:.3g} kg has no finite inverse mass (the smallest mass is "
-                       f"{1 / np.finfo(float).max:.3g} kg)")
+                       f"{SMALLEST_INVERTIBLE:.3g} kg)")
     return problem
 
 

@@ -406,9 +406,9 @@ class _SceneBuilder:
             mass = row_masses[r]
             self._append(t, f"{name}[{k}]", mass, radius, centre, np.zeros(3))
             inertia = rigid_body.principal_inertia("box", mass, radius, size)
-            if not np.all(np.isfinite(inertia) & (inertia > 0)):
-                t.fail(f"the box's principal moments {inertia.tolist()} kg m^2 are not finite and positive "
-                       "(the numbers overflow or underflow)", "size")
+            problem = rigid_body.shape_inertia_problem("box", inertia)
+            if problem:
+                t.fail(problem, "size")
             self.rotating.append((len(self.names) - 1, "box", inertia, np.array([1.0, 0, 0, 0]), np.zeros(3)))
             self.half[len(self.names) - 1] = 0.5 * size
 

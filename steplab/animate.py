@@ -26,6 +26,9 @@ MIN_DRAWN_RADIUS = 0.012
 #: panel's own (a run that diverged to 1e30 m): then the window is capped, and a body outside
 #: it is drawn on the edge, in red
 MAX_SHARED_ZOOM = 1000.0
+#: m: the widest window drawn; matplotlib's tick locators overflow on a window near the float range (a body of
+#: radius 1e308 m, a static box of 1e308 m), so a wider one is refused in one line
+MAX_WINDOW = 1e300
 #: pixels per inch of the written frames
 DPI = 100
 #: inches: a scene panel's largest width and height (the other side follows the window's aspect
@@ -112,6 +115,11 @@ def animate(runs: list[tuple[str, object]], model, out: str | Path, fps: int = 3
     pairs = np.concatenate([np.stack([np.asarray(f.i), np.asarray(f.j)], 1) for f in springs]) if springs else None
     fixed = np.concatenate([_extent(shapes)[:, axes_idx], centers[:, axes_idx]])
     lo, hi = shared_window([traj.positions[..., axes_idx] for _, traj in runs], fixed, radii.max())
+    width = float(np.max(hi - lo))
+    if not width <= MAX_WINDOW:
+        across = f"would be {width:.3g} m across" if np.isfinite(width) else "would overflow float64"
+        raise ValueError(f"the picture's width {across} (the bodies with their radii, the static boxes and the "
+                         f"attracting masses): animate draws at most {MAX_WINDOW:g} m")
     drawn_radii = np.maximum(radii, MIN_DRAWN_RADIUS * (hi - lo).max())
     changes, unit = energy_changes([np.array([float(model.energy(y)) for y in traj.y]) for _, traj in runs])
 

@@ -13,7 +13,9 @@ from the data.
 
 from __future__ import annotations
 
+import contextlib
 import json
+import math
 import re
 from pathlib import Path
 
@@ -112,8 +114,35 @@ def table_slice(name: str, records: dict):
     missing = [study for study in sources if study not in records]
     if missing:
         raise PaperError(f"the table {name!r} needs the results of {', '.join(missing)}")
-    parts = [table.select(records[study]) for study in sources]
-    return parts[0] if len(parts) == 1 else [row for part in parts for row in part]
+    with _drawing(name, sources):
+        parts = [table.select(records[study]) for study in sources]
+        return parts[0] if len(parts) == 1 else [row for part in parts for row in part]
+
+
+@contextlib.contextmanager
+def _drawing(name: str, sources: list[str]):
+    """Selecting or drawing table ``name``: a record without what it needs (cut short, edited, or of a
+    steplab whose records had other fields) is one PaperError naming the table and its studies."""
+    try:
+        yield
+    except PaperError:
+        raise
+    except (KeyError, IndexError, TypeError, AttributeError, ValueError) as err:
+        raise PaperError(f"the table {name!r}: the results of {', '.join(sources)} lack what it needs "
+                         f"({type(err).__name__}: {err}); run {'its study' if len(sources) == 1 else 'them'} "
+                         "again") from None
+
+
+def quoted(value, spec: str, path: str) -> str:
+    """``value`` as the text quotes it (:func:`format_value`); a number that is not finite, or a value its
+    ``spec`` cannot print (a list, a string for ``.2f``), is a PaperError naming its path: never "nan" in the text."""
+    if isinstance(value, float) and not math.isfinite(value):
+        raise PaperError(f"the results' value at {path!r} is {value}, not a finite number; run its study again")
+    try:
+        return format_value(value, spec)
+    except (TypeError, ValueError):
+        raise PaperError(f"the results' value at {path!r} is {json.dumps(value)[:60]}, which the format "
+                         f"{spec!r} cannot print (a number is expected)") from None
 
 
 # --- build --------------------------------------------------------------------------
@@ -140,9 +169,10 @@ def render(template: str, numbers: dict) -> str:
         token = match.group(1)
         if token.startswith("table:"):
             name = token.removeprefix("table:")
-            return tables[name][1].draw(numbers["tables"][name])
+            with _drawing(name, tables[name][0]):
+                return tables[name][1].draw(numbers["tables"][name])
         path, _, spec = token.partition(":")
-        return format_value(numbers["values"][path], spec)
+        return quoted(numbers["values"][path], spec, path)
 
     text = PLACEHOLDER.sub(fill, template)
     # the notice goes after the YAML front matter, which must open the file (JOSS, pandoc)
@@ -152,12 +182,22 @@ def render(template: str, numbers: dict) -> str:
 
 
 def load_records(results: Path) -> dict:
+    """Every record of the results folder by name; a study's record (or the bench's) that is not a JSON
+    object, or that is another study's, is refused in one line naming it."""
+    if not Path(results).is_dir():
+        what = "a file, not a folder" if Path(results).exists() else "no such folder"
+        raise PaperError(f"--results {results}: {what}; run `steplab reproduce --out {results}` first")
     records = {}
     for path in sorted(Path(results).glob("*.json")):
         try:
-            records[path.stem] = json.loads(path.read_text())
+            records[path.stem] = record = json.loads(path.read_text())
         except ValueError as err:
             raise PaperError(f"{path}: not valid JSON ({err})") from None
+        if path.stem in STUDIES or path.stem == "bench":
+            if not isinstance(record, dict):
+                raise PaperError(f"{path}: not a record (a JSON object), but a JSON {type(record).__name__}")
+            if record.get("study", path.stem) != path.stem:
+                raise PaperError(f"{path}: the record of the study {record['study']!r}, not of {path.stem!r}")
     if not records:
         raise PaperError(f"{results}: no study results; run `steplab reproduce --out {results}` first")
     return records

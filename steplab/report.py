@@ -22,10 +22,10 @@ from pathlib import Path
 
 from steplab import report_figures
 from steplab.bench.report import collision_markdown
-from steplab.core.records import write_atomic
-from steplab.paper import BENCH_TABLE, PLACEHOLDER, PaperError, load_records, lookup, to_html
+from steplab.core.records import make_folder, write_atomic
+from steplab.paper import BENCH_TABLE, PLACEHOLDER, PaperError, load_records, lookup, quoted, to_html
 from steplab.studies import STUDIES
-from steplab.studies.tables import format_value, markdown_table
+from steplab.studies.tables import markdown_table
 
 #: the tables that list the lecture's errors (truncation: its misprinted formulas;
 #: restitution and tunnelling: the response and detection chapters' errors)
@@ -52,14 +52,15 @@ def build(results: Path, out: Path) -> list[Path]:
 
     Raises
     ------
+    PaperError
+        When ``results`` is not a folder, or a record there is not valid JSON, not a record or
+        another study's (:func:`steplab.paper.load_records`), or a number the paper quotes is not finite.
     ReportError
-        When ``results`` is not a folder, holds no study record, or a record names a
-        figure the folder does not have.
+        When ``results`` holds no study record, or a record names a figure the folder does not have.
     """
-    results, out = Path(results), Path(out)
-    if not results.is_dir():
-        raise ReportError(f"--results {results}: no such folder; run `steplab reproduce --out {results}` first")
-    records = load_records(results)
+    results = Path(results)
+    records = load_records(results)  # a --results that is not a folder is refused there
+    out = make_folder(out, "site folder")  # before the pages: a file there fails first, in these words
     studies = [(STUDIES[name], records[name]) for name in STUDIES if name in records]
     bench = records.get("bench")
     if not studies and bench is None:
@@ -90,7 +91,9 @@ def _shown(path: Path, make: Callable[..., str], *args) -> str:
     edited, or written by a steplab whose records had other fields) is refused in one line naming it."""
     try:
         return make(*args)
-    except (KeyError, IndexError, TypeError, AttributeError) as err:
+    except PaperError:  # a number it quotes, not finite: already one line naming it
+        raise
+    except (KeyError, IndexError, TypeError, AttributeError, ValueError) as err:  # ValueError: "abc" for a number
         raise ReportError(f"{path}: not a record its page can be made from ({type(err).__name__}: {err}); "
                           "run its study (or the bench) again") from None
 
@@ -206,9 +209,11 @@ def _quoted(name: str, value_of, template: Path) -> str:
         if path.split("/")[0] != name:
             continue
         try:
-            value = format_value(value_of(path), spec)
+            value = value_of(path)
         except PaperError:  # a quick run's record lacks what only the full run has
             value = "not in this record"
+        else:
+            value = quoted(value, spec, path)  # a non-finite number or a wrong type: refused, never "nan"
         before = PLACEHOLDER.sub("…", text[max(0, match.start() - 90):match.start()])
         words = " ".join(re.split(r"(?<=[.:;])\s", " ".join(before.split()))[-1].split()[-12:])
         rows.append([f"`{path}`", value, f"… {words}"])

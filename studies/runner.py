@@ -118,7 +118,13 @@ def is_cached(study: Study, out: Path, quick: bool) -> bool:
     if not isinstance(record, dict) or record.get("cache_key") != cache_key(study, study.parameters(quick)):
         return False
     figures = record.get("figures", [])
-    return isinstance(figures, list) and all(isinstance(f, str) and (out / f).is_file() for f in figures)
+    if not (isinstance(figures, list) and all(isinstance(f, str) and (out / f).is_file() for f in figures)):
+        return False
+    try:  # a record whose fields were cut or edited is no cache: its summary would be a traceback
+        study.summary(record)
+    except (KeyError, IndexError, TypeError, AttributeError, ValueError):
+        return False
+    return True
 
 
 def run_study(study: Study, out: Path, quick: bool = False, force: bool = False, progress=None) -> dict:

@@ -6,7 +6,7 @@ import json
 from pathlib import Path
 
 import pytest
-from helpers import oscillator_scene, run_main
+from helpers import OSCILLATOR_SCENE, oscillator_scene, run_main
 
 #: scenes whose integrator's [simulation.<integrator>] table run refuses
 BAD_TABLES = {
@@ -17,6 +17,24 @@ BAD_TABLES = {
     "heavy-damper-vbd.toml": oscillator_scene("vbd", '\n[[forces.dampers]]\nbodies = ["anchor", "mass"]\n'
                                                       'damping = 1e104\n'),
     "foo.toml": oscillator_scene(table="\n[simulation.semi-implicit-euler]\nfoo = 1\n"),
+}
+
+#: scenes whose every number is finite but too large or too small for what a command computes from them
+EXTREME_SCENES = {
+    # 1/2 rho C_D pi r^2 of a 1e300 m ball overflows: was "Drag: beta must be finite, got inf", naming no file or key
+    "drag-huge-radius.toml": OSCILLATOR_SCENE.read_text().replace("radius = 0.05\nposition = [1.5",
+                                                                  "radius = 1e300\nposition = [1.5")
+    + "\n[forces.drag]\n",
+    # a 1e308 m ball: the plot window overflowed inside matplotlib ("arange: cannot compute length")
+    "huge-ball.toml": OSCILLATOR_SCENE.read_text().replace("radius = 0.05\nposition = [1.5",
+                                                           "radius = 1e308\nposition = [1.5"),
+    # a static box near the float range: matplotlib's OverflowError, a traceback
+    "huge-box.toml": '[simulation]\ndt = 0.01\nt_end = 0.1\n[[bodies]]\nname = "b"\nmass = 1.0\nradius = 0.1\n'
+                     'position = [0, 0, 5]\n[collisions]\n[[collisions.boxes]]\ncenter = [0.0, 0.0, -1e308]\n'
+                     'size = [1e308, 1e308, 1e308]\n',
+    # a ball of 1e-154 m: 2/5 m r^2 = 4e-309 kg m^2 has no finite inverse (the contact solver's state went non-finite)
+    "subnormal-inertia.toml": (OSCILLATOR_SCENE.parent / "rolling-sphere.toml").read_text()
+    .replace("radius = 0.1", "radius = 1e-154"),
 }
 
 #: name -> (argv, what the one line of error says); the files are made in the fixture's folder
@@ -56,7 +74,22 @@ REFUSALS = {
     # 6: the path the user gave, never the temporary file's
     "export-out-folder": (["export", "projectile", "--to", "mjcf", "--out", "folder"], "folder: "),
     "run-out-unwritable": (["run", "projectile", "--out", "/proc/x.csv"], "/proc/x.csv: "),
-    # 7: a bench record whose ratio is not a finite number
+    # 7: extreme but finite numbers in a scene: one line naming what overflows, never a library's words
+    "run-drag-huge-radius": (["run", "drag-huge-radius.toml"], "drag-huge-radius.toml: forces.drag: the drag factor "
+                             "1/2 rho C_D pi r^2 of body 'mass' (radius 1e+300 m"),
+    "animate-huge-ball": (["animate", "huge-ball.toml", "--t-end", "0.05", "--out", "o/a.gif"],
+                          "the picture's width would overflow float64"),
+    "animate-huge-box": (["animate", "huge-box.toml", "--out", "o/a.gif"], "the picture's width would be 1.57e+308 m "
+                         "across (the bodies with their radii, the static boxes and the attracting masses): animate "
+                         "draws at most 1e+300 m"),
+    "run-subnormal-inertia": (["run", "subnormal-inertia.toml"], "subnormal-inertia.toml: bodies[0]: the sphere's "
+                              "principal moments [4e-309, 4e-309, 4e-309] kg m^2 are not each finite and at least "
+                              "5.56e-309 kg m^2 (a smaller one has no finite inverse)"),
+    # simulate's Python advice (pass stepper=attached_stepper(...)) is no answer at the command line
+    "animate-offsets": (["animate", "spring-pendulum", "--t-end", "0.05", "--out", "o/a.gif"],
+                        "scene spring-pendulum: springs or dampers at body-frame points (offsets) turn with the "
+                        "bodies, which animate does not step yet; use steplab run"),
+    # 8: a bench record whose ratio is not a finite number
     "bench-ratio-string": (["bench", "--from", "x.json"], "x.json: ratios."),
     "bench-ratio-nan": (["bench", "--from", "nan.json"], "nan.json: ratios."),
 }
@@ -71,7 +104,7 @@ SOLVER_REQUESTS = {
 
 
 def _files(folder: Path) -> None:
-    for name, text in BAD_TABLES.items():
+    for name, text in {**BAD_TABLES, **EXTREME_SCENES}.items():
         (folder / name).write_text(text)
     (folder / "folder").mkdir()
     # a bench record's fields (read_record checks every ratio before anything is printed)

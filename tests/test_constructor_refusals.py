@@ -122,6 +122,9 @@ REFUSALS = [
     (lambda: Drag.from_coefficients(np.array([0.1]), density=-1), ValueError, "Drag: density must be > 0"),
     (lambda: Drag.from_coefficients(np.array([0.1]), drag_coefficient=NAN), ValueError,
      "Drag: drag_coefficient must be finite"),
+    (lambda: Drag.from_coefficients(np.array([0.1, 1e300])), ValueError,
+     "Drag: the drag factor 1/2 rho C_D pi r^2 of body 1 (radius 1e+300 m, density 1.225 kg/m^3, drag_coefficient 0.4) "
+     "is inf kg/m, beyond float64"),
     (lambda: Drag(np.array([-0.1])), ValueError, "Drag: beta must be >= 0"),
     (lambda: Model([1.0, 1.0], [0.1, 0.1], [Drag(np.array([0.1]))]), ValueError, "Drag: beta must be one value"),
     (lambda: Friction(-0.5, 0.3, UP, 0.0, np.array([0.1])), ValueError, "Friction: mu_static must be >= 0"),

@@ -101,3 +101,25 @@ def test_a_spring_with_no_finite_compliance_is_refused_by_the_position_based_met
         err = refused(capsys, ["run", str(path), "--integrator", method, "--t-end", "0.01"])
         assert "a spring of stiffness 1e-320 N/m has no finite compliance 1 / k" in err
     assert main(["run", str(path), "--integrator", "semi-implicit-euler", "--t-end", "0.01"]) == 0
+
+
+def test_a_subnormal_moment_of_inertia_is_refused():
+    # 1 / 1e-310 overflows: dlm's first step was "diverged at step 1", the contact solver's "non-finite"
+    spun = {"angular_velocity = [0.05, 6.283185307179586, 0.05]": "inertia = [1e-310, 1e-310, 1e-310]"}
+    with pytest.raises(SceneError, match=r"bodies\[0\]\.inertia: inertia must be at least 5\.56e-309 kg m\^2 in "
+                                         r"every moment \(a smaller one has no finite inverse\), got "
+                                         r"\[1e-310, 1e-310, 1e-310\]"):
+        parse_scene(dzhanibekov(spun))
+    smallest = {"angular_velocity = [0.05, 6.283185307179586, 0.05]": "inertia = [6e-309, 6e-309, 6e-309]"}
+    assert parse_scene(dzhanibekov(smallest)).rigid_bodies.inertia[0, 0] == 6e-309
+
+
+def test_a_box_near_the_float_range_exports_its_centre(capsys, tmp_path):
+    # lo + hi of the box overflowed: the MJCF said pos="0.0 0.0 -inf"
+    path = tmp_path / "b.toml"
+    path.write_text('[simulation]\ndt = 0.01\nt_end = 0.1\n[[bodies]]\nname = "b"\nmass = 1.0\nradius = 0.1\n'
+                    'position = [0, 0, 5]\n[collisions]\n[[collisions.boxes]]\nname = "wall"\n'
+                    'center = [0.0, 0.0, -1e308]\nsize = [1e308, 1e308, 1e308]\n')
+    assert main(["export", str(path), "--to", "mjcf"]) == 0
+    out = capsys.readouterr().out
+    assert 'pos="0.0 0.0 -1e+308" size="5e+307 5e+307 5e+307"' in out and "inf" not in out

@@ -134,11 +134,12 @@ class Box(Shape):
 
     @property
     def center(self) -> np.ndarray:
-        return 0.5 * (self.lo + self.hi)
+        # halved first: lo + hi of a box near the float range overflows (an MJCF pos of -inf); the same bits otherwise
+        return 0.5 * self.lo + 0.5 * self.hi
 
     @property
     def half_extents(self) -> np.ndarray:
-        return 0.5 * (self.hi - self.lo)
+        return 0.5 * self.hi - 0.5 * self.lo
 
     def bounds(self):
         return self.lo, self.hi

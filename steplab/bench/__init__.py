@@ -151,8 +151,12 @@ def command(args) -> int:
     """``steplab bench``: run (or, with ``--from``, re-print) the comparisons, one thread per side."""
     from .repeat import format_summary, run_repeated
 
-    if args.source is not None and args.repeat > 1:
-        raise ValueError("--repeat runs the bench and --from prints a record without running: give one of them")
+    if args.source is not None:  # what only a run takes: given with --from, it did nothing, silently
+        running = [name for name, given in (("--repeat", args.repeat > 1), ("--json", args.json is not None),
+                                            ("--only", args.only)) if given]
+        if running:
+            raise ValueError(f"{' and '.join(running)} {'is' if len(running) == 1 else 'are'} for a run of the bench "
+                             "and --from prints a record without running: give one of them")
     log = (lambda message: print(f"[bench] {message}", file=sys.stderr, flush=True))
     writes = args.source is None and args.json is not None
     if writes:  # a path that cannot be written fails now, not after the runs

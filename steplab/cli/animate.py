@@ -2,9 +2,7 @@
 
 from __future__ import annotations
 
-from pathlib import Path
-
-from .args import DETECTORS, count, run_steps, scene_argument, time_arguments, time_span
+from .args import DETECTORS, count, nonempty, pathname, run_steps, scene_argument, time_arguments, time_span
 
 #: the most steps of dt one panel's run may take (an animation draws at most steplab.animate.MAX_FRAMES
 #: = 150 frames of it: 100,000 steps are already some 670 steps a frame); a longer run is refused, one line
@@ -17,15 +15,16 @@ def add_parser(sub, name: str) -> None:
                        "steps of --dt from the scene's t_start to --t-end, drawn as at most 150 frames "
                        "(played at --fps).")
     scene_argument(p)
-    p.add_argument("--integrator", help="integrator name (default: the scene's)")
-    p.add_argument("--compare", metavar="A,B",
+    p.add_argument("--integrator", type=nonempty, help="integrator name (default: the scene's)")
+    p.add_argument("--compare", type=nonempty, metavar="A,B",
                    help="side by side: integrators (euler,velocity-verlet) or detectors (overlap,swept)")
     p.add_argument("--detector", choices=DETECTORS, metavar="NAME",
                    help="collision detector, one of %(choices)s (default: the scene's)")
     time_arguments(p)
     p.add_argument("--fps", type=count, default=30, help="frames per second, 1 to 100 (default: 30)")
     p.add_argument("--view", choices=("xy", "xz", "yz"), help="plane shown (default: the two axes moved along most)")
-    p.add_argument("--out", type=Path, required=True, help="FILE.gif or FILE.mp4 (MP4 through imageio-ffmpeg's ffmpeg)")
+    p.add_argument("--out", type=pathname, required=True,
+                   help="FILE.gif or FILE.mp4 (MP4 through imageio-ffmpeg's ffmpeg)")
 
 
 def command(args) -> int:
@@ -38,6 +37,11 @@ def command(args) -> int:
     check_format(args.out)  # before the runs: a format that cannot be written is one line, status 2
     check_fps(args.fps)
     scene = load_scene(args.scene)
+    from steplab.physics.attachments import attached_forces
+
+    if attached_forces(scene.model):  # simulate's advice (pass stepper=attached_stepper) is the Python API's
+        raise ValueError(f"scene {scene.name}: springs or dampers at body-frame points (offsets) turn with the "
+                         "bodies, which animate does not step yet; use steplab run")
     dt, t_end = time_span(scene, args)
     # each panel: (integrator, detector); --compare varies one of them
     panels = [(args.integrator, args.detector)]  # None: the scene's, with its [simulation.<integrator>] settings

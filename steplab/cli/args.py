@@ -82,6 +82,19 @@ def count(text: str) -> int:
     return value
 
 
+def nonempty(text: str) -> str:
+    """A name or a list of names (--integrator, --compare, --rotation, --scheduler): an empty one is
+    refused, never read as "not given" (it was: the default ran instead)."""
+    if not text.strip():
+        raise argparse.ArgumentTypeError("must not be empty")
+    return text
+
+
+def pathname(text: str) -> Path:
+    """A file or folder: an empty one is refused (``Path("")`` is the current folder)."""
+    return Path(nonempty(text))
+
+
 #: the most local Dask workers a core: one process each, a few hundred MB each (JAX, Numba, the studies), so
 #: more than a few a core only waits and fills memory (99,999 asked for started processes until killed)
 MAX_WORKERS_PER_CORE = 4
@@ -178,19 +191,20 @@ def study_arguments(p) -> None:
     """Where a study's records go, and where its tasks run."""
     p.add_argument("--quick", action="store_true", help="a short version, for CI (a study in under a minute; "
                    "reproduce about 2 minutes on 2 cores)")
-    p.add_argument("--out", type=Path, default=Path("results"), help="results folder (default: results/)")
+    p.add_argument("--out", type=pathname, default=Path("results"), help="results folder (default: results/)")
     p.add_argument("--force", action="store_true", help="re-run even if the cached result is current")
     where = p.add_mutually_exclusive_group()  # on a Dask cluster (studies/distributed.py); default: this process
     where.add_argument("--workers", type=worker_count, metavar="N", help="run the sweeps' tasks on a local Dask "
                        f"cluster of N worker processes, at most {MAX_WORKERS_PER_CORE} a core (timing studies run "
                        "alone afterwards)")
-    where.add_argument("--scheduler", metavar="ADDRESS", help="run them on the Dask cluster whose scheduler is "
-                       "at ADDRESS (e.g. tcp://host:8786; see docs/cluster.md)")
+    where.add_argument("--scheduler", type=nonempty, metavar="ADDRESS", help="run them on the Dask cluster whose "
+                       "scheduler is at ADDRESS (e.g. tcp://host:8786; see docs/cluster.md)")
 
 
 def rotation_argument(p) -> None:
-    p.add_argument("--rotation", metavar="NAME", help="rotation method of the rotating bodies (see `steplab "
-                   "integrators`, kind rotation; default: the scene's [simulation] rotation, else exponential-map)")
+    p.add_argument("--rotation", type=nonempty, metavar="NAME",
+                   help="rotation method of the rotating bodies (see `steplab integrators`, kind rotation; default: "
+                   "the scene's [simulation] rotation, else exponential-map)")
 
 
 def rotation_named(scene, args):

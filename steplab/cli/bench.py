@@ -2,9 +2,7 @@
 
 from __future__ import annotations
 
-from pathlib import Path
-
-from .args import Deferred, count
+from .args import Deferred, count, pathname
 
 
 def _sections():
@@ -16,9 +14,9 @@ def _sections():
 def add_parser(sub, name: str) -> None:
     p = sub.add_parser(name, help="time steplab against diffrax, scipy, Numba and the memory bound")
     p.add_argument("--quick", action="store_true", help="fewer repeats and batches (under about a minute)")
-    p.add_argument("--json", type=Path, metavar="FILE", help="write every ratio and the medians behind it to FILE")
+    p.add_argument("--json", type=pathname, metavar="FILE", help="write every ratio and the medians behind it to FILE")
     p.add_argument("--markdown", action="store_true", help="print the table as Markdown (docs/performance.md's)")
-    p.add_argument("--from", dest="source", type=Path, metavar="FILE",
+    p.add_argument("--from", dest="source", type=pathname, metavar="FILE",
                    help="print the table of a record written by --json instead of running")
     p.add_argument("--only", action="append", choices=Deferred(_sections), metavar="SECTION",
                    help="run only this section (repeat for more), e.g. xpbd-cloth or ball-pits (a wrong name "

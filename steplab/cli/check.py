@@ -5,14 +5,23 @@ from __future__ import annotations
 import dataclasses
 import json
 
-from .args import json_argument, positive, rotation_argument, rotation_named, run_steps, scene_argument, time_span
+from .args import (
+    json_argument,
+    nonempty,
+    positive,
+    rotation_argument,
+    rotation_named,
+    run_steps,
+    scene_argument,
+    time_span,
+)
 from .table import table
 
 
 def add_parser(sub, name: str) -> None:
     p = sub.add_parser(name, help="predict the largest stable dt of each fixed-step integrator on a scene")
     scene_argument(p)
-    p.add_argument("--integrator", help="only this integrator (default: every fixed-step one)")
+    p.add_argument("--integrator", type=nonempty, help="only this integrator (default: every fixed-step one)")
     p.add_argument("--dt", type=positive, help="the dt to check, s (default: the scene's)")
     rotation_argument(p)
     json_argument(p)

@@ -3,9 +3,8 @@
 from __future__ import annotations
 
 import sys
-from pathlib import Path
 
-from .args import scene_argument
+from .args import pathname, scene_argument
 
 
 def add_parser(sub, name: str) -> None:
@@ -14,7 +13,7 @@ def add_parser(sub, name: str) -> None:
     p.add_argument("--to", choices=("mjcf",), required=True, help="the format: mjcf (MuJoCo's XML)")
     p.add_argument("--integrator", choices=("Euler", "RK4", "implicit", "implicitfast", "discrete"),
                    help="MuJoCo's integrator (default: the one that equals the scene's, else Euler)")
-    p.add_argument("--out", type=Path, help="write to FILE (default: print the file)")
+    p.add_argument("--out", type=pathname, help="write to FILE (default: print the file)")
 
 
 def command(args) -> int:

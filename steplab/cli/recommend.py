@@ -8,6 +8,7 @@ import sys
 from .args import (
     DETECTORS,
     json_argument,
+    nonempty,
     positive,
     rotation_argument,
     rotation_named,
@@ -26,7 +27,8 @@ def add_parser(sub, name: str) -> None:
     time_arguments(p, dt=False)
     p.add_argument("--dt-max", type=positive, metavar="DT",
                    help="largest dt to consider, s, e.g. a frame, 1/60 (default: a quarter of the run)")
-    p.add_argument("--integrators", metavar="A,B", help="candidates (default: every fixed-step integrator)")
+    p.add_argument("--integrators", type=nonempty, metavar="A,B",
+                   help="candidates (default: every fixed-step integrator)")
     p.add_argument("--detector", choices=DETECTORS, metavar="NAME", help="collision detector to measure "
                    "with, one of %(choices)s (default: the scene's; none: without collisions)")
     rotation_argument(p)

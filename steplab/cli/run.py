@@ -12,6 +12,8 @@ from .args import (
     DETECTORS,
     count,
     json_argument,
+    nonempty,
+    pathname,
     rotation_argument,
     rotation_named,
     scene_argument,
@@ -25,7 +27,7 @@ from .errors import EXIT_DIVERGED, fail
 def add_parser(sub, name: str) -> None:
     p = sub.add_parser(name, help="simulate a scene and write its trajectory")
     scene_argument(p)
-    p.add_argument("--integrator", help="integrator name, or package.module:Name (default: the scene's, "
+    p.add_argument("--integrator", type=nonempty, help="integrator name, or package.module:Name (default: the scene's, "
                    "with its [simulation.<integrator>] settings such as xpbd's substeps and iterations)")
     time_arguments(p, steps=True)
     p.add_argument("--backend", choices=("numpy", "jax"), default="numpy",
@@ -36,7 +38,7 @@ def add_parser(sub, name: str) -> None:
                    help="keep every K-th state in the trajectory (default: 1)")
     p.add_argument("--max-steps", type=count, default=None, metavar="N",
                    help="refuse runs of more than N steps (default: 10,000,000)")
-    p.add_argument("--out", type=Path, help="write the trajectory to FILE.npz or FILE.csv (and the "
+    p.add_argument("--out", type=pathname, help="write the trajectory to FILE.npz or FILE.csv (and the "
                    "collisions, if any, to FILE.collisions.csv)")
     p.add_argument("--detector", choices=DETECTORS, metavar="NAME",
                    help="collision detection, one of %(choices)s (overlap: overlap testing with bisection; swept: "
