@@ -189,6 +189,7 @@ class _SceneBuilder:
         self.positions: list[np.ndarray] = []
         self.velocities: list[np.ndarray] = []
         self.pinned: list[bool] = []
+        self.tables: list = []  # each body's table (a soft body's or a stack's for theirs): where its keys are
         self.forces: list = []
         self.materials: list[str] = []
         self.rotating: list[tuple] = []  # (body index, shape, inertia, orientation, angular velocity)
@@ -260,6 +261,7 @@ class _SceneBuilder:
             table.fail(f"body {name!r} would be placed at a non-finite position or velocity (the numbers "
                        "overflow)")
         self.index[name] = len(self.names)
+        self.tables.append(table)
         self.names.append(name)
         self.masses.append(mass)
         self.radii.append(radius)
@@ -467,6 +469,7 @@ class _SceneBuilder:
     def add_collisions(self, c: Table, rotation: str | None = None):
         """The [collisions] table: detector, materials and static geometry (a CollisionWorld)."""
         from .broadphase import METHODS
+        from .broadphase.common import MAX_COORDINATE
         from .collision import world as collision_world
         from .collision.detectors import DETECTORS
         from .collision.methods import COLLISION_METHODS
@@ -494,6 +497,13 @@ class _SceneBuilder:
         broadphase = c.string("broadphase", DEFAULT_BROADPHASE, choices=tuple(METHODS))
         rest_speed = c.number("rest_speed", collision_world.DEFAULT_REST_SPEED, nonnegative=True)
 
+        for k, (radius, position) in enumerate(zip(self.radii, self.positions)):
+            # the broadphase squares distances: beyond MAX_COORDINATE they overflow (it would refuse mid-run,
+            # naming no file, or a run would "diverge" at its first step)
+            for key, size in (("radius", radius), ("position", float(np.max(np.abs(position))))):
+                if size > MAX_COORDINATE:
+                    self.tables[k].fail(f"body {self.names[k]!r}: a {key} of {size:g} m in a scene with [collisions]; "
+                                        f"at most {MAX_COORDINATE:g} m (squared distances would overflow)", key)
         shapes = []
         for p in c.tables("planes"):
             p.allow("name", "normal", "offset", "material", "trigger")

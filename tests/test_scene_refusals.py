@@ -123,3 +123,18 @@ def test_a_box_near_the_float_range_exports_its_centre(capsys, tmp_path):
     assert main(["export", str(path), "--to", "mjcf"]) == 0
     out = capsys.readouterr().out
     assert 'pos="0.0 0.0 -1e+308" size="5e+307 5e+307 5e+307"' in out and "inf" not in out
+
+
+@pytest.mark.parametrize("old,new,key,size", [("radius = 0.05", "radius = 1e151", "radius", r"1e\+151"),
+                                              ("position = [-2.0,", "position = [-2e151,", "position", r"2e\+151")])
+def test_a_body_beyond_the_broadphase_range_is_refused_in_a_collision_scene(old, new, key, size):
+    # squared distances overflow past 1e150 m: the run "diverged at step 1", or the broadphase refused mid-run
+    # naming no file or key
+    from importlib import resources
+
+    text = (resources.files("steplab.physics") / "scenes" / "tunnelling.toml").read_text()
+    assert old in text
+    with pytest.raises(SceneError, match=rf"^s\.toml: bodies\[0\]\.{key}: body 'bullet': a {key} of {size} m in a "
+                                         r"scene with \[collisions\]; at most 1e\+150 m"):
+        parse_scene(text.replace(old, new), "s.toml")
+    parse_scene(text.replace(old, new), "s.toml", collisions=False)  # without collisions nothing squares them
