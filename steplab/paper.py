@@ -19,7 +19,7 @@ import math
 import re
 from pathlib import Path
 
-from steplab.core.records import write_atomic
+from steplab.core.records import RECORD_ERRORS, write_atomic
 from steplab.studies import STUDIES
 from steplab.studies.tables import Table, format_value, markdown_table
 
@@ -127,7 +127,7 @@ def _drawing(name: str, sources: list[str]):
         yield
     except PaperError:
         raise
-    except (KeyError, IndexError, TypeError, AttributeError, ValueError) as err:
+    except RECORD_ERRORS as err:
         raise PaperError(f"the table {name!r}: the results of {', '.join(sources)} lack what it needs "
                          f"({type(err).__name__}: {err}); run {'its study' if len(sources) == 1 else 'them'} "
                          "again") from None

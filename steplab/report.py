@@ -22,7 +22,7 @@ from pathlib import Path
 
 from steplab import report_figures
 from steplab.bench.report import collision_markdown
-from steplab.core.records import make_folder, write_atomic
+from steplab.core.records import RECORD_ERRORS, make_folder, write_atomic
 from steplab.paper import BENCH_TABLE, PLACEHOLDER, PaperError, load_records, lookup, quoted, to_html
 from steplab.studies import STUDIES
 from steplab.studies.tables import markdown_table
@@ -93,7 +93,7 @@ def _shown(path: Path, make: Callable[..., str], *args) -> str:
         return make(*args)
     except PaperError:  # a number it quotes, not finite: already one line naming it
         raise
-    except (KeyError, IndexError, TypeError, AttributeError, ValueError) as err:  # ValueError: "abc" for a number
+    except RECORD_ERRORS as err:
         raise ReportError(f"{path}: not a record its page can be made from ({type(err).__name__}: {err}); "
                           "run its study (or the bench) again") from None
 

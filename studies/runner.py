@@ -30,7 +30,7 @@ from collections.abc import Callable, Iterable
 from pathlib import Path
 from typing import Any
 
-from steplab.core.records import make_folder, remove_temporary_files, write_json
+from steplab.core.records import RECORD_ERRORS, make_folder, remove_temporary_files, write_json
 
 from .tables import Table
 from .task_cache import TaskCache, as_json
@@ -122,7 +122,7 @@ def is_cached(study: Study, out: Path, quick: bool) -> bool:
         return False
     try:  # a record whose fields were cut or edited is no cache: its summary would be a traceback
         study.summary(record)
-    except (KeyError, IndexError, TypeError, AttributeError, ValueError):
+    except RECORD_ERRORS:
         return False
     return True
 

@@ -30,7 +30,7 @@ import time
 from collections.abc import Callable
 from pathlib import Path
 
-from steplab.core.records import make_folder, write_json
+from steplab.core.records import RECORD_ERRORS, make_folder, write_json
 from steplab.core.timing import Times as Times
 from steplab.core.timing import interleaved_medians as interleaved_medians
 from steplab.core.timing import interleaved_samples as interleaved_samples
@@ -180,7 +180,7 @@ def command(args) -> int:
             text = format_summary(record, markdown=args.markdown)
         else:
             text = format_markdown(record) if args.markdown else format_table(record)
-    except (KeyError, IndexError, TypeError, AttributeError) as err:
+    except RECORD_ERRORS as err:
         if args.source is None:
             raise
         # a record cut short or edited, or written by a steplab whose records had other fields

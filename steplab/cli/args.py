@@ -83,8 +83,8 @@ def count(text: str) -> int:
 
 
 def nonempty(text: str) -> str:
-    """A name or a list of names (--integrator, --compare, --rotation, --scheduler): an empty one is
-    refused, never read as "not given" (it was: the default ran instead)."""
+    """A name, a list of names or an address: an empty one is refused, never read as "not given"
+    (it was: the default ran instead)."""
     if not text.strip():
         raise argparse.ArgumentTypeError("must not be empty")
     return text

@@ -19,6 +19,10 @@ from pathlib import Path
 #: the names the writer gives its temporary files: ``.<name>.<random>.tmp``, and
 #: ``.<name>.<random>.tmp.<ext>`` for writers that pick the format from the name (animations)
 TEMPORARY_PATTERNS = (".*.*.tmp", ".*.*.tmp.*")
+#: what reading a record's fields raises when one is missing or not what the reader expects (a record cut
+#: short or edited, or written by a steplab whose records had other fields; "abc" where a number is
+#: formatted): the readers catch these to say so in one line naming the record
+RECORD_ERRORS = (KeyError, IndexError, TypeError, AttributeError, ValueError)
 
 
 def write_atomic(path: str | Path, data: bytes) -> None:
