@@ -8,8 +8,8 @@ rotating bodies does no rotation work at all. Springs and dampers at body-frame 
 (``offsets``) couple the two and feed their torques to the rotation: such a scene is stepped
 by :mod:`.attached`, and :func:`rotate_scene` refuses it.
 
-``steplab run`` calls :func:`rotate_scene` after :func:`.simulate`, then :func:`rotation_summary`
-for its JSON fields and :func:`rotation_arrays` for the NPZ file.
+``steplab run`` and the scenes study call :func:`run_rotation` after :func:`.simulate`; ``run`` then
+:func:`rotation_summary` for its JSON fields and :func:`rotation_arrays` for the NPZ file.
 """
 
 from __future__ import annotations
@@ -115,6 +115,43 @@ def rotate_scene(scene, trajectory, rotation: str | None = None, backend: str = 
             t0 = t0 + n * count * trajectory.dt
         qs, omegas, name = np.concatenate(qs), np.concatenate(omegas), method.name
     return RotationTrajectory(t, qs, quat.rotate(np, qs, omegas), name, bodies)
+
+
+def run_rotation(scene, trajectory, step=None, rotation: str | None = None,
+                 backend: str = "numpy") -> RotationTrajectory | None:
+    """The rotating bodies at ``trajectory``'s saved times, however the run turned them.
+
+    ``step`` is the step :func:`.simulate` built for the run (None: the integrator's own): an
+    attached step (springs at body-frame points) stepped the rotation with the translation,
+    the contact solver's turned the bodies with their contacts (the orientations it recorded);
+    otherwise the bodies are free and :func:`rotate_scene` integrates them beside the translation
+    with ``rotation``. None for a scene without rotating bodies.
+    """
+    bodies = scene.rigid_bodies
+    if bodies is None:
+        return None
+    if step is not None and hasattr(step, "rotation_trajectory"):
+        return step.rotation_trajectory(trajectory)
+    if step is not None and hasattr(step, "rotation_at"):
+        orientations, angular_velocities = step.rotation_at(
+            np.rint((trajectory.t - trajectory.t[0]) / trajectory.dt).astype(int))
+        return RotationTrajectory(trajectory.t, orientations[:, bodies.index], angular_velocities[:, bodies.index],
+                                  step.world.rigid.rotation, bodies)
+    return rotate_scene(scene, trajectory, rotation, backend=backend)
+
+
+def keeping(make_step, kept: list, save_every: int = 1):
+    """``make_step`` (a stepper factory for :func:`.simulate`) that also appends the step it builds to
+    ``kept``, for :func:`run_rotation` after the run (a step that records the rotation, the contact
+    solver's, records it at the saved steps only)."""
+    def stepper(model, integrator):
+        step = make_step(model, integrator)
+        if hasattr(step, "record_every"):
+            step.record_every = save_every
+        kept.append(step)
+        return step
+
+    return stepper
 
 
 def angular_momentum(positions, velocities, masses, bodies: RigidBodies | None) -> np.ndarray:

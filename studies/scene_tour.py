@@ -15,6 +15,7 @@ from __future__ import annotations
 import numpy as np
 from steplab.integrators import simulate
 from steplab.integrators.attached import scene_stepper
+from steplab.integrators.scene_rotation import keeping, run_rotation
 from steplab.physics.scene import builtin_scenes, load_scene
 
 from .runner import Study, run_tasks
@@ -25,6 +26,8 @@ BACKENDS = ("numpy", "jax")
 PERTURBATION = 1e-15
 #: the perturbation's draw
 SEED = 0
+#: the runs keep their first and last states only
+SAVE_EVERY = 10**9
 
 
 def parameters(quick: bool) -> dict:
@@ -39,9 +42,9 @@ def tasks(params: dict) -> list[str]:
 def task(params: dict, name: str) -> list[dict]:
     """Run one built-in scene with its declared integrator and dt on NumPy and JAX.
 
-    Records per backend: steps, energy at the start and end, the wall time, and the
-    largest differences between the two backends' final positions (m) and velocities
-    (m/s), beside those between NumPy's run and NumPy's from perturbed initial positions
+    Records per backend: steps, energy at the start and end (the rotating bodies' spin included,
+    turned as ``steplab run`` turns them), the wall time, and the largest differences between
+    the two backends' final positions (m) and velocities (m/s), beside those between NumPy's run and NumPy's from perturbed initial positions
     (the yardstick of round-off amplified by the scene's dynamics). ``fraction`` of the
     scene's duration is run.
     """
@@ -51,17 +54,20 @@ def task(params: dict, name: str) -> list[dict]:
     backends = ["numpy"] if world is not None else params["backends"]
     finals, rows = {}, []
     for backend in backends:
-        kept = []
+        kept = []  # the step the run built: the collision step or the attached one, which turned the bodies
+        stepper = keeping(world.stepper, kept, SAVE_EVERY) if world is not None else scene_stepper(scene, kept)
         traj = simulate(scene.model, scene.integrator, scene.y0, scene.t_start, t_end, scene.dt,
-                        backend=backend, save_every=10**9, collisions=world, stepper=scene_stepper(scene, kept))
+                        backend=backend, save_every=SAVE_EVERY, stepper=stepper)
         finals[backend] = traj.y[-1]
+        rotation = run_rotation(scene, traj, kept[0] if kept else None, backend=backend)
         # springs at body-frame points: the end's energy with their lever arms where the bodies turned them
-        end_model = kept[0].final_model() if kept else scene.model
+        end_model = kept[0].final_model() if kept and hasattr(kept[0], "final_model") else scene.model
         rows.append({
             "scene": name, "integrator": scene.integrator, "backend": backend, "dt": scene.dt,
             "steps": traj.steps, "t_end": float(traj.t[-1]),
-            "energy_start": float(scene.model.energy(scene.y0)),
-            "energy_end": float(end_model.energy(traj.y[-1])),
+            # with the rotating bodies' 1/2 omega . I omega, as steplab run reports them
+            "energy_start": float(scene.model.energy(scene.y0, scene.rigid_bodies)),
+            "energy_end": float(end_model.energy(traj.y[-1], rotation.at(-1) if rotation is not None else None)),
             "wall_time": traj.wall_time,
             "detector": world.detector if world is not None else "none",
             "impacts": traj.collisions.summary()["impacts"] if traj.collisions is not None else 0,
@@ -72,7 +78,7 @@ def task(params: dict, name: str) -> list[dict]:
         y0 = scene.y0.copy()
         y0[0] *= 1 + PERTURBATION * rng.standard_normal(y0[0].shape)
         finals["perturbed"] = simulate(scene.model, scene.integrator, y0, scene.t_start, t_end, scene.dt,
-                                       save_every=10**9, stepper=scene_stepper(scene)).y[-1]
+                                       save_every=SAVE_EVERY, stepper=scene_stepper(scene)).y[-1]
         # (position, velocity) differences from NumPy's final state: JAX's, and the perturbed start's
         jax, perturbed = (np.abs(finals["numpy"] - finals[other]).max(axis=(1, 2)) for other in ("jax", "perturbed"))
         differences = {"backend_difference": float(max(jax)), "position_difference": float(jax[0]),

@@ -52,6 +52,7 @@ def command(args) -> int:
     import numpy as np
 
     from steplab.integrators.run_summary import RunSettings, run_summary, stopped_summary
+    from steplab.integrators.scene_rotation import keeping, rotation_arrays, run_rotation
     from steplab.integrators.simulate import MAX_STEPS, simulate
     from steplab.integrators.stable_dt import dt_warning
     from steplab.io import check_trajectory_path, save_trajectory
@@ -75,7 +76,7 @@ def command(args) -> int:
     kept = []  # the run's collision step, whose log tells what happened before a stop (or its attached step)
     energy_start = float(scene.model.energy(scene.y0, scene.rigid_bodies))  # with the spin's 1/2 omega . I omega
     settings = RunSettings(scene, integrator, dt, world, args.precision, energy_start, run_warnings)
-    stepper = None if world is None else _keeping(world.stepper, kept, args.save_every)
+    stepper = None if world is None else keeping(world.stepper, kept, args.save_every)
     attached = _attached(scene, world)
     if attached:  # forces at body-frame points: the rotation steps with the translation
         from steplab.integrators.attached import attached_stepper
@@ -96,22 +97,14 @@ def command(args) -> int:
         if args.json:  # stopped, never dropped: one line, status 1 (and the record)
             print(json.dumps(stopped_summary(settings, err, kept[0].log if kept else None), indent=2))
         return fail(args.command, str(err), EXIT_DIVERGED)
-    rotation = None
+    # the bodies as the attached step or the contact solver turned them, else free beside the translation
+    rotation = run_rotation(scene, traj, kept[0] if kept else None, rotation_method, backend=args.backend)
     if attached:  # the energy at the end with the lever arms at the final orientations
-        rotation = kept[0].rotation_trajectory(traj)
         settings = dataclasses.replace(settings, scene=dataclasses.replace(scene, model=kept[0].final_model()))
-    elif kept and hasattr(kept[0], "rotation_at"):  # the contact solver turned the bodies with their contacts
-        rotation = _solved_rotation(scene, traj, kept[0])
-    elif scene.rigid_bodies is not None:  # beside the translation, at its saved times; a divergence is status 1
-        from steplab.integrators.scene_rotation import rotate_scene
-
-        rotation = rotate_scene(scene, traj, rotation_method, backend=args.backend)
     summary = run_summary(settings, traj, rotation)
     if args.out is not None:
         extra = None
         if rotation is not None:
-            from steplab.integrators.scene_rotation import rotation_arrays
-
             extra = rotation_arrays(rotation, scene.model.n_bodies)
         save_trajectory(args.out, traj, scene.model, {k: summary[k] for k in (
             "scene", "integrator", "dt", "steps", "t_start", "t_end", "backend", "precision", "detector",
@@ -180,31 +173,6 @@ def _attached(scene, world) -> bool:
         raise ValueError("springs and dampers at body-frame points (offsets) do not run with collisions yet; "
                          "use --detector none")
     return True
-
-
-def _keeping(make_step, kept: list, save_every: int = 1):
-    """``make_step`` (a stepper factory for ``simulate``) that also appends the step it builds to ``kept``
-    (a step that records the rotation, the rigid solver's, records it at the saved steps only)."""
-    def stepper(model, integrator):
-        step = make_step(model, integrator)
-        if hasattr(step, "record_every"):
-            step.record_every = save_every
-        kept.append(step)
-        return step
-
-    return stepper
-
-
-def _solved_rotation(scene, traj, step):
-    """The rotating bodies at the trajectory's saved times, as the contact solver turned them."""
-    import numpy as np
-
-    from steplab.integrators.scene_rotation import RotationTrajectory
-
-    bodies = scene.rigid_bodies
-    orientations, angular_velocities = step.rotation_at(np.rint((traj.t - traj.t[0]) / traj.dt).astype(int))
-    return RotationTrajectory(traj.t, orientations[:, bodies.index], angular_velocities[:, bodies.index],
-                              step.world.rigid.rotation, bodies)
 
 
 def with_sweeps(integrator, world, args):
