@@ -44,9 +44,9 @@ def task(params: dict, name: str) -> list[dict]:
 
     Records per backend: steps, energy at the start and end (the rotating bodies' spin included,
     turned as ``steplab run`` turns them), the wall time, and the largest differences between
-    the two backends' final positions (m) and velocities (m/s), beside those between NumPy's run and NumPy's from perturbed initial positions
-    (the yardstick of round-off amplified by the scene's dynamics). ``fraction`` of the
-    scene's duration is run.
+    the two backends' final positions (m) and velocities (m/s), beside those between NumPy's
+    run and NumPy's from perturbed initial positions (the yardstick of round-off amplified by
+    the scene's dynamics). ``fraction`` of the scene's duration is run.
     """
     scene = load_scene(name)
     t_end = scene.t_start + max((scene.t_end - scene.t_start) * params["fraction"], scene.dt)
