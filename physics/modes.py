@@ -100,11 +100,21 @@ def stiffest_mode(model, q, v=None, derivative: str = "jvp") -> StiffestMode:
     sqrt_m = np.where(d > 0, 1 / np.where(d > 0, d, 1), 0.0)  # sqrt(M), 0 where pinned
     zero = np.zeros(shape)
 
+    def weighted(x, which):
+        """-sqrt(M) J x (``which``: 0, J_q; 1, J_v), and J of x scaled. J is linear: applied to x scaled by
+        a power of two near 1 / max |x|, then sqrt(M) and the scale back, so that a light body's large D (a
+        mass of 1e-300 kg: 1e150) does not overflow on the way while the product is finite; a power of two
+        changes no bit of a product that never overflowed."""
+        exponent = int(np.frexp(np.max(np.abs(x)))[1]) if np.any(x) else 0
+        dx = np.ldexp(x, -exponent)
+        scaled = derivatives(dx, zero)[0] if which == 0 else derivatives(zero, dx)[1]
+        return np.ldexp(-sqrt_m * scaled, exponent), scaled
+
     def stiffness(z):  # S z = D K D z = -sqrt(M) J_q (D z)
-        product = (-sqrt_m * derivatives(d * np.reshape(z, shape), zero)[0]).ravel()
+        product, accelerations = weighted(d * np.reshape(z, shape), 0)
+        product = product.ravel()
         if not np.all(np.isfinite(product)):
-            raise NonFiniteModelError("the model's stiffness at its initial state is not finite "
-                                      "(overflowing forces?): no stable dt can be predicted")
+            raise NonFiniteModelError(_not_finite(model, inverse_masses, accelerations, product))
         return product
 
     if size <= DENSE_SIZE:
@@ -133,9 +143,26 @@ def stiffest_mode(model, q, v=None, derivative: str = "jvp") -> StiffestMode:
         return StiffestMode(None, 0.0, pattern)
     omega = float(np.sqrt(omega2))
     # zeta = x^T C x / (2 omega x^T M x) with x = D z, |z| = 1: x^T M x = 1, D C D z = -sqrt(M) J_v (D z)
-    zeta = float(-np.sum(z * sqrt_m * derivatives(zero, pattern)[1]) / (2 * omega))
+    zeta = float(np.sum(z * weighted(pattern, 1)[0]) / (2 * omega))
     scale = np.max(np.abs(pattern))
     return StiffestMode(omega, zeta if zeta > 0 else 0.0, pattern / scale)
+
+
+def _not_finite(model, inverse_masses, accelerations, product) -> str:
+    """Why S z is not finite, one line naming the body: the lightest of those whose rows are not finite."""
+    bad = np.unique(np.flatnonzero(~np.isfinite(product)) // 3)
+    body = int(bad[np.argmax(inverse_masses[bad])])
+    name = model.names[body] if getattr(model, "names", None) else f"body{body}"
+    mass = f"mass {1 / inverse_masses[body]:.3g} kg" if inverse_masses[body] > 0 else "pinned"
+    if np.any(np.isnan(accelerations[body])):
+        why = ("a force's derivative there is undefined (NaN): a spring on it with its ends at one point and a "
+               "rest length > 0 has no direction")
+    else:
+        why = (f"the stiffness of its forces over its mass, k / m, overflows float64 (beyond "
+               f"{np.finfo(float).max:.3g} s^-2): a mass too small for the stiffness of its springs, or a "
+               "stiffness too large")
+    return (f"the model's stiffness at its initial state is not finite at body {name!r} ({mass}): {why}; "
+            "no stable dt can be predicted")
 
 
 def _sparse_is_exact(model) -> bool:

@@ -74,7 +74,29 @@ class Springs(Force):
         rest = [s.number("rest_length", attachments.point_distance(offsets, n, pair, bodies), nonnegative=True)
                 for n, (s, pair) in enumerate(zip(tables, pairs))]
         i, j = np.array([a for a, _ in pairs]), np.array([b for _, b in pairs])
-        return cls(i, j, np.array(k), np.array(rest), attachments.initial_attachment(offsets, i, j, bodies))
+        springs = cls(i, j, np.array(k), np.array(rest), attachments.initial_attachment(offsets, i, j, bodies))
+        springs._refuse_no_direction(tables, bodies)
+        return springs
+
+    def _refuse_no_direction(self, tables, bodies) -> None:
+        """A spring with rest_length > 0 whose ends start at one point (its length, as the model computes
+        it, 0: equal points, or points so close that the squared distance underflows) has no direction:
+        it exerts no force there (an unstable equilibrium, held for ever) and its stiffness across the
+        pair, -k (L / l - 1), has no bound, so no stable dt can be predicted. Refused at its table."""
+        q = np.asarray(bodies.positions, dtype=float)
+        delta = q[self.j] - q[self.i]
+        if self.attachment is not None:
+            delta = delta + (self.attachment.arms[:, 1] - self.attachment.arms[:, 0])
+        _, length = self._geometry(np, q)
+        for n in np.flatnonzero((length == 0) & (self.rest_length > 0)):
+            a, b = (bodies.names[int(k)] for k in (self.i[n], self.j[n]))
+            points = "ends (at their offsets)" if self.attachment is not None else "ends"
+            apart = float(np.max(np.abs(delta[n])))
+            where = (f"start {apart:.3g} m apart, too close for their distance to be computed (its square "
+                     "underflows to 0)" if apart > 0 else "start at the same point")
+            tables[n].fail(f"the spring's {points}, bodies {a!r} and {b!r}, {where}, so it has no direction, and "
+                           f"rest_length = {self.rest_length[n]:g} m > 0 would push them apart along none (its "
+                           "stiffness across them is unbounded): place the ends apart, or give rest_length = 0")
 
     def _geometry(self, xp, q):
         delta = rows(xp, q, self.j) - rows(xp, q, self.i)

@@ -90,6 +90,18 @@ def nonempty(text: str) -> str:
     return text
 
 
+def comma_list(text: str) -> list[str]:
+    """A comma-separated list of names (``rk4,euler``), each stripped of spaces: an empty list is
+    refused as :func:`nonempty` refuses it, and so is an empty item (``rk4,,euler``, a trailing
+    comma), never dropped (it was: the other names ran as if it had not been typed)."""
+    items = [item.strip() for item in nonempty(text).split(",")]
+    empty = [k for k, item in enumerate(items) if not item]
+    if empty:
+        raise argparse.ArgumentTypeError(f"item {empty[0] + 1} of {len(items)} in {text!r} is empty: give names "
+                                         "separated by single commas, none empty (no trailing comma), e.g. rk4,euler")
+    return items
+
+
 def pathname(text: str) -> Path:
     """A file or folder: an empty one is refused (``Path("")`` is the current folder)."""
     return Path(nonempty(text))

@@ -7,8 +7,8 @@ import sys
 
 from .args import (
     DETECTORS,
+    comma_list,
     json_argument,
-    nonempty,
     positive,
     rotation_argument,
     rotation_named,
@@ -27,7 +27,7 @@ def add_parser(sub, name: str) -> None:
     time_arguments(p, dt=False)
     p.add_argument("--dt-max", type=positive, metavar="DT",
                    help="largest dt to consider, s, e.g. a frame, 1/60 (default: a quarter of the run)")
-    p.add_argument("--integrators", type=nonempty, metavar="A,B",
+    p.add_argument("--integrators", type=comma_list, metavar="A,B",
                    help="candidates (default: every fixed-step integrator)")
     p.add_argument("--detector", choices=DETECTORS, metavar="NAME", help="collision detector to measure "
                    "with, one of %(choices)s (default: the scene's; none: without collisions)")
@@ -55,9 +55,7 @@ def command(args) -> int:
     if args.integrators is not None:
         from steplab.studies.recommend_collisions import check_integrators
 
-        integrators = check_integrators(n.strip() for n in args.integrators.split(","))
-        if not integrators:
-            raise ValueError("--integrators: give at least one fixed-step integrator")
+        integrators = check_integrators(args.integrators)  # a list of names, none empty (comma_list)
     world = collision_world(scene, args.detector, "numpy")
     if world is not None:
         return _with_collisions(args, scene, t_end, world, integrators, rotation)
