@@ -5,6 +5,12 @@ in the plane of the two axes the motion spans most, and below it the energy's ch
 time, so a class sees both the motion and what the integrator does to the energy. Side by
 side, the panels share their axes: what looks bigger is bigger.
 
+A scene whose springs act at body-frame points (offsets on rotating bodies, stepped by
+:mod:`steplab.integrators.attached`) comes with each run's rotation: its springs are drawn to
+their attachment points x + R(q) r, each rotating body's orientation as a black line from its
+centre to its springs' points on it, and its energy is what ``steplab run`` reports, the spin
+1/2 omega . I omega and the springs at the lever arms of each saved state included.
+
 The static parts of the figure (axes, ticks, the energy curves) are drawn once; each frame
 redraws only the bodies, springs, clock and energy marker on top of them (blitting), and the
 frames go straight to Pillow (GIF) or ffmpeg (MP4).
@@ -74,7 +80,7 @@ def _ffmpeg(out):
 
 
 def animate(runs: list[tuple[str, object]], model, out: str | Path, fps: int = 30, view: str | None = None,
-            shapes=()) -> Path:
+            shapes=(), rotations=None) -> Path:
     """Write an animation of one or more runs of the same scene, one panel each.
 
     Parameters
@@ -84,8 +90,14 @@ def animate(runs: list[tuple[str, object]], model, out: str | Path, fps: int = 3
         The scene's model (body radii, springs, energy).
     out : path ending in .gif (Pillow) or .mp4 (ffmpeg; see :func:`check_format`)
     view : "xy", "xz" or "yz", optional
-        The plane shown; by default the two axes the motion spans most.
+        The plane shown; by default the two axes the motion spans most (with ``rotations``: see
+        :func:`motion_view`).
     shapes : static collision shapes (planes, boxes, oriented boxes) to draw in grey
+    rotations : list of integrators.scene_rotation.RotationTrajectory, optional
+        For a model with springs or dampers at body-frame points: each run's rotating bodies at its
+        saved times (``AttachedStep.rotation_trajectory``). The springs are then drawn to their
+        attachment points, the bodies' orientations as lines (:func:`attached_segments`), and the
+        energy is :func:`attached_energies`.
     """
     import matplotlib
 
@@ -101,8 +113,14 @@ def animate(runs: list[tuple[str, object]], model, out: str | Path, fps: int = 3
     out = Path(out)
     check_format(out)
     check_fps(fps)
+    # with rotations, each run's springs (end points) and orientation lines at every saved state, world frame
+    drawn = None if rotations is None else [attached_frames(model, traj, rotation)
+                                            for (_, traj), rotation in zip(runs, rotations)]
     if view is not None:
         axes_idx = [AXIS_NAMES.index(a) for a in view]
+    elif drawn is not None:
+        axes_idx = motion_view([np.concatenate([traj.positions, springs.reshape(len(traj.t), -1, 3)], axis=1)
+                                for (_, traj), (springs, _) in zip(runs, drawn)])
     else:
         positions = np.concatenate([traj.positions for _, traj in runs])
         spans = np.ptp(positions[np.isfinite(positions).all(axis=-1)], axis=0)
@@ -114,14 +132,22 @@ def animate(runs: list[tuple[str, object]], model, out: str | Path, fps: int = 3
     centers = centers.reshape(-1, 3)
     pairs = np.concatenate([np.stack([np.asarray(f.i), np.asarray(f.j)], 1) for f in springs]) if springs else None
     fixed = np.concatenate([_extent(shapes)[:, axes_idx], centers[:, axes_idx]])
-    lo, hi = shared_window([traj.positions[..., axes_idx] for _, traj in runs], fixed, radii.max())
+    tracks = [traj.positions[..., axes_idx] for _, traj in runs]
+    if drawn is not None:  # the attachment points stay in the window too
+        tracks = [np.concatenate([q, springs[..., axes_idx].reshape(len(q), -1, 2)], axis=1)
+                  for q, (springs, _) in zip(tracks, drawn)]
+    lo, hi = shared_window(tracks, fixed, radii.max())
     width = float(np.max(hi - lo))
     if not width <= MAX_WINDOW:
         across = f"would be {width:.3g} m across" if np.isfinite(width) else "would overflow float64"
         raise ValueError(f"the picture's width {across} (the bodies with their radii, the static boxes and the "
                          f"attracting masses): animate draws at most {MAX_WINDOW:g} m")
     drawn_radii = np.maximum(radii, MIN_DRAWN_RADIUS * (hi - lo).max())
-    changes, unit = energy_changes([np.array([float(model.energy(y)) for y in traj.y]) for _, traj in runs])
+    if rotations is None:
+        energies = [np.array([float(model.energy(y)) for y in traj.y]) for _, traj in runs]
+    else:
+        energies = [attached_energies(model, traj, rotation) for (_, traj), rotation in zip(runs, rotations)]
+    changes, unit = energy_changes(energies)
 
     frames = min(MAX_FRAMES, max(len(traj.t) for _, traj in runs))
     width, height = panel_size(hi - lo)
@@ -147,6 +173,12 @@ def animate(runs: list[tuple[str, object]], model, out: str | Path, fps: int = 3
         circles = PatchCollection([Circle((0, 0), r) for r in drawn_radii], facecolor="tab:blue", edgecolor="k",
                                   linewidth=0.5, animated=True)
         ax.add_collection(circles)
+        turned = None
+        if drawn is not None:  # over the bodies: each one's orientation, and the points its springs pull at
+            pointers = LineCollection([], colors="k", linewidths=1.5, animated=True)
+            ax.add_collection(pointers)
+            points, = ax.plot([], [], "o", color="tab:orange", mec="k", mew=0.5, ms=4, animated=True)
+            turned = (drawn[col], pointers, points)
         clock = ax.text(0.02, 0.95, "", transform=ax.transAxes, fontsize=9, va="top", animated=True)
         eax.plot(traj.t, changes[col], color="0.6", lw=1)
         eax.axhline(0.0, color="0.85", lw=0.8, zorder=0)
@@ -156,22 +188,33 @@ def animate(runs: list[tuple[str, object]], model, out: str | Path, fps: int = 3
         for axis in (ax.xaxis, ax.yaxis, eax.xaxis):
             axis.set_major_locator(MaxNLocator(MAX_TICKS))
         picks = np.linspace(0, len(traj.t) - 1, frames).round().astype(int)
-        panels.append((traj, picks, lines, circles, clock, marker, changes[col]))
+        panels.append((traj, picks, lines, circles, clock, marker, changes[col], turned))
     _energy_scale(grid[1][0], changes)
 
+    def shown(points):  # world points (..., 3) on the view plane, clipped onto the window's edge
+        return np.clip(np.nan_to_num(points[..., axes_idx], nan=0.0), lo, hi)
+
     def draw(frame):
-        for traj, picks, lines, circles, clock, marker, change in panels:
+        for traj, picks, lines, circles, clock, marker, change, turned in panels:
             k = picks[frame]
             q = traj.positions[k][:, axes_idx]
             inside = np.isfinite(q).all(axis=1) & (q >= lo).all(axis=1) & (q <= hi).all(axis=1)
             q = np.clip(np.nan_to_num(q, nan=0.0), lo, hi)  # clipped onto the edge, and marked red
             circles.set_paths([Circle(tuple(c), r) for c, r in zip(q, drawn_radii)])
             circles.set_facecolor(np.where(inside, "tab:blue", "tab:red"))
-            if pairs is not None:
+            artists = [lines, circles, clock, marker]
+            if turned is not None:  # to the attachment points, not the centres
+                (springs, arms), pointers, points = turned
+                lines.set_segments(shown(springs[k]))
+                pointers.set_segments(shown(arms[k]))
+                ends = shown(springs[k].reshape(-1, 3))
+                points.set_data(ends[:, 0], ends[:, 1])
+                artists[2:2] = [pointers, points]
+            elif pairs is not None:
                 lines.set_segments(np.stack([q[pairs[:, 0]], q[pairs[:, 1]]], axis=1))
             clock.set_text(f"t = {traj.t[k]:.2f} s")
             marker.set_data([traj.t[k]], [change[k]])
-            for artist in (lines, circles, clock, marker):
+            for artist in artists:
                 artist.axes.draw_artist(artist)
 
     fig.tight_layout()
@@ -215,6 +258,109 @@ def _write_mp4(path: Path, images, fps: int) -> None:
             writer.send(None)  # start ffmpeg
         writer.send(image)
     writer.close()
+
+
+def all_bodies(rotation, n: int) -> tuple[np.ndarray, np.ndarray]:
+    """The orientations (K, N, 4) and world angular velocities (K, N, 3) of all ``n`` bodies at the saved
+    times of ``rotation`` (a RotationTrajectory): the identity and zero for a body that does not rotate."""
+    k = len(rotation.t)
+    orientations = np.tile(np.array([1.0, 0.0, 0.0, 0.0]), (k, n, 1))
+    spins = np.zeros((k, n, 3))
+    orientations[:, rotation.bodies.index] = rotation.orientations
+    spins[:, rotation.bodies.index] = rotation.angular_velocities
+    return orientations, spins
+
+
+def attached_energies(model, traj, rotation) -> np.ndarray:
+    """The energy (K,) at each saved state of a run of a model with springs or dampers at body-frame
+    points, J: the centres' kinetic energy, the rotating bodies' 1/2 omega . I omega, and the potential
+    with every lever arm R(q) r at that state's orientations (``rotation``, a RotationTrajectory at the
+    run's saved times). At the last state it is the ``energy_end`` of ``steplab run``."""
+    from steplab.physics.attachments import model_at
+
+    orientations, spins = all_bodies(rotation, model.n_bodies)
+    return np.array([float(model_at(model, orientations[k], spins[k]).energy(np.asarray(y, float), rotation.at(k)))
+                     for k, y in enumerate(traj.y)])
+
+
+def attached_segments(model, x, orientations, rotating, reach) -> tuple[np.ndarray, np.ndarray]:
+    """What one frame of a model with springs at body-frame points draws, world frame, m.
+
+    Parameters
+    ----------
+    x : ndarray (N, 3)
+        The centres.
+    orientations : ndarray (N, 4)
+        Every body's orientation, the identity for a body that does not rotate.
+    rotating : int array
+        Which bodies rotate.
+    reach : ndarray (N,)
+        The length of the orientation line of a rotating body that no spring pulls off its centre.
+
+    Returns
+    -------
+    springs : ndarray (P, 2, 3)
+        Each spring from the point it pulls on its first body, x_i + R(q_i) r_i, to the one on its
+        second (the centre for an end without an offset).
+    pointers : ndarray (B, 2, 3)
+        Each rotating body's orientation: a line from its centre to each point a spring pulls it
+        at off its centre, the lever arm R(q) r; along its body-frame x axis, ``reach`` long, for
+        a rotating body with no such point.
+    """
+    from steplab.physics import Springs
+    from steplab.physics import quaternion as quat
+
+    x, orientations = np.asarray(x, float), np.asarray(orientations, float)
+    springs, pointers, pointed = [np.zeros((0, 2, 3))], [np.zeros((0, 2, 3))], set()
+    for f in model.forces:
+        if not isinstance(f, Springs):
+            continue
+        i, j = np.atleast_1d(f.i), np.atleast_1d(f.j)
+        ends = np.stack([x[i], x[j]], axis=1)
+        if getattr(f, "attachment", None) is not None:
+            offsets = np.asarray(f.attachment.offsets, float)
+            ends = ends + np.stack([quat.rotate(np, orientations[i], offsets[:, 0]),
+                                    quat.rotate(np, orientations[j], offsets[:, 1])], axis=1)
+            for end, bodies in enumerate((i, j)):
+                off = np.any(offsets[:, end] != 0, axis=-1)
+                pointers.append(np.stack([x[bodies[off]], ends[off, end]], axis=1))
+                pointed.update(bodies[off].tolist())
+        springs.append(ends)
+    free = np.array([b for b in np.atleast_1d(rotating).tolist() if b not in pointed], dtype=int)
+    axis = quat.rotate(np, orientations[free], np.array([1.0, 0.0, 0.0])) * np.asarray(reach, float)[free, None]
+    pointers.append(np.stack([x[free], x[free] + axis], axis=1))
+    return np.concatenate(springs), np.concatenate(pointers)
+
+
+def attached_frames(model, traj, rotation) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`attached_segments` at each saved state of ``traj``: springs (K, P, 2, 3), pointers (K, B, 2, 3);
+    the orientation line of a body without an attachment point is its radius long."""
+    orientations, _ = all_bodies(rotation, model.n_bodies)
+    frames = [attached_segments(model, x, o, rotation.bodies.index, model.radii)
+              for x, o in zip(traj.positions, orientations)]
+    return np.stack([s for s, _ in frames]), np.stack([p for _, p in frames])
+
+
+def motion_view(tracks: list[np.ndarray]) -> list[int]:
+    """The two axes (indices, ascending) along which the points of ``tracks`` move most: each run's
+    (K, M, 3), M points (centres, attachment points) at its K saved times.
+
+    Each point's own range over time counts, not how far apart the points are: a pinned anchor, or
+    a second pendulum beside the first, does not move, so it does not pick the plane. The extent of
+    all the points only breaks ties, such as two axes no point moves along; a move below 1e-6 of the
+    largest range is rounding, not motion.
+    """
+    q = np.concatenate([np.asarray(t, float).reshape(len(t), -1, 3) for t in tracks])
+    q = np.where(np.isfinite(q), q, np.nan)
+    motion = np.nan_to_num(np.max(np.fmax.reduce(q, axis=0) - np.fmin.reduce(q, axis=0), axis=0, initial=0.0))
+    finite = q.reshape(-1, 3)
+    finite = finite[np.isfinite(finite).all(axis=1)]
+    extent = np.ptp(finite, axis=0) if len(finite) else np.zeros(3)
+    largest = max(motion.max(), extent.max())
+    if not largest > 0:
+        return [0, 2]
+    moving = np.where(motion > 1e-6 * largest, motion, 0.0)
+    return sorted(np.lexsort((extent, moving))[-2:].tolist())
 
 
 def shared_window(runs: list[np.ndarray], fixed: np.ndarray, pad: float) -> tuple[np.ndarray, np.ndarray]:

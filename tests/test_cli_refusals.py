@@ -85,10 +85,6 @@ REFUSALS = {
     "run-subnormal-inertia": (["run", "subnormal-inertia.toml"], "subnormal-inertia.toml: bodies[0]: the sphere's "
                               "principal moments [4e-309, 4e-309, 4e-309] kg m^2 are not each finite and at least "
                               "5.56e-309 kg m^2 (a smaller one has no finite inverse)"),
-    # simulate's Python advice (pass stepper=attached_stepper(...)) is no answer at the command line
-    "animate-offsets": (["animate", "spring-pendulum", "--t-end", "0.05", "--out", "o/a.gif"],
-                        "scene spring-pendulum: springs or dampers at body-frame points (offsets) turn with the "
-                        "bodies, which animate does not step yet; use steplab run"),
     # 8: a bench record whose ratio is not a finite number
     "bench-ratio-string": (["bench", "--from", "x.json"], "x.json: ratios."),
     "bench-ratio-nan": (["bench", "--from", "nan.json"], "nan.json: ratios."),

@@ -39,9 +39,7 @@ def command(args) -> int:
     scene = load_scene(args.scene)
     from steplab.physics.attachments import attached_forces
 
-    if attached_forces(scene.model):  # simulate's advice (pass stepper=attached_stepper) is the Python API's
-        raise ValueError(f"scene {scene.name}: springs or dampers at body-frame points (offsets) turn with the "
-                         "bodies, which animate does not step yet; use steplab run")
+    attached = bool(attached_forces(scene.model))  # springs or dampers at body-frame points (offsets)
     dt, t_end = time_span(scene, args)
     # each panel: (integrator, detector); --compare varies one of them
     panels = [(args.integrator, args.detector)]  # None: the scene's, with its [simulation.<integrator>] settings
@@ -56,17 +54,34 @@ def command(args) -> int:
             panels = [(n, args.detector) for n in names]
     steps = run_steps(scene, dt, t_end, MAX_STEPS, "steplab animate")
     methods = [scene_method(scene, name) for name, _ in panels]  # every panel's refusals before any run
-    runs = []
+    rotation = None
+    if attached:  # their lever arms turn with the bodies: the rotation steps with the translation, as in run
+        from steplab.integrators import DEFAULT_ROTATION, get_rotation
+        from steplab.integrators.attached import attached_stepper
+
+        rotation = get_rotation(scene.rotation or DEFAULT_ROTATION)  # run's, without --rotation
+        if any(collision_world(scene, detector, "numpy") is not None for _, detector in panels):
+            raise ValueError("springs and dampers at body-frame points (offsets) do not run with collisions yet; "
+                             "use --detector none")
+        for method in methods:  # a method the coupled step refuses (an adaptive one), before any run
+            attached_stepper(scene.rigid_bodies, rotation)(scene.model, method)
+    runs, rotations = [], []
     for method, (_, detector) in zip(methods, panels):
         world = collision_world(scene, detector, "numpy")
+        kept = []  # the attached step, which keeps the rotation at the saved steps
         traj = simulate(scene.model, method, scene.y0, scene.t_start, t_end, dt,
-                        save_every=max(1, steps // 300), collisions=world)
+                        save_every=max(1, steps // 300), collisions=world,
+                        stepper=attached_stepper(scene.rigid_bodies, rotation, kept) if attached else None)
         label = f"{scene.name}: {method.name}, dt = {dt:g} s"
         if world is not None or detector is not None:
             label += (", contact solver" if world is not None and world.method == "solver"
                       else f", {world.detector if world is not None else 'no'} detector")
+        if attached:  # on a line of its own: the title is as wide as the panel
+            rotations.append(kept[0].rotation_trajectory(traj))
+            label += f"\nrotation: {rotation.name} (coupled)"
         runs.append((label, traj))
     shapes = scene.collisions.shapes if scene.collisions is not None else ()
-    path = animate(runs, scene.model, args.out, fps=args.fps, view=args.view, shapes=shapes)
-    print(f"animation written to {path} ({'; '.join(label for label, _ in runs)})")
+    path = animate(runs, scene.model, args.out, fps=args.fps, view=args.view, shapes=shapes,
+                   rotations=rotations if attached else None)
+    print(f"animation written to {path} ({'; '.join(label.replace(chr(10), ', ') for label, _ in runs)})")
     return 0
