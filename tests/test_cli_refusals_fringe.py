@@ -131,6 +131,7 @@ def test_a_tiny_moment_of_inertia_under_the_contact_solver_stops_in_one_line(cap
     status, _, err = run_main(capsys, ["run", str(path), "--t-end", "0.1"])
     assert status == 1 and "Traceback" not in err and err.count("\n") == 1, err
     assert err.startswith("steplab run: error: "), err
+    assert "became non-finite at body 'ball' in the step from" in err, err  # which body, of a scene of many
 
 
 # --- 4. bench --repeat has a bound -------------------------------------------------------------------------

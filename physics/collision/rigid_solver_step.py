@@ -43,7 +43,7 @@ from .heap import keep_freed_memory
 from .manifolds import BOX, CAPSULE, SPHERE, check_shapes
 from .pairs import SweptSpheres
 from .rigid_columns import first_impacts, gather, inverse, is_sorted
-from .solver_step import INTEGRATOR
+from .solver_step import INTEGRATOR, non_finite
 from .step import ConstantField
 
 #: the rotation method's stages in the solver's substep, by its name: (gyroscopic term, orientation
@@ -238,8 +238,8 @@ class RigidSolverStep:
             residual = rs.finish(bodies, contacts, sub, layout)
         self._conclude(t, dt, contacts, residual)
         if not (np.isfinite(state).all() and np.isfinite(bodies.omega).all()):
-            raise FloatingPointError(f"the contact solver's state became non-finite in the step from t = {t:g} s "
-                                     f"(largest residual {self.log.largest_residual:.3g} m/s)")
+            raise FloatingPointError(non_finite(self.model.names, t, self.log.largest_residual, state[0], state[1],
+                                                bodies.omega))
         self._steps += 1
         if (self._steps - 1) % self.record_every:  # the last step's record was kept only while it was the last
             orientation, omega = self.history.pop(self._steps - 1)  # its arrays (no one's now) take this step's

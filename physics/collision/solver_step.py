@@ -177,8 +177,7 @@ class SolverStep:
         self.log.largest_residual = max(self.log.largest_residual, solved.residual)
         self._previous = solved
         if not (np.all(np.isfinite(q)) and np.all(np.isfinite(v))):
-            raise FloatingPointError(f"the contact solver's state became non-finite in the step from "
-                                     f"t = {start.t:g} s (largest residual {self.log.largest_residual:.3g} m/s)")
+            raise FloatingPointError(non_finite(self.model.names, start.t, self.log.largest_residual, q, v))
         return np.stack([q, v])
 
     def _impacts(self, start: StepStart, solved) -> tuple[ImpactBlock, np.ndarray]:
@@ -317,3 +316,13 @@ class Solved:
 _EMPTY = np.zeros(0)
 _NO_CONTACTS = Solved(Contacts.empty(),
                        _EMPTY, np.zeros((0, 3)), _EMPTY)
+
+
+def non_finite(names, t: float, residual: float, *rows) -> str:
+    """The contact solver's one line for a state that became non-finite in the step from ``t``,
+    naming the first body whose row (position, velocity, angular velocity: ``rows``, each (N, 3))
+    is not finite."""
+    bad = np.flatnonzero(~np.all(np.isfinite(np.concatenate(rows, axis=1)), axis=1))
+    body = f" at body {names[int(bad[0])]!r}" if len(bad) else ""
+    return (f"the contact solver's state became non-finite{body} in the step from t = {t:g} s "
+            f"(largest residual {residual:.3g} m/s)")
