@@ -256,11 +256,12 @@ def scene_stepper(scene, kept: list | None = None):
     """The step :func:`.simulate` needs for ``scene`` (its ``stepper`` argument): the attached step, with the
     scene's rotation method, where it has springs or dampers at body-frame points (their lever arms turn with
     the bodies), else None (the integrator's own step)."""
+    from .rotation import DEFAULT_ROTATION
     from .rotation_registry import get_rotation
 
     if not attachments.attached_forces(scene.model):
         return None
-    return attached_stepper(scene.rigid_bodies, get_rotation(scene.rotation), kept)
+    return attached_stepper(scene.rigid_bodies, get_rotation(scene.rotation or DEFAULT_ROTATION), kept)
 
 
 def attached_stepper(bodies: RigidBodies, rotation, kept: list | None = None):

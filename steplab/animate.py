@@ -5,11 +5,19 @@ in the plane of the two axes the motion spans most, and below it the energy's ch
 time, so a class sees both the motion and what the integrator does to the energy. Side by
 side, the panels share their axes: what looks bigger is bigger.
 
+A scene with rotating bodies comes with each run's rotation (``integrators.scene_rotation.
+run_rotation``: as the contact solver or the attached step turned them, else free beside the
+translation), and each rotating body is drawn as it is at each frame's orientation: a box as its
+faces toward the viewer, shaded by a fixed light (:func:`box_faces`), inside the outline of its
+turned box on the view plane (:func:`box_outline`), far bodies first; a capsule or cylinder as its
+outline; a sphere as its disc with two black spokes from its centre to body-fixed points on its
+surface, so that tumbling, spin and rolling show. The energy panel is then the mechanical energy
+``steplab run`` reports, the spin 1/2 omega . I omega included (:func:`drawn_energies`).
+
 A scene whose springs act at body-frame points (offsets on rotating bodies, stepped by
-:mod:`steplab.integrators.attached`) comes with each run's rotation: its springs are drawn to
-their attachment points x + R(q) r, each rotating body's orientation as a black line from its
-centre to its springs' points on it, and its energy is what ``steplab run`` reports, the spin
-1/2 omega . I omega and the springs at the lever arms of each saved state included.
+:mod:`steplab.integrators.attached`) has its springs drawn to their attachment points x + R(q) r,
+each rotating body's lever arms as black lines from its centre to its springs' points on it, and
+its energy has the springs at the lever arms of each saved state.
 
 The static parts of the figure (axes, ticks, the energy curves) are drawn once; each frame
 redraws only the bodies, springs, clock and energy marker on top of them (blitting), and the
@@ -80,7 +88,7 @@ def _ffmpeg(out):
 
 
 def animate(runs: list[tuple[str, object]], model, out: str | Path, fps: int = 30, view: str | None = None,
-            shapes=(), rotations=None) -> Path:
+            shapes=(), rotations=None, half=None) -> Path:
     """Write an animation of one or more runs of the same scene, one panel each.
 
     Parameters
@@ -94,28 +102,35 @@ def animate(runs: list[tuple[str, object]], model, out: str | Path, fps: int = 3
         :func:`motion_view`).
     shapes : static collision shapes (planes, boxes, oriented boxes) to draw in grey
     rotations : list of integrators.scene_rotation.RotationTrajectory, optional
-        For a model with springs or dampers at body-frame points: each run's rotating bodies at its
-        saved times (``AttachedStep.rotation_trajectory``). The springs are then drawn to their
-        attachment points, the bodies' orientations as lines (:func:`attached_segments`), and the
-        energy is :func:`attached_energies`.
+        For a model with rotating bodies: each run's rotating bodies at its saved times
+        (``integrators.scene_rotation.run_rotation``). They are drawn at each frame's orientation
+        (:func:`rigid_outlines`) and the energy is :func:`drawn_energies`, the spin included. With
+        springs or dampers at body-frame points, the springs are drawn to their attachment points
+        and the lever arms as lines (:func:`attached_segments`).
+    half : ndarray (N, 3), optional
+        The bodies' half extents (a box's half edges, a capsule's (0, 0, l/2)) where the scene has
+        them (its contact solver's ``RigidScene.half``); else they follow from the principal
+        moments (:func:`half_extents`).
     """
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
-    from matplotlib.collections import LineCollection, PatchCollection
+    from matplotlib.collections import LineCollection, PatchCollection, PolyCollection
     from matplotlib.patches import Circle
     from matplotlib.ticker import MaxNLocator
 
     from steplab.core.records import write_with
     from steplab.physics import CentralGravity, Springs
+    from steplab.physics import quaternion as quat
+    from steplab.physics.attachments import attached_forces
 
     out = Path(out)
     check_format(out)
     check_fps(fps)
-    # with rotations, each run's springs (end points) and orientation lines at every saved state, world frame
-    drawn = None if rotations is None else [attached_frames(model, traj, rotation)
-                                            for (_, traj), rotation in zip(runs, rotations)]
+    # with springs at body-frame points, each run's springs (end points) and lever arms at every saved state
+    drawn = None if rotations is None or not attached_forces(model) else [
+        attached_frames(model, traj, rotation) for (_, traj), rotation in zip(runs, rotations)]
     if view is not None:
         axes_idx = [AXIS_NAMES.index(a) for a in view]
     elif drawn is not None:
@@ -136,6 +151,15 @@ def animate(runs: list[tuple[str, object]], model, out: str | Path, fps: int = 3
     if drawn is not None:  # the attachment points stay in the window too
         tracks = [np.concatenate([q, springs[..., axes_idx].reshape(len(q), -1, 2)], axis=1)
                   for q, (springs, _) in zip(tracks, drawn)]
+    # with rotations, each run's rotating bodies on the view plane at every saved state: (K, R, P, 2) points
+    # whose hull is each one's outline (a sphere's, a circle), which stay in the window too
+    solid = None
+    if rotations is not None:
+        rotating = rotations[0].bodies
+        extents = half_extents(model, rotating, half)
+        solid = [rigid_outlines(rotating.shapes, extents, radii[rotating.index], traj.positions[:, rotating.index],
+                                rotation.orientations, axes_idx) for (_, traj), rotation in zip(runs, rotations)]
+        tracks = [np.concatenate([q, points.reshape(len(q), -1, 2)], axis=1) for q, points in zip(tracks, solid)]
     lo, hi = shared_window(tracks, fixed, radii.max())
     width = float(np.max(hi - lo))
     if not width <= MAX_WINDOW:
@@ -143,10 +167,15 @@ def animate(runs: list[tuple[str, object]], model, out: str | Path, fps: int = 3
         raise ValueError(f"the picture's width {across} (the bodies with their radii, the static boxes and the "
                          f"attracting masses): animate draws at most {MAX_WINDOW:g} m")
     drawn_radii = np.maximum(radii, MIN_DRAWN_RADIUS * (hi - lo).max())
-    if rotations is None:
-        energies = [np.array([float(model.energy(y)) for y in traj.y]) for _, traj in runs]
-    else:
-        energies = [attached_energies(model, traj, rotation) for (_, traj), rotation in zip(runs, rotations)]
+    discs = np.arange(len(radii))  # the bodies drawn as circles: all but the rotating boxes, capsules, cylinders
+    if rotations is not None:
+        round_ = np.array([shape == "sphere" for shape in rotating.shapes], dtype=bool)
+        discs = np.setdiff1d(discs, rotating.index[~round_])
+        spun = np.flatnonzero(round_)  # the rotating spheres, among the rotating bodies
+        # their spokes: from the centre to body-fixed points on the (drawn) surface, along the body x and z axes
+        spokes = np.eye(3)[[0, 2]] * drawn_radii[rotating.index[spun], None, None]
+    energies = [drawn_energies(model, traj, rotation)
+                for (_, traj), rotation in zip(runs, rotations or [None] * len(runs))]
     changes, unit = energy_changes(energies)
 
     frames = min(MAX_FRAMES, max(len(traj.t) for _, traj in runs))
@@ -170,10 +199,16 @@ def animate(runs: list[tuple[str, object]], model, out: str | Path, fps: int = 3
             ax.legend(loc="lower right", fontsize=8)
         lines = LineCollection([], colors="0.5", linewidths=0.8, animated=True)
         ax.add_collection(lines)
-        circles = PatchCollection([Circle((0, 0), r) for r in drawn_radii], facecolor="tab:blue", edgecolor="k",
-                                  linewidth=0.5, animated=True)
+        circles = PatchCollection([Circle((0, 0), r) for r in drawn_radii[discs]], facecolor="tab:blue",
+                                  edgecolor="k", linewidth=0.5, animated=True)
         ax.add_collection(circles)
-        turned = None
+        turned = solids = None
+        if solid is not None:  # the rotating bodies at each frame's orientation, spokes on the spheres
+            outlines = PolyCollection([], animated=True)
+            ax.add_collection(outlines)
+            spinning = LineCollection([], colors="k", linewidths=1.2, animated=True)
+            ax.add_collection(spinning)
+            solids = (solid[col], rotations[col].orientations, outlines, spinning)
         if drawn is not None:  # over the bodies: each one's orientation, and the points its springs pull at
             pointers = LineCollection([], colors="k", linewidths=1.5, animated=True)
             ax.add_collection(pointers)
@@ -188,28 +223,42 @@ def animate(runs: list[tuple[str, object]], model, out: str | Path, fps: int = 3
         for axis in (ax.xaxis, ax.yaxis, eax.xaxis):
             axis.set_major_locator(MaxNLocator(MAX_TICKS))
         picks = np.linspace(0, len(traj.t) - 1, frames).round().astype(int)
-        panels.append((traj, picks, lines, circles, clock, marker, changes[col], turned))
+        panels.append((traj, picks, lines, circles, clock, marker, changes[col], turned, solids))
     _energy_scale(grid[1][0], changes)
 
     def shown(points):  # world points (..., 3) on the view plane, clipped onto the window's edge
         return np.clip(np.nan_to_num(points[..., axes_idx], nan=0.0), lo, hi)
 
     def draw(frame):
-        for traj, picks, lines, circles, clock, marker, change, turned in panels:
+        for traj, picks, lines, circles, clock, marker, change, turned, solids in panels:
             k = picks[frame]
-            q = traj.positions[k][:, axes_idx]
-            inside = np.isfinite(q).all(axis=1) & (q >= lo).all(axis=1) & (q <= hi).all(axis=1)
-            q = np.clip(np.nan_to_num(q, nan=0.0), lo, hi)  # clipped onto the edge, and marked red
-            circles.set_paths([Circle(tuple(c), r) for c, r in zip(q, drawn_radii)])
-            circles.set_facecolor(np.where(inside, "tab:blue", "tab:red"))
+            centres = traj.positions[k][:, axes_idx]
+            inside = np.isfinite(centres).all(axis=1) & (centres >= lo).all(axis=1) & (centres <= hi).all(axis=1)
+            q = np.clip(np.nan_to_num(centres, nan=0.0), lo, hi)  # clipped onto the edge, and marked red
+            circles.set_paths([Circle(tuple(c), r) for c, r in zip(q[discs], drawn_radii[discs])])
+            circles.set_facecolor(np.where(inside[discs], "tab:blue", "tab:red"))
             artists = [lines, circles, clock, marker]
+            if solids is not None:  # each outline and spoke moved with its centre where that is clipped
+                points, orientations, outlines, spinning = solids
+                at = rotating.index
+                shift = (q - np.nan_to_num(centres, nan=0.0))[at]
+                verts, faces, edges, widths = rigid_polygons(rotating.shapes, extents, traj.positions[k][at],
+                                                             orientations[k], points[k], axes_idx, inside[at])
+                outlines.set_verts([v + shift[b] for v, b in verts])
+                outlines.set_facecolor(faces)
+                outlines.set_edgecolor(edges)
+                outlines.set_linewidth(widths)
+                turned_spokes = quat.rotate(np, orientations[k][spun, None], spokes)[..., axes_idx]
+                ends = q[at[spun], None] + np.nan_to_num(turned_spokes, nan=0.0)
+                spinning.set_segments([[c, e] for c, pair in zip(q[at[spun]], ends) for e in pair])
+                artists[2:2] = [outlines, spinning]
             if turned is not None:  # to the attachment points, not the centres
                 (springs, arms), pointers, points = turned
                 lines.set_segments(shown(springs[k]))
                 pointers.set_segments(shown(arms[k]))
                 ends = shown(springs[k].reshape(-1, 3))
                 points.set_data(ends[:, 0], ends[:, 1])
-                artists[2:2] = [pointers, points]
+                artists[-2:-2] = [pointers, points]
             elif pairs is not None:
                 lines.set_segments(np.stack([q[pairs[:, 0]], q[pairs[:, 1]]], axis=1))
             clock.set_text(f"t = {traj.t[k]:.2f} s")
@@ -339,6 +388,193 @@ def attached_frames(model, traj, rotation) -> tuple[np.ndarray, np.ndarray]:
     frames = [attached_segments(model, x, o, rotation.bodies.index, model.radii)
               for x, o in zip(traj.positions, orientations)]
     return np.stack([s for s, _ in frames]), np.stack([p for _, p in frames])
+
+
+def drawn_energies(model, traj, rotation=None) -> np.ndarray:
+    """The energy (K,) the energy panel draws at each saved state of ``traj``, J: ``model.energy`` (the
+    centres' kinetic and the potential energy); with ``rotation`` (the run's RotationTrajectory at its
+    saved times) the rotating bodies' 1/2 omega . I omega too, and for a model with springs or dampers
+    at body-frame points their lever arms at each state (:func:`attached_energies`). It is the energy
+    ``steplab run`` reports: at the last state, its ``energy_end``."""
+    from steplab.physics.attachments import attached_forces
+
+    if rotation is None:
+        return np.array([float(model.energy(y)) for y in traj.y])
+    if attached_forces(model):
+        return attached_energies(model, traj, rotation)
+    return np.array([float(model.energy(np.asarray(y, float), rotation.at(k))) for k, y in enumerate(traj.y)])
+
+
+#: the corners of the box [-1, 1]^3, (8, 3), in the order of the bits (x, y, z) of their index
+CORNERS = np.array([[1.0 if (k >> a) & 1 else -1.0 for a in range(3)] for k in range(8)])
+#: points on a circle that a capsule's or cylinder's outline is drawn through
+ROUND = 24
+
+
+def half_extents(model, bodies, half=None) -> np.ndarray:
+    """Each rotating body's half extents (R, 3), m: a box's half edges, a capsule's or cylinder's
+    (0, 0, l / 2), a sphere's zeros.
+
+    ``half`` (N, 3), where the scene has them (its contact solver's ``RigidScene.half``), gives
+    them; else they follow from the principal moments and the mass, which a scene without
+    collisions keeps: the box of edges a^2 = 6 (I2 + I3 - I1) / m (and so on), the cylinder of
+    length l^2 = 12 I1 / m - 3 r^2, the capsule whose I1 the moments give (the shape's own size
+    when its moments came from it; for moments given in the file, the solid of the shape that has
+    them).
+    """
+    if half is not None:
+        return np.asarray(half, float)[bodies.index]
+    bodies_half = np.zeros((len(bodies.index), 3))
+    inertia = np.asarray(bodies.inertia, float)
+    masses = np.asarray(model.masses, float)[bodies.index]
+    radii = np.asarray(model.radii, float)[bodies.index]
+    for b, shape in enumerate(bodies.shapes):
+        moments, m, r = inertia[b], masses[b], radii[b]
+        if shape == "box":
+            bodies_half[b] = np.sqrt(np.maximum(1.5 * (moments.sum() - 2 * moments) / m, 0.0))
+        elif shape == "cylinder":
+            bodies_half[b, 2] = 0.5 * np.sqrt(max(12 * moments[0] / m - 3 * r * r, 0.0))
+        elif shape == "capsule":
+            bodies_half[b, 2] = 0.5 * _capsule_length(moments[0], m, r)
+    return bodies_half
+
+
+def _capsule_length(across: float, mass: float, radius: float) -> float:
+    """The length of the capsule's cylindrical part whose moment about a transverse axis is ``across``
+    (``physics.rigid_body.principal_inertia``, which grows with the length), 0 for a sphere's or less."""
+    from scipy.optimize import brentq
+
+    from steplab.physics.rigid_body import principal_inertia
+
+    def excess(length):
+        return principal_inertia("capsule", mass, radius, length=length)[0] - across
+
+    if excess(0.0) >= 0:
+        return 0.0
+    top = radius
+    while excess(top) < 0 and top < 1e12 * radius:
+        top *= 2
+    return float(brentq(excess, 0.0, top, xtol=1e-12 * top))
+
+
+def box_outline(center, orientation, half, axes=(0, 1)) -> np.ndarray:
+    """The outline (M, 2) of a box on a view plane, counter-clockwise: the convex hull of its eight
+    corners ``center + R(orientation) (+-half)`` projected on the plane of ``axes`` (indices of two
+    world axes, such as (0, 2) for x-z). A box seen face on is its rectangle (M = 4), one turned
+    in 3-D a hexagon (M = 6)."""
+    from steplab.physics import quaternion as quat
+
+    turned = quat.rotate(np, np.asarray(orientation, float), CORNERS * np.asarray(half, float))
+    corners = np.asarray(center, float) + turned
+    return convex_hull(corners[:, list(axes)])
+
+
+def rigid_outlines(shapes, half, radii, centers, orientations, axes) -> np.ndarray:
+    """Points (..., R, P, 2) on the view plane ``axes`` whose convex hull is each rotating body's outline
+    at ``centers`` (..., R, 3) and ``orientations`` (..., R, 4): a box's eight corners, a cylinder's two
+    rims, the circles of a capsule's two caps and of a sphere (ROUND points each); a body's row repeats
+    its points up to the largest count P of the bodies."""
+    from steplab.physics import quaternion as quat
+
+    centers, orientations = np.asarray(centers, float), np.asarray(orientations, float)
+    half, radii = np.asarray(half, float), np.asarray(radii, float)
+    axes = list(axes)
+    count = 8 if all(shape == "box" for shape in shapes) else 2 * ROUND
+    out = np.zeros((*centers.shape[:-1], count, 2))
+    angle = 2 * np.pi * np.arange(ROUND) / ROUND
+    circle = np.stack([np.cos(angle), np.sin(angle)], axis=-1)  # (ROUND, 2), on the view plane
+    for b, shape in enumerate(shapes):
+        x, q = centers[..., b, None, :], orientations[..., b, None, :]
+        if shape == "box":
+            points = (x + quat.rotate(np, q, CORNERS * half[b]))[..., axes]
+        elif shape == "cylinder":
+            rim = np.concatenate([np.stack([radii[b] * circle[:, 0], radii[b] * circle[:, 1],
+                                            np.full(ROUND, z)], axis=-1) for z in (-half[b, 2], half[b, 2])])
+            points = (x + quat.rotate(np, q, rim))[..., axes]
+        else:  # a sphere (the cap ends at its centre) or a capsule: circles about the ends of its segment
+            ends = (x + quat.rotate(np, q, np.array([[0.0, 0.0, -half[b, 2]], [0.0, 0.0, half[b, 2]]])))[..., axes]
+            points = (ends[..., :, None, :] + radii[b] * circle).reshape(*ends.shape[:-2], 2 * ROUND, 2)
+        out[..., b, :, :] = points[..., np.arange(count) % points.shape[-2], :]
+    return out
+
+
+#: the faces of the box [-1, 1]^3: each one's outward normal (6, 3) and its corners (6, 4), indices into CORNERS
+#: in order around it
+FACE_NORMALS = np.concatenate([np.eye(3), -np.eye(3)])
+FACE_CORNERS = np.array([[next(c for c in range(8) if CORNERS[c, i] == sign and CORNERS[c, (i + 1) % 3] == u
+                               and CORNERS[c, (i + 2) % 3] == w) for u, w in ((1, 1), (-1, 1), (-1, -1), (1, -1))]
+                         for sign in (1.0, -1.0) for i in range(3)])
+#: the fill of a rotating body, and of one outside the window (drawn on its edge), RGB
+FILL, OUTSIDE = np.array([0.122, 0.467, 0.706]), np.array([0.839, 0.153, 0.157])
+
+
+def toward_viewer(axes) -> np.ndarray:
+    """The world unit vector out of the screen for the view plane of ``axes`` (the first axis to the
+    right, the second up): their cross product, so that x-z is seen from -y."""
+    right, up = np.eye(3)[list(axes)]
+    return np.cross(right, up)
+
+
+def box_faces(centers, orientations, half, axes) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The faces of boxes at ``centers`` (B, 3) turned by ``orientations`` (B, 4), half edges ``half``
+    (B, 3), on the view plane of ``axes``: their corners (B, 6, 4, 2), whether each faces the viewer
+    (B, 6) (:func:`toward_viewer`; a face seen edge-on does not) and its brightness (B, 6), the cosine
+    of its normal with a light from the viewer's upper left (Lambert's law)."""
+    from steplab.physics import quaternion as quat
+
+    centers, orientations = np.asarray(centers, float), np.asarray(orientations, float)
+    axes = list(axes)
+    corners = centers[:, None] + quat.rotate(np, orientations[:, None], CORNERS * np.asarray(half, float)[:, None])
+    normals = quat.rotate(np, orientations[:, None], FACE_NORMALS)
+    right, up = np.eye(3)[axes]
+    out = toward_viewer(axes)
+    light = (2 * out + up - right) / np.sqrt(6.0)
+    return corners[:, FACE_CORNERS][..., axes], normals @ out > 1e-9, normals @ light
+
+
+def rigid_polygons(shapes, half, centers, orientations, points, axes, inside):
+    """What one frame draws of the R rotating bodies that are not spheres, far to near (along
+    :func:`toward_viewer`), as the polygons of one PolyCollection: ``(verts, faces, edges, widths)``.
+
+    ``verts`` lists ``(polygon (M, 2), body)`` (``body`` its row among the R); a box is its faces
+    toward the viewer, each shaded by its brightness (:func:`box_faces`) with a thin edge, then its
+    outline (:func:`convex_hull` of its corners) with a black one; a capsule or cylinder is its
+    outline, filled. ``points`` (R, P, 2) are :func:`rigid_outlines` at this frame; ``inside`` (R,)
+    whether each body is in the window: one outside it is drawn red.
+    """
+    centers = np.nan_to_num(np.asarray(centers, float), nan=0.0)
+    orientations, points = np.nan_to_num(orientations, nan=0.0), np.nan_to_num(points, nan=0.0)
+    boxes = np.flatnonzero([shape == "box" for shape in shapes])
+    corners, facing, brightness = box_faces(centers[boxes], orientations[boxes], np.asarray(half)[boxes], axes)
+    row = {b: n for n, b in enumerate(boxes)}
+    verts, faces, edges, widths = [], [], [], []
+    for b in np.argsort(centers @ toward_viewer(axes), kind="stable"):
+        if shapes[b] == "sphere":
+            continue
+        fill = FILL if inside[b] else OUTSIDE
+        if b in row:
+            for f in np.flatnonzero(facing[row[b]]):
+                verts.append((corners[row[b], f], b))
+                faces.append((*np.clip(fill * (0.55 + 0.6 * brightness[row[b], f]), 0, 1), 1.0))
+                edges.append((0.1, 0.1, 0.1, 1.0))
+                widths.append(0.4)
+        verts.append((convex_hull(points[b]), b))
+        faces.append((*fill, 0.0 if b in row else 1.0))
+        edges.append((0.0, 0.0, 0.0, 1.0))
+        widths.append(0.9)
+    return verts, faces, edges, widths
+
+
+def convex_hull(points) -> np.ndarray:
+    """The convex hull (M, 2) of 2-D ``points``, counter-clockwise (SciPy's Qhull); a set without
+    area (a body of no extent, or seen edge-on) is drawn as its points."""
+    from scipy.spatial import ConvexHull, QhullError
+
+    points = np.asarray(points, float)
+    try:
+        return points[ConvexHull(points).vertices]
+    except QhullError:
+        return points
 
 
 def motion_view(tracks: list[np.ndarray]) -> list[int]:

@@ -49,3 +49,16 @@ def test_energy_is_shown_as_its_change(e0, unit):
     changes, shown = energy_changes([np.array([e0, e0 + 1.0]), np.array([e0, e0 - 2.0])])
     scale = 100 / abs(e0) if e0 else 1.0
     assert shown == unit and np.allclose(changes, [[0, scale], [0, -2 * scale]])
+
+
+@pytest.mark.parametrize(("value", "message"), [
+    ("rk4,", "argument --compare: item 2 of 2 in 'rk4,' is empty"),
+    ("rk4,,euler", "argument --compare: item 2 of 3 in 'rk4,,euler' is empty"),
+])
+def test_compare_refuses_an_empty_name(capsys, tmp_path, value, message):
+    """``rk4,`` added a panel of the scene's own integrator, as if a name had been typed after the comma."""
+    from helpers import refused
+
+    err = refused(capsys, ["animate", "oscillator", "--compare", value, "--out", str(tmp_path / "a.gif")])
+    assert err.startswith("steplab animate: error: ") and message in err, err
+    assert not list(tmp_path.iterdir())

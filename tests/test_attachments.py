@@ -395,3 +395,25 @@ def test_a_compiled_attached_run_that_diverges_is_reported_like_any_divergence()
         kept = []
         simulate(scene.model, "euler", scene.y0, 0.0, dt=0.05, n_steps=2000, backend="jax",
                  stepper=attached_stepper(scene.rigid_bodies, get_rotation("explicit"), kept))
+
+
+def test_the_scene_stepper_of_a_scene_that_names_no_rotation_method_uses_the_default(tmp_path):
+    """A scene with springs at body-frame points and no [simulation] rotation: the default method
+    (was: 'unknown rotation method None')."""
+    from pathlib import Path
+
+    from steplab.integrators.attached import scene_stepper
+    from steplab.integrators.rotation import DEFAULT_ROTATION
+    from steplab.physics.scene import load_scene
+
+    text = (Path(__file__).resolve().parent.parent / "physics" / "scenes" / "spring-pendulum.toml").read_text()
+    assert 'rotation = "exponential-map"\n' in text
+    path = tmp_path / "no-rotation.toml"
+    path.write_text(text.replace('rotation = "exponential-map"\n', ""))
+    scene = load_scene(path)
+    assert scene.rotation is None
+    kept = []
+    from steplab.integrators import get_integrator
+
+    step = scene_stepper(scene, kept)(scene.model, get_integrator(scene.integrator))
+    assert kept == [step] and step.coupling.rotation.name == DEFAULT_ROTATION
