@@ -743,7 +743,7 @@ position = [2.0, 0.0, 1.0]
 [[forces.springs]]
 bodies = ["a", "b"]
 stiffness = 10.0
-rest_length = 0.5
+rest_length = 0.0
 [[forces.dampers]]
 bodies = ["a", "b"]
 damping = 1.0
@@ -755,7 +755,9 @@ damping = 1.0
     a, b, c0, c1 = (scene.model.names.index(name) for name in ("a", "b", "c[0]", "c[1]"))
     # vertices c[0] and c[1] coincide and feel identical forces: they move together
     assert_allclose(traj.positions[:, c0], traj.positions[:, c1], rtol=0, atol=1e-14)
-    # a and b coincide with rest length 0.5: no direction, so no force (an unstable equilibrium)
+    # a and b coincide at their spring's rest length 0: no force, no 0/0 in its direction
+    # (with a rest length > 0 the file is refused: the spring would push along no direction;
+    # tests/test_cli_refusals_fringe.py)
     assert_array_equal(traj.positions[:, a], traj.positions[:, b])
 
 
