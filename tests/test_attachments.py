@@ -288,8 +288,9 @@ def test_steplab_run_couples_the_rotation_and_refuses_what_it_cannot_couple(caps
         assert main(["run", "spring-pendulum", "--t-end", "0.01", *argv]) == 2
         err = capsys.readouterr().err
         assert message in err and err.count("\n") == 1
-    assert main(["recommend", "spring-pendulum", "--tol", "1e-3"]) == 2
-    assert "recommend does not measure yet" in capsys.readouterr().err
+    assert main(["recommend", "spring-pendulum", "--tol", "1e-3", "--detector", "swept"]) == 2  # as run refuses it
+    err = capsys.readouterr().err
+    assert "do not run with collisions yet; use --detector none" in err and err.count("\n") == 1
 
 
 def test_the_free_rotation_beside_the_translation_refuses_an_attached_scene():

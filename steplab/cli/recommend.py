@@ -40,16 +40,11 @@ def command(args) -> int:
     from steplab.studies.problems import problem_of
     from steplab.studies.recommend import recommend
 
-    from .run import collision_world, scene_method
+    from .run import _attached, collision_world, scene_method
 
     scene = load_scene(args.scene)
     scene_method(scene)  # the scene's [simulation.<integrator>] table, refused as run refuses it
     rotation = rotation_named(scene, args)
-    from steplab.physics.attachments import attached_forces
-
-    if attached_forces(scene.model):  # its references and candidates step the translation alone
-        raise ValueError(f"scene {scene.name}: springs or dampers at body-frame points (offsets) couple the "
-                         "rotation with the translation, which recommend does not measure yet; use steplab run")
     _, t_end = time_span(scene, args)
     integrators = None
     if args.integrators is not None:
@@ -57,6 +52,8 @@ def command(args) -> int:
 
         integrators = check_integrators(args.integrators)  # a list of names, none empty (comma_list)
     world = collision_world(scene, args.detector, "numpy")
+    if _attached(scene, world):  # the rotation steps with the translation: measured together (not with collisions)
+        return _with_attachments(args, scene, t_end, integrators, rotation)
     if world is not None:
         return _with_collisions(args, scene, t_end, world, integrators, rotation)
     result = _with_rotation(recommend(problem_of(scene, t_end), args.tol, dt_max=args.dt_max,
@@ -125,4 +122,32 @@ def _with_collisions(args, scene, t_end, world, integrators, rotation) -> int:
     if "note" in r:
         print(f"  note: {r['note']}")
     _print_rotation(r)
+    return 0
+
+
+def _with_attachments(args, scene, t_end, integrators, rotation) -> int:
+    """``recommend`` on springs or dampers at body-frame points, the translation and the rotation measured
+    together; status 1 with the evidence when nothing passes."""
+    from steplab.studies.recommend_attached import NoAttachedStepError, recommend_attached
+
+    try:
+        r = recommend_attached(scene, t_end, args.tol, rotation=rotation, dt_max=args.dt_max,
+                               integrators=integrators, progress=not args.json and sys.stderr.isatty())
+    except NoAttachedStepError as err:
+        if not args.json:
+            raise
+        print(json.dumps(err.evidence | {"error": str(err)}, indent=2))
+        return EXIT_DIVERGED
+    if args.json:
+        print(json.dumps(r, indent=2))
+        return 0
+    ref = r["reference"]
+    print(f"{scene.name}: {r['integrator']} with rotation {r['rotation']}, dt = {r['dt']:.6g} s ({r['steps']} "
+          f"steps), coupled: largest error {r['error']:.3g} m <= {args.tol:g} m (positions "
+          f"{r['position_error']:.3g} m, lever arms {r['arm_error']:.3g} m), {r['seconds'] * 1e3:.3g} ms "
+          "(NumPy loop, median)")
+    print(f"  reference: {ref['integrator']} with {ref['rotation']} at dt = {ref['dt']:.3g} s, converged to "
+          f"{ref['convergence']:.3g} m against dt = {2 * ref['dt']:.3g} s")
+    for name, why in r["skipped"].items():
+        print(f"  skipped {name}: {why}")
     return 0
