@@ -55,6 +55,7 @@ from .recommend_collisions import (
     REFERENCE_REFINEMENT,
     TIMING_REPEATS,
     check_integrators,
+    climb,
 )
 
 #: the reference pair: velocity Verlet with dlm, the coupled step's one second-order stage order
@@ -167,16 +168,8 @@ def recommend_attached(scene, t_end: float, tol: float, *, rotation, dt_max: flo
     finest = ref_steps // FINEST_CANDIDATE
     for method in names:
         bar.set_description(f"recommend: {method}")
-        previous, n = None, coarsest
         try:
-            while n <= finest:
-                point = measure(method, n)
-                tried.append(point)
-                if point.get("passes") and previous is not None:
-                    accepted.append(previous)
-                    break
-                previous = point if point.get("passes") else None
-                n *= 2
+            accepted.extend(climb(functools.partial(measure, method), coarsest, finest, tried))
         except ValueError as err:  # the coupled step refuses this integrator (a plugin's step, say)
             if named:
                 raise ValueError(f"--integrators: {method} cannot step springs or dampers at body-frame points: "

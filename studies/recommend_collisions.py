@@ -179,15 +179,7 @@ def recommend_with_collisions(problem: CollisionProblem, tol: float, *, scene_dt
     finest = ref_steps // FINEST_CANDIDATE
     for method in names:
         bar.set_description(f"recommend: {method}")
-        previous, n = None, coarsest
-        while n <= finest:
-            point = measure(method, n)
-            tried.append(point)
-            if point.get("passes") and previous is not None:
-                accepted.append(previous)
-                break
-            previous = point if point.get("passes") else None
-            n *= 2
+        accepted.extend(climb(functools.partial(measure, method), coarsest, finest, tried))
         bar.update()
     bar.close()
     evidence = {"regime": regime, "reference": reference, "tol": tol, "dt_max": dt_max}
@@ -209,6 +201,21 @@ def recommend_with_collisions(problem: CollisionProblem, tol: float, *, scene_dt
                           f"{reference['convergence']:.3g} m): compared energy over time, impact count and "
                           "penetration instead")
     return result
+
+
+def climb(measure, coarsest: int, finest: int, tried: list) -> list[dict]:
+    """A method's accepted point, as a list of none or one: ``measure(n)`` at coarsest, 2 coarsest, ...
+    steps up to ``finest`` (each point appended to ``tried``) until one passes and so does the next
+    at dt/2 (no lucky cancellation); the coarser of the two is accepted."""
+    previous, n = None, coarsest
+    while n <= finest:
+        point = measure(n)
+        tried.append(point)
+        if point.get("passes") and previous is not None:
+            return [previous]
+        previous = point if point.get("passes") else None
+        n *= 2
+    return []
 
 
 def _run(problem: CollisionProblem, method, n):

@@ -70,6 +70,33 @@ def lecture_projectile():
     return helpers.lecture_projectile()
 
 
+@pytest.fixture
+def drawn(monkeypatch):
+    """What ``steplab animate`` gives steplab.animate and draws: each call's runs and rotations, the
+    energies of its energy panel and the view's axes that motion_view picks."""
+    import steplab.animate
+
+    seen = {"calls": [], "energies": [], "views": []}
+    animate, changes, view = steplab.animate.animate, steplab.animate.energy_changes, steplab.animate.motion_view
+
+    def animate_(runs, model, out, **kw):
+        seen["calls"].append((runs, kw.get("rotations")))
+        return animate(runs, model, out, **kw)
+
+    def changes_(energies):
+        seen["energies"].append(energies)
+        return changes(energies)
+
+    def view_(tracks):
+        seen["views"].append(view(tracks))
+        return seen["views"][-1]
+
+    monkeypatch.setattr(steplab.animate, "animate", animate_)
+    monkeypatch.setattr(steplab.animate, "energy_changes", changes_)
+    monkeypatch.setattr(steplab.animate, "motion_view", view_)
+    return seen
+
+
 def pytest_terminal_summary(terminalreporter):
     """One line, not a buried skip reason, when the browser tests could not run."""
     skipped = terminalreporter.stats.get("skipped", [])

@@ -10,8 +10,6 @@ import pytest
 from helpers import refused, run_main
 from steplab.physics.scene import load_scene
 
-import steplab.animate
-
 T_END = "0.05"  # 50 steps of the scene's 1 ms
 #: the spring-pendulum's cube: 1 kg, 0.1 m on a side, hung at its corner (a/2, a/2, a/2) by k = 1e5 N/m, L = 0
 MASS, SIDE, STIFFNESS, CORNER = 1.0, 0.1, 1e5, np.array([0.05, 0.05, 0.05])
@@ -23,32 +21,6 @@ def matrix(q):
     return np.array([[1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)],
                      [2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)],
                      [2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)]])
-
-
-@pytest.fixture
-def drawn(monkeypatch):
-    """What animate is given and draws: each call's runs and rotations, the energies of its energy panel
-    and the view's axes that motion_view picks."""
-    seen = {"calls": [], "energies": [], "views": []}
-    animate, changes = steplab.animate.animate, steplab.animate.energy_changes
-    view = getattr(steplab.animate, "motion_view", None)
-
-    def animate_(runs, model, out, **kw):
-        seen["calls"].append((runs, kw.get("rotations")))
-        return animate(runs, model, out, **kw)
-
-    def changes_(energies):
-        seen["energies"].append(energies)
-        return changes(energies)
-
-    def view_(tracks):
-        seen["views"].append(view(tracks))
-        return seen["views"][-1]
-
-    monkeypatch.setattr(steplab.animate, "animate", animate_)
-    monkeypatch.setattr(steplab.animate, "energy_changes", changes_)
-    monkeypatch.setattr(steplab.animate, "motion_view", view_, raising=False)
-    return seen
 
 
 def run_json(capsys, *argv) -> dict:

@@ -9,7 +9,6 @@ import numpy as np
 import pytest
 from helpers import run_main
 
-import steplab.animate
 from steplab.animate import box_faces, box_outline, half_extents, rigid_outlines, rigid_polygons
 
 
@@ -98,25 +97,6 @@ def test_a_box_without_collisions_has_the_size_its_moments_give():
 
 
 # --- the energy drawn is the one run reports ----------------------------------------------------------------
-
-
-@pytest.fixture
-def drawn(monkeypatch):
-    """What animate is given and draws: each call's runs and rotations, and the energies of its energy panel."""
-    seen = {"calls": [], "energies": []}
-    animate, changes = steplab.animate.animate, steplab.animate.energy_changes
-
-    def animate_(runs, model, out, **kw):
-        seen["calls"].append((runs, kw.get("rotations")))
-        return animate(runs, model, out, **kw)
-
-    def changes_(energies):
-        seen["energies"].append(energies)
-        return changes(energies)
-
-    monkeypatch.setattr(steplab.animate, "animate", animate_)
-    monkeypatch.setattr(steplab.animate, "energy_changes", changes_)
-    return seen
 
 
 def animated(capsys, tmp_path, scene, t_end, *argv):
