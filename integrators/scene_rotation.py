@@ -133,11 +133,18 @@ def run_rotation(scene, trajectory, step=None, rotation: str | None = None,
     if step is not None and hasattr(step, "rotation_trajectory"):
         return step.rotation_trajectory(trajectory)
     if step is not None and hasattr(step, "rotation_at"):
-        orientations, angular_velocities = step.rotation_at(
-            np.rint((trajectory.t - trajectory.t[0]) / trajectory.dt).astype(int))
-        return RotationTrajectory(trajectory.t, orientations[:, bodies.index], angular_velocities[:, bodies.index],
-                                  step.world.rigid.rotation, bodies)
+        return solved_rotation(bodies, trajectory, step)
     return rotate_scene(scene, trajectory, rotation, backend=backend)
+
+
+def solved_rotation(bodies: RigidBodies, trajectory, step) -> RotationTrajectory:
+    """``bodies`` at ``trajectory``'s saved times as the collision ``step`` turned them with their
+    contacts (the orientations it recorded, :meth:`rotation_at`: the contact solver's, the event
+    loop's spinning spheres')."""
+    orientations, angular_velocities = step.rotation_at(np.rint((trajectory.t - trajectory.t[0]) / trajectory.dt)
+                                                        .astype(int))
+    return RotationTrajectory(trajectory.t, orientations[:, bodies.index], angular_velocities[:, bodies.index],
+                              step.world.rigid.rotation, bodies)
 
 
 def keeping(make_step, kept: list, save_every: int = 1):

@@ -30,6 +30,7 @@ from typing import NamedTuple
 
 import numpy as np
 from steplab.integrators import INTEGRATORS, Stepper, get_integrator, simulate
+from steplab.integrators.scene_rotation import keeping, solved_rotation
 from steplab.integrators.simulate import DivergenceError
 from steplab.physics.broadphase import find_pairs
 from steplab.physics.collision import ImpactCapError, Sphere, collide
@@ -76,13 +77,15 @@ class NoCollisionStepError(NoFixedStepError):
 class CollisionProblem(NamedTuple):
     """The run a step is recommended for: ``model`` from ``y0`` (2, N, 3) over [``t_start``,
     ``t_end``] (s), with the collisions of ``world`` (a physics.collision.CollisionWorld, with
-    the detector to use)."""
+    the detector to use); ``rigid_bodies`` (physics.rigid_body.RigidBodies), the scene's rotating
+    bodies, whose spin 1/2 omega . I omega counts in the energy where the collisions turn them."""
 
     model: object
     y0: np.ndarray
     t_start: float
     t_end: float
     world: object
+    rigid_bodies: object = None
 
 
 def recommend_with_collisions(problem: CollisionProblem, tol: float, *, scene_dt: float, dt_max: float | None = None,
@@ -160,7 +163,7 @@ def recommend_with_collisions(problem: CollisionProblem, tol: float, *, scene_dt
         """One candidate run: its errors against the reference, or why it has none."""
         point = {"integrator": method, "dt": span / n, "steps": n}
         try:
-            run = _run(problem, method, n)
+            run, energies = _measured_run(problem, method, n)
         except (DivergenceError, ImpactCapError) as err:  # a coarse dt may crowd a step past the cap
             return point | {"failed": str(err)}
         stride = ref_steps // n
@@ -169,7 +172,7 @@ def recommend_with_collisions(problem: CollisionProblem, tol: float, *, scene_dt
         point["impacts"] = run.collisions.count("impact")
         point["passes"] = regime == "trajectories" and point["error"] <= tol
         if regime == "statistics" or point["passes"]:  # what the statistics need, or the answer shows
-            point["energy_error"] = float(np.max(np.abs(_energies(model, run.y) - ref_energy[::stride]))) / ref_scale
+            point["energy_error"] = float(np.max(np.abs(energies - ref_energy[::stride]))) / ref_scale
             point["penetration"] = largest_penetration(world, radii, run.y[:, 0])
         if regime == "statistics":
             point["passes"] = all(v <= 1.0 for v in _statistics_ratios(point, reference, tol))
@@ -218,30 +221,42 @@ def climb(measure, coarsest: int, finest: int, tried: list) -> list[dict]:
     return []
 
 
-def _run(problem: CollisionProblem, method, n):
-    """The problem's run with ``method`` in ``n`` steps, with its collisions."""
+def _run(problem: CollisionProblem, method, n, kept: list | None = None):
+    """The problem's run with ``method`` in ``n`` steps, with its collisions (their step appended to ``kept``)."""
     span = problem.t_end - problem.t_start
-    return simulate(problem.model, method, problem.y0, problem.t_start, dt=span / n, n_steps=n,
-                    collisions=problem.world)
+    stepper = problem.world.stepper if kept is None else keeping(problem.world.stepper, kept)
+    return simulate(problem.model, method, problem.y0, problem.t_start, dt=span / n, n_steps=n, stepper=stepper)
+
+
+def _measured_run(problem: CollisionProblem, method, n) -> tuple:
+    """:func:`_run` and its mechanical energy at every step (K,), J: the rotating bodies' spin included
+    where the collision step turned them (the contact solver, the event loop's spinning spheres), as
+    ``steplab run`` reports it."""
+    kept = []
+    run = _run(problem, method, n, kept)
+    rotation = None
+    if problem.rigid_bodies is not None and hasattr(kept[0], "rotation_at"):
+        rotation = solved_rotation(problem.rigid_bodies, run, kept[0])
+    return run, np.array([float(problem.model.energy(y, rotation.at(k) if rotation is not None else None))
+                          for k, y in enumerate(run.y)])
 
 
 def _reference(problem: CollisionProblem, tol, n, method: str) -> dict:
     """Reference runs of ``method`` at n, 2n, ... steps until two agree to tol / REFERENCE_MARGIN (REFERENCE_RUNS
     at most, none beyond REFERENCE_MAX_STEPS)."""
-    model, span = problem.model, problem.t_end - problem.t_start
-    runs = [_run(problem, method, n), _run(problem, method, 2 * n)]
-    differences = [_difference(runs[-2], runs[-1])]
+    span = problem.t_end - problem.t_start
+    runs = [_measured_run(problem, method, n), _measured_run(problem, method, 2 * n)]
+    differences = [_difference(runs[-2][0], runs[-1][0])]
     while len(runs) < REFERENCE_RUNS and differences[-1] > tol / REFERENCE_MARGIN and 4 * n <= REFERENCE_MAX_STEPS:
         n *= 2
-        runs.append(_run(problem, method, 2 * n))
-        differences.append(_difference(runs[-2], runs[-1]))
-    fine, coarse = runs[-1], runs[-2]
-    energy_fine = _energies(model, fine.y)
+        runs.append(_measured_run(problem, method, 2 * n))
+        differences.append(_difference(runs[-2][0], runs[-1][0]))
+    (fine, energy_fine), (coarse, energy_coarse) = runs[-1], runs[-2]
     scale = max(float(np.max(np.abs(energy_fine))), np.finfo(float).tiny)
     return {"integrator": method, "dt": span / fine.steps, "steps": fine.steps,
             "impacts": fine.collisions.count("impact"), "impacts_at_2dt": coarse.collisions.count("impact"),
             "convergence": differences[-1], "converged": differences[-1] <= tol,
-            "energy_convergence": float(np.max(np.abs(energy_fine[::2] - _energies(model, coarse.y)))) / scale,
+            "energy_convergence": float(np.max(np.abs(energy_fine[::2] - energy_coarse))) / scale,
             "run": fine, "energies": energy_fine}
 
 
@@ -264,10 +279,6 @@ def _reference_method() -> str:
 def _difference(coarse, fine) -> float:
     """Largest position difference of two runs at the coarse run's step times, m."""
     return float(np.max(np.linalg.norm(coarse.y[:, 0] - fine.y[::2, 0], axis=-1)))
-
-
-def _energies(model, ys) -> np.ndarray:
-    return np.array([float(model.energy(y)) for y in ys])
 
 
 def _statistics_ratios(point, reference, tol) -> tuple[float, float, float]:

@@ -109,3 +109,26 @@ def test_largest_penetration_matches_all_pairs():
         d = np.linalg.norm(p[:, None] - p[None], axis=-1) + np.diag(np.full(12, np.inf))
         deepest = max(deepest, np.max(radii[:, None] + radii[None] - d), np.max(radii - (p[:, 2] + 0.9)))
     assert largest_penetration(CollisionWorld(shapes=(floor,)), radii, q) == pytest.approx(deepest, abs=1e-12)
+
+
+def test_the_energy_compared_counts_the_spin_the_contact_solver_gives(capsys):
+    """A sphere launched sliding on a floor with friction rolls at 5/7 of its speed: its energy then
+    is 1/2 m v^2 + 1/2 I omega^2. recommend's energy over time is the one steplab run reports (the
+    translation alone read 2/7 of the kinetic energy lower once it rolls)."""
+    from steplab.physics.scene import load_scene
+    from steplab.studies.recommend_collisions import CollisionProblem, _measured_run
+
+    scene = load_scene("rolling-sphere")
+    steps = 30
+    t_end = scene.t_start + steps * scene.dt
+    problem = CollisionProblem(scene.model, scene.y0, scene.t_start, t_end, scene.collisions, scene.rigid_bodies)
+    run, energies = _measured_run(problem, "semi-implicit-euler", steps)
+    assert main(["run", "rolling-sphere", "--steps", str(steps), "--json"]) == 0
+    summary = json.loads(capsys.readouterr().out)
+    assert len(energies) == steps + 1
+    for value, key in ((energies[0], "energy_start"), (energies[-1], "energy_end")):
+        assert value == pytest.approx(summary[key], rel=1e-12, abs=0)
+    # rolling (omega r = v) a solid sphere's spin, 1/2 (2/5 m r^2) omega^2, is 2/5 of 1/2 m v^2
+    translation = float(scene.model.energy(run.y[-1]))
+    kinetic = 0.5 * scene.model.masses[0] * float(np.sum(run.y[-1, 1, 0] ** 2))
+    assert energies[-1] - translation == pytest.approx(0.4 * kinetic, rel=0.02)

@@ -97,7 +97,8 @@ def _with_collisions(args, scene, t_end, world, integrators, rotation) -> int:
     from .run import plural
 
     try:
-        r = recommend_with_collisions(CollisionProblem(scene.model, scene.y0, scene.t_start, t_end, world), args.tol,
+        problem = CollisionProblem(scene.model, scene.y0, scene.t_start, t_end, world, scene.rigid_bodies)
+        r = recommend_with_collisions(problem, args.tol,
                                       scene_dt=scene.dt, dt_max=args.dt_max, integrators=integrators,
                                       progress=not args.json and sys.stderr.isatty())
     except NoCollisionStepError as err:
