@@ -6,11 +6,15 @@ collisions; the others run on NumPy and JAX, and the two final states are compar
 The backends do the same arithmetic in another order, so they differ by round-off each
 step, and a chaotic scene amplifies round-off exponentially: the cloth's 1,500 steps take
 a difference of 1e-15 m to centimetres. The yardstick beside each difference is how far
-NumPy alone moves from a start perturbed by PERTURBATION (relative): the guarantee is that
-the backends differ by no more than ten times that, or by 1e-12 where neither grows.
+NumPy alone moves from a start perturbed by PERTURBATION (relative; the positions, and the
+rotating bodies' angular velocities): the guarantee is that the backends differ by no more
+than ten times that, or by 1e-12 where neither grows, in positions, velocities and, where the
+scene has rotating bodies, their orientations and angular velocities.
 """
 
 from __future__ import annotations
+
+import dataclasses
 
 import numpy as np
 from steplab.integrators import simulate
@@ -58,8 +62,8 @@ def task(params: dict, name: str) -> list[dict]:
         stepper = keeping(world.stepper, kept, SAVE_EVERY) if world is not None else scene_stepper(scene, kept)
         traj = simulate(scene.model, scene.integrator, scene.y0, scene.t_start, t_end, scene.dt,
                         backend=backend, save_every=SAVE_EVERY, stepper=stepper)
-        finals[backend] = traj.y[-1]
         rotation = run_rotation(scene, traj, kept[0] if kept else None, backend=backend)
+        finals[backend] = _final(traj, rotation)
         # springs at body-frame points: the end's energy with their lever arms where the bodies turned them
         end_model = kept[0].final_model() if kept and hasattr(kept[0], "final_model") else scene.model
         rows.append({
@@ -74,17 +78,52 @@ def task(params: dict, name: str) -> list[dict]:
         })
     differences = {"backend_difference": None}
     if len(finals) > 1:
-        rng = np.random.default_rng(SEED)
-        y0 = scene.y0.copy()
-        y0[0] *= 1 + PERTURBATION * rng.standard_normal(y0[0].shape)
-        finals["perturbed"] = simulate(scene.model, scene.integrator, y0, scene.t_start, t_end, scene.dt,
-                                       save_every=SAVE_EVERY, stepper=scene_stepper(scene)).y[-1]
-        # (position, velocity) differences from NumPy's final state: JAX's, and the perturbed start's
-        jax, perturbed = (np.abs(finals["numpy"] - finals[other]).max(axis=(1, 2)) for other in ("jax", "perturbed"))
-        differences = {"backend_difference": float(max(jax)), "position_difference": float(jax[0]),
-                       "velocity_difference": float(jax[1]), "perturbed_position_difference": float(perturbed[0]),
-                       "perturbed_velocity_difference": float(perturbed[1])}
+        perturbed = _perturbed(scene)
+        kept = []
+        traj = simulate(scene.model, scene.integrator, perturbed.y0, scene.t_start, t_end, scene.dt,
+                        save_every=SAVE_EVERY, stepper=scene_stepper(perturbed, kept))
+        finals["perturbed"] = _final(traj, run_rotation(perturbed, traj, kept[0] if kept else None))
+        # the differences from NumPy's final state: JAX's, and the perturbed start's
+        jax, moved = (_differences(finals["numpy"], finals[other]) for other in ("jax", "perturbed"))
+        differences = {"backend_difference": max(jax["position"], jax["velocity"])}
+        differences |= {f"{kind}_difference": value for kind, value in jax.items()}
+        differences |= {f"perturbed_{kind}_difference": value for kind, value in moved.items()}
     return [row | differences for row in rows]
+
+
+def _perturbed(scene):
+    """``scene`` with its initial positions, and its rotating bodies' angular velocities, each moved by
+    PERTURBATION (relative) times a standard normal draw (SEED)."""
+    rng = np.random.default_rng(SEED)
+    y0 = scene.y0.copy()
+    y0[0] *= 1 + PERTURBATION * rng.standard_normal(y0[0].shape)
+    bodies = scene.rigid_bodies
+    if bodies is not None:
+        omega = np.asarray(bodies.angular_velocities, float)
+        bodies = dataclasses.replace(bodies, angular_velocities=omega * (1 + PERTURBATION * rng.standard_normal(
+            omega.shape)))
+    return dataclasses.replace(scene, y0=y0, rigid_bodies=bodies)
+
+
+def _final(traj, rotation) -> tuple[np.ndarray, ...]:
+    """A run's final (positions, velocities, orientations, angular velocities); the last two (0, 4) and
+    (0, 3) without rotating bodies."""
+    if rotation is None:
+        return (*traj.y[-1], np.zeros((0, 4)), np.zeros((0, 3)))
+    return (*traj.y[-1], rotation.orientations[-1], rotation.angular_velocities[-1])
+
+
+def _differences(a, b) -> dict:
+    """The largest differences of two final states (:func:`_final`): positions (m), velocities (m/s),
+    orientations (of the unit quaternions, q and -q being one orientation) and angular velocities
+    (rad/s); the last two None without rotating bodies."""
+    (qa, va, oa, wa), (qb, vb, ob, wb) = a, b
+    out = {"position": float(np.max(np.abs(qa - qb))), "velocity": float(np.max(np.abs(va - vb)))}
+    if not len(oa):
+        return out | {"orientation": None, "angular_velocity": None}
+    sign = np.where(np.sum(oa * ob, axis=-1, keepdims=True) < 0, -1.0, 1.0)
+    return out | {"orientation": float(np.max(np.abs(oa - sign * ob))),
+                  "angular_velocity": float(np.max(np.abs(wa - wb)))}
 
 
 def reduce(params: dict, results: list) -> dict:
