@@ -177,11 +177,6 @@ def simulate(model, integrator, y0, t_start: float, t_end: float | None = None, 
         if stepper is not None:
             raise ValueError("give collisions or stepper, not both")
         stepper = collisions.stepper
-    if stepper is None and attached_forces(model):
-        # their lever arms turn with the bodies: only the attached step moves them; the plain step would freeze them
-        raise ValueError("simulate: this model has springs or dampers at body-frame points (offsets), which turn "
-                         "with the bodies: pass stepper=attached_stepper(scene.rigid_bodies, rotation) "
-                         "(steplab.integrators.attached), as steplab run does")
     dtype = np.dtype(dtype or model.dtype)
     n = _requested_steps(t_start, t_end, n_steps, dt, dtype)
     if n > max_steps:
@@ -203,6 +198,12 @@ def simulate(model, integrator, y0, t_start: float, t_end: float | None = None, 
                          f"|component| {largest:g}; states beyond {limit:g} count as diverged)")
     # the step the loop calls, built once with its context (a collision world's log, ...)
     step = None if stepper is None else stepper(_on_backend(model, backend, dtype), integrator)
+    if step is None and attached_forces(model):
+        # their lever arms turn with the bodies: only the attached step (or the contact solver) moves them; the
+        # integrator's own step, or the detector "none"'s, would freeze them
+        raise ValueError("simulate: this model has springs or dampers at body-frame points (offsets), which turn "
+                         "with the bodies: pass stepper=attached_stepper(scene.rigid_bodies, rotation) "
+                         "(steplab.integrators.attached), as steplab run does")
 
     if isinstance(integrator, Solver):
         backend = integrator.backend

@@ -149,5 +149,5 @@ def test_the_default_view_is_the_plane_of_the_swing(capsys, tmp_path, drawn):
 def test_with_collisions_it_is_one_line(capsys, tmp_path):
     err = refused(capsys, ["animate", "spring-pendulum", "--detector", "overlap", "--t-end", T_END,
                            "--out", str(tmp_path / "a.gif")])
-    assert "do not run with collisions yet; use --detector none" in err
+    assert "not the event loop; use [collisions] method = \"solver\", or --detector none" in err
     assert not list(tmp_path.iterdir())

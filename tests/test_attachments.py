@@ -282,15 +282,17 @@ def test_steplab_run_couples_the_rotation_and_refuses_what_it_cannot_couple(caps
     record = json.loads(capsys.readouterr().out)
     assert record["rotation"].startswith("dlm") and record["rotating_bodies"] == ["cube"]
     assert abs(record["energy_relative_change"]) < 1e-6  # the potential at the corner, both kinetic energies
-    for argv, message in ((["--detector", "swept"], "do not run with collisions yet; use --detector none"),
+    for argv, message in ((["--detector", "swept"], "not the event loop; use [collisions] method = \"solver\", or "
+                                                    "--detector none"),
                           (["--integrator", "xpbd"], "need a fixed-step integrator that evaluates their forces"),
                           (["--integrator", "scipy-dop853"], "not 'scipy-dop853' (use semi-implicit-euler")):
         assert main(["run", "spring-pendulum", "--t-end", "0.01", *argv]) == 2
         err = capsys.readouterr().err
         assert message in err and err.count("\n") == 1
-    assert main(["recommend", "spring-pendulum", "--tol", "1e-3", "--detector", "swept"]) == 2  # as run refuses it
+    assert main(["recommend", "spring-pendulum", "--tol", "1e-3", "--detector", "swept"]) == 2  # not measured so
     err = capsys.readouterr().err
-    assert "do not run with collisions yet; use --detector none" in err and err.count("\n") == 1
+    assert "measures springs and dampers at body-frame points (offsets) without collisions only; use --detector " \
+           "none" in err and err.count("\n") == 1
 
 
 def test_the_free_rotation_beside_the_translation_refuses_an_attached_scene():

@@ -23,6 +23,23 @@ turns each orientation by h omega, both as the scene's rotation method does them
 that composes with semi-implicit Euler (:data:`ROTATION_STAGES`); the others (explicit Euler, the
 splittings and implicit rules of order 2 and more) have no place between the solver's velocity and
 position stages and are refused in one line.
+
+Springs and dampers at body-frame points (:mod:`steplab.physics.attachments`, a box hung by a
+spring at its corner): their force on a centre depends on the orientations, through the lever
+arms R(q) r, and they turn the bodies with the torque (R r) x F. With them, every substep
+(the first's included, whose acceleration the step's bounds use) rebuilds the model at the
+orientations and angular velocities now (:func:`.attachments.model_at`) for the centres'
+acceleration, and kicks each body's world angular velocity by h I_w^-1 tau, I_w^-1 = R diag(1/I1,
+1/I2, 1/I3) R^T, just before the kernel's substep: the torque is explicit, from the state at the
+substep's start, and the kernel's velocity stage then adds the gyroscopic term to the kicked
+omega, Box3D's order and that of ``implicit-gyroscopic`` (torque, then the gyroscopic term), so
+that with one substep and no contact the step is :mod:`steplab.integrators.attached`'s coupled step
+of semi-implicit Euler with that method. The methods that take the torque and the gyroscopic
+term both at the substep's start (``exponential-map``, ``first-order-quaternion``) or rescale
+first (``momentum-rescaled``) differ from their coupled step by h^2 I^-1 (d(omega x I omega) /
+d omega) I^-1 tau a step, first order as both are (nothing for a body of equal moments). The
+bounds grow each body's turning speed by what its torque can add in the step, |omega| + dt |alpha|.
+A pinned body neither moves nor turns (zero inverse inertia: no kick).
 """
 
 from __future__ import annotations
@@ -33,6 +50,7 @@ import importlib
 import numba
 import numpy as np
 
+from .. import attachments
 from .. import quaternion as quat
 from . import rigid_solver as rs
 from .chords import turning_bounds
@@ -186,7 +204,9 @@ class RigidSolverStep:
         self.shapes = check_shapes(self.narrow_phase.RigidShapes(rigid.kind, rigid.radius, rigid.half))
         self.bounding = np.asarray(self.narrow_phase.bounding_radius(self.shapes), dtype=float)
         self.inverse_masses = np.ascontiguousarray(self.model.inverse_masses, dtype=float)
-        field = self.model.constant_acceleration
+        # springs and dampers at body-frame points: forces and torques at each substep's orientations
+        self.attached = bool(attachments.attached_forces(self.model))
+        field = None if self.attached else self.model.constant_acceleration
         self.field = None if field is None else np.array(field, dtype=float, order="C")  # writable: one kernel type
         self.materials = Materials.of(world, n)
         self.margin = SPECULATIVE_OF_RADIUS * float(np.median(self.bounding)) if n else 0.0
@@ -222,6 +242,8 @@ class RigidSolverStep:
 
     def _advance(self, t, y, dt, carry):
         state = np.array(y, dtype=float, order="C")  # (2, N, 3): q and v, stepped in place and returned
+        if self.attached:
+            return self._advance_attached(t, state, dt, carry)
         q0, v0 = state[0], state[1]
         a = self.field if self.field is not None else np.asarray(self.model.acceleration(t, q0, v0), dtype=float)
         points = self.contact_points(t, y, dt, a)
@@ -236,6 +258,44 @@ class RigidSolverStep:
                         self.model.acceleration(t + k * sub.h, bodies.q, bodies.v), dtype=float))
                 rs.substep(bodies, contacts, sub, layout)
             residual = rs.finish(bodies, contacts, sub, layout)
+        return self._end_step(t, dt, state, carry, contacts, bodies, residual)
+
+    def _advance_attached(self, t, state, dt, carry):
+        """:meth:`_advance` of a model with springs or dampers at body-frame points (see the module): at
+        each substep the acceleration and the torque's kick h I_w^-1 tau at the orientations now."""
+        q0, v0 = state[0], state[1]
+        a, alpha = self.attached_rates(t, q0, v0)
+        points = self.contact_points(t, state, dt, a, alpha)
+        bodies, contacts, sub, layout = self.columns(q0, v0, a, points, dt)
+        for k in range(self.world.solver.substeps):
+            if k:
+                a, alpha = self.attached_rates(t + k * sub.h, bodies.q, bodies.v)
+                bodies = bodies._replace(accel=a)
+            # the torque's kick, in place (self.omega), before the velocity stage adds the gyroscopic term
+            np.add(bodies.omega, sub.h * alpha, out=bodies.omega)
+            rs.substep(bodies, contacts, sub, layout)
+        residual = rs.finish(bodies, contacts, sub, layout)
+        return self._end_step(t, dt, state, carry, contacts, bodies, residual)
+
+    def attached_rates(self, t, x, v):
+        """The centres' acceleration (N, 3) and the bodies' angular acceleration from the attached
+        forces' torque, I_w^-1 tau (N, 3, world frame; zero for a pinned body or a point mass), with
+        the lever arms at the orientations and angular velocities now."""
+        model = attachments.model_at(self.model, self.orientation, self.omega)
+        torque = attachments.torques(model, x, v, self.orientation)
+        alpha = quat.rotate(np, self.orientation, quat.rotate_inverse(np, self.orientation, torque)
+                            * self.inverse_principal)
+        return np.ascontiguousarray(model.acceleration(t, x, v), dtype=float), alpha
+
+    def final_model(self):
+        """The model with its lever arms at the orientations now (after a run, the last step's): the
+        energy at the end counts its springs there. The model itself without attached forces."""
+        if not self.attached:
+            return self.model
+        return attachments.model_at(self.model, self.orientation, self.omega)
+
+    def _end_step(self, t, dt, state, carry, contacts, bodies, residual):
+        """The log, the checks and the rotation's record at the end of a step; returns ``(state, carry)``."""
         self._conclude(t, dt, contacts, residual)
         if not (np.isfinite(state).all() and np.isfinite(bodies.omega).all()):
             raise FloatingPointError(non_finite(self.model.names, t, self.log.largest_residual, state[0], state[1],
@@ -252,14 +312,19 @@ class RigidSolverStep:
 
     # --- stages --------------------------------------------------------------------------
 
-    def contact_points(self, t, y, dt, a):
-        """Broadphase over the swept bounds, then the narrow phase's manifolds, sorted by (a, b, feature)."""
+    def contact_points(self, t, y, dt, a, alpha=None):
+        """Broadphase over the swept bounds, then the narrow phase's manifolds, sorted by (a, b, feature);
+        ``alpha`` (N, 3), the angular acceleration of attached forces' torques (None: none)."""
         q0 = np.ascontiguousarray(y[0], dtype=float)
         y_forces, _ = self.integrator.step(ConstantField(a), t, np.asarray(y, dtype=float), dt, None)
         q1 = np.ascontiguousarray(y_forces[0], dtype=float)
+        turning = np.ascontiguousarray(self.omega)
+        if alpha is not None:  # a torque spins a body up within the step: |omega| + dt |alpha| (its length is read)
+            turning = np.zeros_like(turning)
+            turning[:, 0] = np.linalg.norm(self.omega, axis=1) + dt * np.linalg.norm(alpha, axis=1)
         # the reach grows by what the rotation can move a point; the margin: every point up to as far
         # apart as the two bodies can close in the step, speculative ones included
-        reach, margin = turning_bounds(q0, q1, np.ascontiguousarray(self.omega), self.bounding,
+        reach, margin = turning_bounds(q0, q1, turning, self.bounding,
                                        (float(dt), MAX_ROTATION_REACH, float(self.margin)))
         swept = SweptSpheres.of(q0, q1, reach, self.inverse_masses, self.log.removed, self.margin)
         pairs = swept.pair_rows(self.world.broadphase, self.world.solver.threads)

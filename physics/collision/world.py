@@ -145,6 +145,17 @@ class CollisionWorld:
     def with_detector(self, detector: str) -> CollisionWorld:
         return dataclasses.replace(self, detector=detector)
 
+    def check_attachments(self, model) -> None:
+        """Springs or dampers at body-frame points (``offsets``) run with collisions in the contact solver
+        on rigid bodies only (method "solver" with ``rigid``), which turns their lever arms at every
+        substep; the event loop and the sphere solver would keep them where they started: ValueError."""
+        from ..attachments import attached_forces
+
+        if attached_forces(model) and not (self.method == "solver" and self.rigid is not None):
+            raise ValueError("springs and dampers at body-frame points (offsets) run with collisions in the contact "
+                             "solver on rigid bodies only, not the event loop; use [collisions] method = \"solver\", "
+                             "or --detector none")
+
     def stepper(self, model, integrator):
         """The physics step of one run, ``step(t, y, dt, carry)``, holding its collision log.
 
@@ -155,6 +166,7 @@ class CollisionWorld:
         self.check_bodies(model.n_bodies)
         if self.detector == "none":
             return None
+        self.check_attachments(model)
         if not hasattr(integrator, "step"):  # a solver: it has no steps to put collisions between
             raise ValueError(f"collisions need a fixed-step integrator, not the {integrator.kind} solver "
                              f"'{integrator.name}' (use the detector 'none')")

@@ -66,7 +66,8 @@ def command(args) -> int:
             panels = [(n, args.detector) for n in names]
     steps = run_steps(scene, dt, t_end, MAX_STEPS, "steplab animate")
     # every panel's refusals before any run: its integrator, springs at body-frame points with collisions
-    # (refused as run refuses them), an integrator its step refuses (the coupled step, the contact solver)
+    # other than the contact solver's (refused as run refuses them), an integrator its step refuses (the
+    # coupled step, the contact solver)
     methods = [scene_method(scene, name) for name, _ in panels]
     rotation = get_rotation(scene.rotation or DEFAULT_ROTATION)  # run's, without --rotation
     worlds = [collision_world(scene, detector, "numpy") for _, detector in panels]
@@ -75,18 +76,18 @@ def command(args) -> int:
               for world in worlds]
     attached = [_attached(scene, world) for world in worlds]
     for method, world, coupled in zip(methods, worlds, attached):  # a method the panel's step refuses
-        if coupled:  # their lever arms turn with the bodies: the rotation steps with the translation
-            attached_stepper(scene.rigid_bodies, rotation)(scene.model, method)
-        elif world is not None:  # an adaptive one, or the contact solver's other than semi-implicit Euler
+        if world is not None:  # an adaptive one, or the contact solver's other than semi-implicit Euler
             world.stepper(scene.model, method)
+        elif coupled:  # their lever arms turn with the bodies: the rotation steps with the translation
+            attached_stepper(scene.rigid_bodies, rotation)(scene.model, method)
     save_every = max(1, steps // 300)
     runs, rotations = [], []
     for method, world, coupled, (_, detector) in zip(methods, worlds, attached, panels):
         kept = []  # the step the run built: the attached one or the contact solver's keeps the rotation
-        if coupled:
-            stepper = attached_stepper(scene.rigid_bodies, rotation, kept)
+        if world is not None:  # the contact solver turns attached forces' lever arms itself (run's _attached)
+            stepper = keeping(world.stepper, kept, save_every)
         else:
-            stepper = None if world is None else keeping(world.stepper, kept, save_every)
+            stepper = attached_stepper(scene.rigid_bodies, rotation, kept) if coupled else None
         traj = simulate(scene.model, method, scene.y0, scene.t_start, t_end, dt, save_every=save_every,
                         stepper=stepper)
         # the bodies as the attached step or the contact solver turned them, else free beside the translation

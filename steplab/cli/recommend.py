@@ -36,6 +36,7 @@ def add_parser(sub, name: str) -> None:
 
 
 def command(args) -> int:
+    from steplab.physics.attachments import attached_forces
     from steplab.physics.scene import load_scene
     from steplab.studies.problems import problem_of
     from steplab.studies.recommend import recommend
@@ -52,6 +53,9 @@ def command(args) -> int:
 
         integrators = check_integrators(args.integrators)  # a list of names, none empty (comma_list)
     world = collision_world(scene, args.detector, "numpy")
+    if world is not None and attached_forces(scene.model):  # run steps them in the contact solver: not measured so
+        raise ValueError("recommend measures springs and dampers at body-frame points (offsets) without "
+                         "collisions only; use --detector none")
     if _attached(scene, world):  # the rotation steps with the translation: measured together (not with collisions)
         return _with_attachments(args, scene, t_end, integrators, rotation)
     if world is not None:

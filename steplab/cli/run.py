@@ -76,12 +76,15 @@ def command(args) -> int:
     kept = []  # the run's collision step, whose log tells what happened before a stop (or its attached step)
     energy_start = float(scene.model.energy(scene.y0, scene.rigid_bodies))  # with the spin's 1/2 omega . I omega
     settings = RunSettings(scene, integrator, dt, world, args.precision, energy_start, run_warnings)
-    stepper = None if world is None else keeping(world.stepper, kept, args.save_every)
-    attached = _attached(scene, world)
-    if attached:  # forces at body-frame points: the rotation steps with the translation
+    attached = _attached(scene, world)  # forces at body-frame points: the rotation steps with the translation
+    if world is not None:  # the collision step (the contact solver turns attached forces' lever arms itself)
+        stepper = keeping(world.stepper, kept, args.save_every)
+    elif attached:  # without collisions: the coupled step
         from steplab.integrators.attached import attached_stepper
 
         stepper = attached_stepper(scene.rigid_bodies, rotation_method, kept)
+    else:
+        stepper = None
     try:
         traj = simulate(scene.model, integrator, scene.y0, scene.t_start, dt=dt, **end, backend=args.backend,
                         dtype=np.dtype(args.precision), save_every=args.save_every,
@@ -164,14 +167,20 @@ def _importable(name: str) -> str:
 
 
 def _attached(scene, world) -> bool:
-    """Whether ``scene`` has springs or dampers at body-frame points (refused with collisions, for now)."""
+    """Whether ``scene`` has springs or dampers at body-frame points (offsets).
+
+    Without collisions (``world`` None) the coupled step runs them (``integrators.attached``); with
+    collisions only the contact solver on rigid bodies does (world.method "solver" with
+    ``world.rigid``: :mod:`steplab.physics.collision.rigid_solver_step` turns their lever arms at each
+    substep), and the caller steps with ``world.stepper``. The event loop and the sphere solver would
+    keep the lever arms where they started: refused in one line.
+    """
     from steplab.physics.attachments import attached_forces
 
     if not attached_forces(scene.model):
         return False
     if world is not None:
-        raise ValueError("springs and dampers at body-frame points (offsets) do not run with collisions yet; "
-                         "use --detector none")
+        world.check_attachments(scene.model)
     return True
 
 
