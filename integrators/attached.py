@@ -252,16 +252,28 @@ class _HeldTorque:
         return attachments.torques(model, self.x, self.v, orientations)[self.coupling.bodies.index]
 
 
-def scene_stepper(scene, kept: list | None = None):
-    """The step :func:`.simulate` needs for ``scene`` (its ``stepper`` argument): the attached step, with the
-    scene's rotation method, where it has springs or dampers at body-frame points (their lever arms turn with
-    the bodies), else None (the integrator's own step)."""
+def scene_stepper(scene, kept: list | None = None, world=None, rotation=None, save_every: int = 1):
+    """The step :func:`.simulate` needs for a run of ``scene`` (its ``stepper`` argument), appended to
+    ``kept`` when it is built, so that the caller reads the rotation it turned after the run
+    (:func:`.scene_rotation.run_rotation`).
+
+    With collisions (``world``, a physics.collision.CollisionWorld) the world's step, recording the
+    rotation at every ``save_every``-th step (the contact solver turns the lever arms of springs at
+    body-frame points itself; the other collision methods refuse them, one line). Without, the
+    attached step with ``rotation`` (default the scene's rotation method) where springs or dampers
+    act at body-frame points (their lever arms turn with the bodies); else None (the integrator's
+    own step).
+    """
     from .rotation import DEFAULT_ROTATION
     from .rotation_registry import get_rotation
+    from .scene_rotation import keeping
 
+    if world is not None:
+        world.check_attachments(scene.model)
+        return keeping(world.stepper, [] if kept is None else kept, save_every)
     if not attachments.attached_forces(scene.model):
         return None
-    return attached_stepper(scene.rigid_bodies, get_rotation(scene.rotation or DEFAULT_ROTATION), kept)
+    return attached_stepper(scene.rigid_bodies, rotation or get_rotation(scene.rotation or DEFAULT_ROTATION), kept)
 
 
 def attached_stepper(bodies: RigidBodies, rotation, kept: list | None = None):

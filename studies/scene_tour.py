@@ -19,7 +19,7 @@ import dataclasses
 import numpy as np
 from steplab.integrators import simulate
 from steplab.integrators.attached import scene_stepper
-from steplab.integrators.scene_rotation import keeping, run_rotation
+from steplab.integrators.scene_rotation import run_rotation
 from steplab.physics.scene import builtin_scenes, load_scene
 
 from .runner import Study, run_tasks
@@ -59,7 +59,7 @@ def task(params: dict, name: str) -> list[dict]:
     finals, rows = {}, []
     for backend in backends:
         kept = []  # the step the run built: the collision step or the attached one, which turned the bodies
-        stepper = keeping(world.stepper, kept, SAVE_EVERY) if world is not None else scene_stepper(scene, kept)
+        stepper = scene_stepper(scene, kept, world, save_every=SAVE_EVERY)
         traj = simulate(scene.model, scene.integrator, scene.y0, scene.t_start, t_end, scene.dt,
                         backend=backend, save_every=SAVE_EVERY, stepper=stepper)
         rotation = run_rotation(scene, traj, kept[0] if kept else None, backend=backend)

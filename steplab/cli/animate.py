@@ -42,8 +42,8 @@ def command(args) -> int:
 
     from steplab.animate import animate, check_format, check_fps
     from steplab.integrators import DEFAULT_ROTATION, get_rotation
-    from steplab.integrators.attached import attached_stepper
-    from steplab.integrators.scene_rotation import keeping, run_rotation
+    from steplab.integrators.attached import attached_stepper, scene_stepper
+    from steplab.integrators.scene_rotation import run_rotation
     from steplab.integrators.simulate import simulate
     from steplab.physics.scene import load_scene
 
@@ -84,12 +84,8 @@ def command(args) -> int:
     runs, rotations = [], []
     for method, world, coupled, (_, detector) in zip(methods, worlds, attached, panels):
         kept = []  # the step the run built: the attached one or the contact solver's keeps the rotation
-        if world is not None:  # the contact solver turns attached forces' lever arms itself (run's _attached)
-            stepper = keeping(world.stepper, kept, save_every)
-        else:
-            stepper = attached_stepper(scene.rigid_bodies, rotation, kept) if coupled else None
         traj = simulate(scene.model, method, scene.y0, scene.t_start, t_end, dt, save_every=save_every,
-                        stepper=stepper)
+                        stepper=scene_stepper(scene, kept, world, rotation, save_every))
         # the bodies as the attached step or the contact solver turned them, else free beside the translation
         rotations.append(run_rotation(scene, traj, kept[0] if kept else None, rotation))
         label = f"{scene.name}: {method.name}, dt = {dt:g} s"

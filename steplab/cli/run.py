@@ -51,8 +51,9 @@ def add_parser(sub, name: str) -> None:
 def command(args) -> int:
     import numpy as np
 
+    from steplab.integrators.attached import scene_stepper
     from steplab.integrators.run_summary import RunSettings, run_summary, stopped_summary
-    from steplab.integrators.scene_rotation import keeping, rotation_arrays, run_rotation
+    from steplab.integrators.scene_rotation import rotation_arrays, run_rotation
     from steplab.integrators.simulate import MAX_STEPS, simulate
     from steplab.integrators.stable_dt import dt_warning
     from steplab.io import check_trajectory_path, save_trajectory
@@ -77,14 +78,8 @@ def command(args) -> int:
     energy_start = float(scene.model.energy(scene.y0, scene.rigid_bodies))  # with the spin's 1/2 omega . I omega
     settings = RunSettings(scene, integrator, dt, world, args.precision, energy_start, run_warnings)
     attached = _attached(scene, world)  # forces at body-frame points: the rotation steps with the translation
-    if world is not None:  # the collision step (the contact solver turns attached forces' lever arms itself)
-        stepper = keeping(world.stepper, kept, args.save_every)
-    elif attached:  # without collisions: the coupled step
-        from steplab.integrators.attached import attached_stepper
-
-        stepper = attached_stepper(scene.rigid_bodies, rotation_method, kept)
-    else:
-        stepper = None
+    # the collision step (the contact solver turns attached forces' lever arms itself), else the coupled one
+    stepper = scene_stepper(scene, kept, world, rotation_method, args.save_every)
     try:
         traj = simulate(scene.model, integrator, scene.y0, scene.t_start, dt=dt, **end, backend=args.backend,
                         dtype=np.dtype(args.precision), save_every=args.save_every,
