@@ -55,13 +55,27 @@ def stable_step(mode: StiffestMode, stepper: Stepper) -> StableStep:
     return StableStep(stepper.name, undamped, _dt(undamped, mode.omega), damped, _dt(damped, mode.omega))
 
 
-def stable_steps(model, q, steppers) -> tuple[StiffestMode, list[StableStep]]:
-    """The stiffest mode of ``model`` at positions ``q`` and each stepper's limits on it."""
-    mode = stiffest_mode(model, q)
+def scene_mode(model, q, bodies=None, derivative: str = "jvp") -> StiffestMode:
+    """The stiffest mode of ``model`` at positions ``q``: with springs or dampers at body-frame points on
+    the rotating ``bodies``, of the translation and the rotation together
+    (:func:`steplab.physics.coupled_modes.coupled_stiffest_mode`; the lever arms held, a turn would
+    be no degree of freedom and the mode too slow), else :func:`steplab.physics.modes.stiffest_mode`."""
+    from steplab.physics.attachments import attached_forces
+
+    if bodies is not None and attached_forces(model):
+        from steplab.physics.coupled_modes import coupled_stiffest_mode
+
+        return coupled_stiffest_mode(model, bodies, q)
+    return stiffest_mode(model, q, derivative=derivative)
+
+
+def stable_steps(model, q, steppers, bodies=None) -> tuple[StiffestMode, list[StableStep]]:
+    """The stiffest mode of ``model`` at positions ``q`` (:func:`scene_mode`) and each stepper's limits on it."""
+    mode = scene_mode(model, q, bodies)
     return mode, [stable_step(mode, s) for s in steppers if isinstance(s, Stepper)]
 
 
-def dt_warning(model, q, stepper, dt: float) -> str | None:
+def dt_warning(model, q, stepper, dt: float, bodies=None) -> str | None:
     """One line when ``dt`` exceeds the largest stable dt of ``stepper`` on ``model``, else None.
 
     Cheap enough to run before every ``steplab run``: the mode by central differences
@@ -74,7 +88,7 @@ def dt_warning(model, q, stepper, dt: float) -> str | None:
     if not isinstance(stepper, Stepper):
         return None
     try:
-        mode = stiffest_mode(model, q, derivative="difference")
+        mode = scene_mode(model, q, bodies, derivative="difference")
     except NonFiniteModelError:  # the run itself will say what is wrong
         return None
     if mode.omega is None or stepper.spectral_radius(mode.omega * dt, mode.damping_ratio) <= 1 + GROWTH_TOLERANCE:

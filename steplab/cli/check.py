@@ -52,7 +52,7 @@ def command(args) -> int:
                              "(it has no step size to limit)")
     else:
         steppers = [m for m in INTEGRATORS.values() if isinstance(m, Stepper)]
-    mode, rows = stable_steps(scene.model, scene.y0[0], steppers)
+    mode, rows = stable_steps(scene.model, scene.y0[0], steppers, scene.rigid_bodies)
     report = {"scene": scene.name, "dt": dt, "omega_max": mode.omega, "damping_ratio": mode.damping_ratio,
               "integrators": [dataclasses.asdict(r) | {"stable": r.stable(dt)} for r in rows]}
     if scene.rigid_bodies is not None:

@@ -69,7 +69,7 @@ def command(args) -> int:
     integrator, world = with_sweeps(integrator, world, args)
     if world is not None and world.rigid is not None:  # the solver turns the bodies with the run's rotation method
         world = dataclasses.replace(world, rigid=dataclasses.replace(world.rigid, rotation=rotation_method.name))
-    warning = dt_warning(scene.model, scene.y0[0], integrator, dt)  # before the run: it may be long
+    warning = dt_warning(scene.model, scene.y0[0], integrator, dt, scene.rigid_bodies)  # before the run: it may be long
     if warning is not None:
         print(f"steplab run: warning: {warning}", file=sys.stderr)
     run_warnings = [] if warning is None else [warning]
