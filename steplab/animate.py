@@ -309,25 +309,16 @@ def _write_mp4(path: Path, images, fps: int) -> None:
     writer.close()
 
 
-def all_bodies(rotation, n: int) -> tuple[np.ndarray, np.ndarray]:
-    """The orientations (K, N, 4) and world angular velocities (K, N, 3) of all ``n`` bodies at the saved
-    times of ``rotation`` (a RotationTrajectory): the identity and zero for a body that does not rotate."""
-    k = len(rotation.t)
-    orientations = np.tile(np.array([1.0, 0.0, 0.0, 0.0]), (k, n, 1))
-    spins = np.zeros((k, n, 3))
-    orientations[:, rotation.bodies.index] = rotation.orientations
-    spins[:, rotation.bodies.index] = rotation.angular_velocities
-    return orientations, spins
-
-
 def attached_energies(model, traj, rotation) -> np.ndarray:
     """The energy (K,) at each saved state of a run of a model with springs or dampers at body-frame
     points, J: the centres' kinetic energy, the rotating bodies' 1/2 omega . I omega, and the potential
     with every lever arm R(q) r at that state's orientations (``rotation``, a RotationTrajectory at the
     run's saved times). At the last state it is the ``energy_end`` of ``steplab run``."""
+    from steplab.integrators.scene_rotation import rotation_arrays
     from steplab.physics.attachments import model_at
 
-    orientations, spins = all_bodies(rotation, model.n_bodies)
+    arrays = rotation_arrays(rotation, model.n_bodies)
+    orientations, spins = arrays["orientations"], arrays["angular_velocities"]
     return np.array([float(model_at(model, orientations[k], spins[k]).energy(np.asarray(y, float), rotation.at(k)))
                      for k, y in enumerate(traj.y)])
 
@@ -384,7 +375,9 @@ def attached_segments(model, x, orientations, rotating, reach) -> tuple[np.ndarr
 def attached_frames(model, traj, rotation) -> tuple[np.ndarray, np.ndarray]:
     """:func:`attached_segments` at each saved state of ``traj``: springs (K, P, 2, 3), pointers (K, B, 2, 3);
     the orientation line of a body without an attachment point is its radius long."""
-    orientations, _ = all_bodies(rotation, model.n_bodies)
+    from steplab.integrators.scene_rotation import rotation_arrays
+
+    orientations = rotation_arrays(rotation, model.n_bodies)["orientations"]
     frames = [attached_segments(model, x, o, rotation.bodies.index, model.radii)
               for x, o in zip(traj.positions, orientations)]
     return np.stack([s for s, _ in frames]), np.stack([p for _, p in frames])

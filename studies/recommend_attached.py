@@ -52,10 +52,10 @@ from .recommend import NoFixedStepError, check_dt_max
 from .recommend_collisions import (
     FINEST_CANDIDATE,
     REFERENCE_MARGIN,
-    REFERENCE_REFINEMENT,
     TIMING_REPEATS,
     check_integrators,
     climb,
+    first_reference_steps,
 )
 
 #: the reference pair: velocity Verlet with dlm, the coupled step's one second-order stage order
@@ -133,15 +133,7 @@ def recommend_attached(scene, t_end: float, tol: float, *, rotation, dt_max: flo
     if not names:
         raise ValueError("--integrators: give at least one fixed-step integrator")
     points = _attachment_points(model, bodies)
-    # the reference's first run: the coarsest count times a power of two (every candidate's step times are
-    # among its step times), at least 4 times the coarsest (the coarsest candidate and its check at dt/2)
-    target = min(scene.dt, dt_max) / REFERENCE_REFINEMENT
-    halvings = max(2, math.ceil(math.log2(span / (coarsest * target))))
-    first = coarsest * 2**halvings
-    if 2 * first > REFERENCE_MAX_STEPS:  # its first run and its check at dt/2
-        raise ValueError(f"the reference run at dt = {span / (2 * first):.3g} s (the smaller of --dt-max and the "
-                         f"scene's dt, halved twice) takes {2 * first} steps, more than recommend's limit of "
-                         f"{REFERENCE_MAX_STEPS} with attached forces: pass a larger --dt-max or an earlier --t-end")
+    first = first_reference_steps(span, coarsest, min(scene.dt, dt_max), REFERENCE_MAX_STEPS, "attached forces")
     from tqdm import tqdm
 
     # one tick for the reference, one per candidate method; shown after a second

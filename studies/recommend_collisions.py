@@ -137,22 +137,13 @@ def recommend_with_collisions(problem: CollisionProblem, tol: float, *, scene_dt
                              f"= \"solver\"), which steps with {only} only (velocities, contacts, then positions, "
                              f"per substep), not {other}; give --integrators {only}, or leave it out")
         names = [only]
-    # the reference: its step count is the coarsest count times a power of two, so every
-    # candidate's step times are among its step times; at least 4 times the coarsest, so
-    # the coarsest candidate and its check at dt/2 are both coarser than the reference
-    target = min(scene_dt, dt_max) / REFERENCE_REFINEMENT
-    halvings = max(2, math.ceil(math.log2(span / (coarsest * target))))
-    if 2 * coarsest * 2**halvings > REFERENCE_MAX_STEPS:  # its first run and its check at dt/2
-        raise ValueError(f"the reference run at dt = {span / (2 * coarsest * 2**halvings):.3g} s (the smaller of "
-                         f"--dt-max and the scene's dt, halved twice) takes {2 * coarsest * 2**halvings} steps, "
-                         f"more than recommend's limit of {REFERENCE_MAX_STEPS} with collisions: pass a larger "
-                         "--dt-max or an earlier --t-end")
+    first = first_reference_steps(span, coarsest, min(scene_dt, dt_max), REFERENCE_MAX_STEPS, "collisions")
     from tqdm import tqdm
 
     # one tick for the reference, one per candidate method; shown after a second
     bar = tqdm(total=len(names) + 1, desc="recommend: reference", unit="method", disable=not progress,
                leave=False, delay=1.0)
-    reference = _reference(problem, tol, coarsest * 2**halvings, only or _reference_method())
+    reference = _reference(problem, tol, first, only or _reference_method())
     bar.update()
     ref_run, ref_energy, ref_steps = reference.pop("run"), reference.pop("energies"), reference["steps"]
     regime = "trajectories" if reference["converged"] else "statistics"
@@ -204,6 +195,22 @@ def recommend_with_collisions(problem: CollisionProblem, tol: float, *, scene_dt
                           f"{reference['convergence']:.3g} m): compared energy over time, impact count and "
                           "penetration instead")
     return result
+
+
+def first_reference_steps(span: float, coarsest: int, dt: float, limit: int, what: str) -> int:
+    """The reference's first step count over ``span``: the coarsest candidate's count times a power of
+    two, so that every candidate's step times are among its own, at least 4 times the coarsest (the
+    coarsest candidate and its check at dt/2 are both coarser), and its dt at most ``dt`` (the smaller
+    of --dt-max and the scene's) / REFERENCE_REFINEMENT. Refused in one line when it and its check at
+    dt/2 take more than ``limit`` steps (recommend's limit with ``what``: collisions, attached forces)."""
+    target = dt / REFERENCE_REFINEMENT
+    halvings = max(2, math.ceil(math.log2(span / (coarsest * target))))
+    first = coarsest * 2**halvings
+    if 2 * first > limit:
+        raise ValueError(f"the reference run at dt = {span / (2 * first):.3g} s (the smaller of --dt-max and the "
+                         f"scene's dt, halved twice) takes {2 * first} steps, more than recommend's limit of {limit} "
+                         f"with {what}: pass a larger --dt-max or an earlier --t-end")
+    return first
 
 
 def climb(measure, coarsest: int, finest: int, tried: list) -> list[dict]:

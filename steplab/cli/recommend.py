@@ -41,7 +41,7 @@ def command(args) -> int:
     from steplab.studies.problems import problem_of
     from steplab.studies.recommend import recommend
 
-    from .run import _attached, collision_world, scene_method
+    from .run import collision_world, scene_method
 
     scene = load_scene(args.scene)
     scene_method(scene)  # the scene's [simulation.<integrator>] table, refused as run refuses it
@@ -53,10 +53,10 @@ def command(args) -> int:
 
         integrators = check_integrators(args.integrators)  # a list of names, none empty (comma_list)
     world = collision_world(scene, args.detector, "numpy")
-    if world is not None and attached_forces(scene.model):  # run steps them in the contact solver: not measured so
-        raise ValueError("recommend measures springs and dampers at body-frame points (offsets) without "
-                         "collisions only; use --detector none")
-    if _attached(scene, world):  # the rotation steps with the translation: measured together (not with collisions)
+    if attached_forces(scene.model):  # the rotation steps with the translation: measured together
+        if world is not None:  # run steps them in the contact solver: not measured so
+            raise ValueError("recommend measures springs and dampers at body-frame points (offsets) without "
+                             "collisions only; use --detector none")
         return _with_attachments(args, scene, t_end, integrators, rotation)
     if world is not None:
         return _with_collisions(args, scene, t_end, world, integrators, rotation)
