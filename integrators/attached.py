@@ -2,19 +2,27 @@
 
 A force at a point couples the two systems (:mod:`steplab.physics.attachments`): the force on a
 centre depends on the orientations, through the lever arms R(q) r, and the torque on a body
-depends on the positions. :class:`AttachedStep` advances both with the same dt, in one of two
-stage orders:
+depends on the positions. :class:`AttachedStep` advances both with the same dt. A pair composes
+when the rotation method names the integrator among those it composes with (``composes_with``,
+:func:`composes`); its stage order is then one method on the whole system:
 
-- velocity Verlet with ``dlm``: the Strang splitting of H = T + V that both methods are. Half
+- velocity Verlet with ``dlm`` or ``implicit-midpoint``: the Strang splitting of H = T + V. Half
   kicks of v and of the body-frame momentum pi with the forces and torques at (x, q); the drift of
-  x and the free rotation of q (dlm's, without torque) by h; half kicks at the new (x, q).
+  x and the free rotation of q (the method's, without torque) by h; half kicks at the new (x, q).
   Symplectic and second order, so the energy error stays bounded.
-- every other pair: the forces and torques at the start of the step. The translation
-  integrator steps with the orientations held there, the rotation method with the positions
-  and velocities held there. The coupling is then first order. For semi-implicit Euler with a
-  method that updates omega first (``exponential-map``, ``first-order-quaternion``,
-  ``implicit-gyroscopic``, ``momentum-rescaled``) this is their declared stage order, "forces and
-  torques at t; v and omega; then x and q".
+- ``rk4`` with ``rk4``: the four stages on (x, v, q, omega) together (the translation's tableau),
+  the lever arms at each stage's q, q normalised after the step: fourth order.
+- semi-implicit Euler with a method that updates omega first (``exponential-map``,
+  ``first-order-quaternion``, ``implicit-gyroscopic``, ``momentum-rescaled``), and explicit Euler
+  with ``explicit``: the forces and torques at the start of the step, each system stepped with the
+  other held there (:func:`held_step`), which is these pairs' declared order, "forces and torques
+  at t; v and omega; then x and q" (symplectic Euler on the whole system), or all from the values
+  at t (explicit Euler on it).
+
+Any other pair takes the held step too, but then the two systems see each other at different
+stages: the coupling is first order and not symplectic, and on a stiff attachment it gains energy
+at every dt (semi-implicit Euler with ``dlm`` on spring-pendulum multiplies a perturbation by 1.021
+a step at dt = 1 ms). :mod:`.coupled_stability` measures that growth before a run.
 
 Each stage rebuilds the model at the new lever arms (:func:`.attachments.model_at`). On NumPy
 :class:`AttachedStep` is the step of :func:`.simulate`'s Python loop; on JAX the same stage
@@ -61,12 +69,31 @@ class Coupling(NamedTuple):
     dtype: object = np.dtype(np.float64)
 
     @property
+    def composes(self) -> bool:
+        """Whether the rotation method composes with the integrator (:func:`composes`)."""
+        return composes(self.integrator, self.rotation)
+
+    @property
     def strang(self) -> bool:
-        """Velocity Verlet with dlm: one Strang splitting (see the module)."""
-        return self.integrator.name == "velocity-verlet" and self.rotation.name == "dlm"
+        """Velocity Verlet with a rotation method whose free step sits inside its Strang splitting (dlm,
+        implicit-midpoint): see the module."""
+        return self.composes and self.integrator.name == "velocity-verlet"
+
+    @property
+    def joint(self) -> bool:
+        """An explicit Runge-Kutta integrator with the rotation method of its stages (rk4 with rk4):
+        one tableau on the whole state."""
+        return self.composes and hasattr(self.integrator, "tableau")
 
     def rotation_model(self, torques=()) -> RotationModel:
         return RotationModel(self.bodies.inertia, tuple(torques), self.xp)
+
+
+def composes(integrator, rotation) -> bool:
+    """Whether the coupled step of ``integrator`` and the rotation method ``rotation`` is one method on the
+    whole system (the rotation method's ``composes_with`` names the integrator); else the held step of a
+    pair whose stages do not match (see the module)."""
+    return integrator.name in rotation.composes_with
 
 
 def model_at(c: Coupling, q, omega):
@@ -117,6 +144,40 @@ def strang_step(c: Coupling, t, y, q, omega, kept, dt):
     return xp.stack([x1, v_half + 0.5 * dt * a1]), q1, omega_free + 0.5 * dt * tau1 / inertia, (a1, tau1)
 
 
+def joint_step(c: Coupling, t, y, q, omega, dt):
+    """One step of the integrator's Butcher tableau on (x, v, q, omega) together: every stage takes the
+    forces and the torques at its own positions and lever arms. q is normalised after the step (its
+    stages leave the unit sphere by O(h^2), the derivative's smooth extension there)."""
+    from .runge_kutta import rk_step
+
+    xp = c.xp
+    packed = _Packed(c, y.shape, y.dtype)
+    inertia = xp.asarray(c.bodies.inertia, dtype=y.dtype)
+
+    def rate(t, z):
+        y, q, omega = packed.unpack(xp, z)
+        model, orientations = model_at(c, q, omega)
+        torque = quat.rotate_inverse(xp, q, attachments.torques(model, y[0], y[1], orientations)[c.bodies.index])
+        alpha = (torque - quat.cross(xp, omega, inertia * omega)) / inertia  # Euler's equations
+        return packed.pack(xp, model.vector_field(t, y), 0.5 * quat.multiply_vector(xp, q, omega), alpha)
+
+    y1, q1, omega1 = packed.unpack(xp, rk_step(rate, t, packed.pack(xp, y, q, omega), dt, c.integrator.tableau))
+    return y1, quat.normalize(xp, q1), omega1
+
+
+def first_kept(c: Coupling, t, y, q, omega):
+    """What the coupled step carries into its first step: the Strang splitting's acceleration and torque at
+    the start, else nothing."""
+    return accelerations(c, t, y[0], y[1], q, omega) if c.strang else ()
+
+
+def coupled_step(c: Coupling, t, y, q, omega, kept, dt):
+    """One coupled step in the pair's stage order (see the module): (y, q, omega, kept for the next step)."""
+    if c.strang:
+        return strang_step(c, t, y, q, omega, kept, dt)
+    return *(joint_step if c.joint else held_step)(c, t, y, q, omega, dt), kept
+
+
 class AttachedStep:
     """``step(t, y, dt, carry) -> (y, carry)`` of a model with attached forces, its rotating
     ``bodies`` stepped by ``rotation`` beside ``integrator``; the rotation at the saved steps is kept.
@@ -144,7 +205,7 @@ class AttachedStep:
         self.q, self.omega = bodies.orientations, bodies.body_angular_velocities()
         self.saved = {0: (self.q, self.omega)}  # by step
         self.log = None  # no collisions
-        self._kept = None  # velocity Verlet's last acceleration and torque, for the next first kick
+        self._kept = None  # the Strang splitting's last acceleration and torque, for the next first kick
 
     def model_at(self, q, omega):
         """:func:`model_at` of this run: (model, orientations of all bodies)."""
@@ -156,11 +217,8 @@ class AttachedStep:
 
     def __call__(self, t, y, dt, carry):
         c = self.coupling
-        if c.strang:
-            kept = self._kept or accelerations(c, t, y[0], y[1], self.q, self.omega)
-            y, self.q, self.omega, self._kept = strang_step(c, t, y, self.q, self.omega, kept, dt)
-        else:
-            y, self.q, self.omega = held_step(c, t, y, self.q, self.omega, dt)
+        kept = first_kept(c, t, y, self.q, self.omega) if self._kept is None else self._kept
+        y, self.q, self.omega, self._kept = coupled_step(c, t, y, self.q, self.omega, kept, dt)
         if not (np.all(np.isfinite(self.q)) and np.all(np.isfinite(self.omega))):
             raise DivergenceError(_name(c), dt, len(self.saved), t + dt)
         self.saved[len(self.saved)] = (self.q, self.omega)
@@ -226,15 +284,10 @@ class _Packed:
                 z[..., cut + 4 * r:].reshape(lead + (r, 3)))
 
     def init(self, model, t, z):  # the loop's model is not used: the coupling rebuilds it at each state
-        y, q, omega = self.unpack(self.coupling.xp, z)
-        return accelerations(self.coupling, t, y[0], y[1], q, omega) if self.coupling.strang else ()
+        return first_kept(self.coupling, t, *self.unpack(self.coupling.xp, z))
 
     def step(self, model, t, z, dt, kept):
-        y, q, omega = self.unpack(self.coupling.xp, z)
-        if self.coupling.strang:
-            y, q, omega, kept = strang_step(self.coupling, t, y, q, omega, kept, dt)
-        else:
-            y, q, omega = held_step(self.coupling, t, y, q, omega, dt)
+        y, q, omega, kept = coupled_step(self.coupling, t, *self.unpack(self.coupling.xp, z), kept, dt)
         return self.pack(self.coupling.xp, y, q, omega), kept
 
 

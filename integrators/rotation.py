@@ -102,7 +102,7 @@ class Explicit(RotationMethod):
     name: ClassVar[str] = "explicit"
     style: ClassVar[tuple[str, str]] = ("tab:red", "o")
     order: ClassVar[int] = 1
-    composes_with: ClassVar[tuple[str, ...]] = ("explicit-euler",)
+    composes_with: ClassVar[tuple[str, ...]] = ("euler",)
     stage_order: ClassVar[str] = "forces and torques at t; then v, x, omega, q all from the values at t"
     source: ClassVar[str] = "Catto, 'Numerical Methods', GDC 2015 (the explicit gyroscopic term); ODE before patch 185"
 
@@ -282,9 +282,10 @@ class ImplicitMidpoint(RotationMethod):
     scheme: ClassVar[str] = "implicit"  # Newton iterated to round-off
     symplectic: ClassVar[bool] = True
     conserves: ClassVar[tuple[str, ...]] = ("energy", "|L|")
-    composes_with: ClassVar[tuple[str, ...]] = ("implicit-midpoint (not a steplab translation method; "
-                                                "velocity-verlet by the Strang splitting of dlm)",)
-    stage_order: ClassVar[str] = "one implicit solve for (v, x, omega, q) at the midpoint of the step"
+    composes_with: ClassVar[tuple[str, ...]] = ("velocity-verlet",)
+    stage_order: ClassVar[str] = ("kick v and pi by h/2 with the forces and torques at t; drift x by h and "
+                                  "rotate freely by the implicit midpoint rule; forces and torques at t + h; "
+                                  "kick by h/2 (dlm's Strang splitting)")
     source: ClassVar[str] = ("Hairer, Lubich and Wanner, Geometric Numerical Integration, IV.1 and VII.5 "
                              "(quadratic invariants; the rigid body)")
 

@@ -14,10 +14,9 @@ the candidate's translation integrator beside the run's rotation method, and it 
   attachment point by about theta |r|. The attachment point in the world, x + R(q) r, is then
   within twice the error.
 2. **The reference** is velocity Verlet with ``dlm`` (:data:`REFERENCE_INTEGRATOR`,
-   :data:`REFERENCE_ROTATION`), the one pair whose coupled step is a second-order Strang
-   splitting (:mod:`steplab.integrators.attached`); every other pair holds one motion fixed while
-   the other steps, which is first order, rk4 with rk4 included (on ``spring-pendulum`` over 0.5 s,
-   6e-3 m at dt = 1.25e-4 s, where velocity Verlet with dlm is within 1.3e-7 m at dt = 1e-3 s).
+   :data:`REFERENCE_ROTATION`), whose coupled step is a second-order Strang splitting
+   (:mod:`steplab.integrators.attached`); a pair that does not compose holds one motion fixed while
+   the other steps, which is first order (:mod:`steplab.integrators.coupled_stability`).
    Its first dt is the finer of the scene's dt and ``dt_max``, halved
    (:data:`.recommend_collisions.REFERENCE_REFINEMENT`) and rounded down to the coarsest candidate's
    dt over a power of two, so that every candidate's step times are among its own; it is run again at
@@ -58,7 +57,7 @@ from .recommend_collisions import (
     first_reference_steps,
 )
 
-#: the reference pair: velocity Verlet with dlm, the coupled step's one second-order stage order
+#: the reference pair: velocity Verlet with dlm, the coupled step's Strang splitting (second order)
 REFERENCE_INTEGRATOR = "velocity-verlet"
 REFERENCE_ROTATION = "dlm"
 #: the most steps of one reference run: the coupled NumPy step rebuilds the model at the new lever

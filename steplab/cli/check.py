@@ -39,7 +39,7 @@ def command(args) -> int:
     rotation = rotation_named(scene, args)
     # the dts run refuses: longer than the run, too small to advance time, more steps than a float counts
     dt, t_end = time_span(scene, args)
-    run_steps(scene, dt, t_end)
+    steps = run_steps(scene, dt, t_end)
     if args.integrator is not None:
         steppers = [integrator_named(args.integrator)]
         if getattr(steppers[0], "kind", None) == "position-based":  # nothing to predict: no dt limit
@@ -55,6 +55,12 @@ def command(args) -> int:
     mode, rows = stable_steps(scene.model, scene.y0[0], steppers, scene.rigid_bodies)
     report = {"scene": scene.name, "dt": dt, "omega_max": mode.omega, "damping_ratio": mode.damping_ratio,
               "integrators": [dataclasses.asdict(r) | {"stable": r.stable(dt)} for r in rows]}
+    if _coupled(scene):  # springs at body-frame points without collisions: the coupled step's pair
+        from steplab.integrators.coupled_stability import grows, pair_growth
+
+        for row, stepper in zip(report["integrators"], [s for s in steppers if isinstance(s, Stepper)]):
+            row["coupled"] = pair_growth(scene.model, scene.rigid_bodies, stepper, rotation, scene.y0, dt, steps)
+            row["stable"] = row["stable"] and not grows(row["coupled"])
     if scene.rigid_bodies is not None:
         report["rotation"] = rotation_limit(rotation, scene.rigid_bodies, dt)
     if args.json:
@@ -77,11 +83,30 @@ def command(args) -> int:
     damped = f", damping ratio {mode.damping_ratio:.3g}" if mode.damping_ratio else ", undamped"
     print(f"{scene.name}: stiffest mode omega_max = {mode.omega:.6g} rad/s{damped}; dt = {dt:g} s "
           f"(omega_max dt = {mode.omega * dt:.4g})")
-    print(table([(r["integrator"], _limit(r["omega_dt_max"]), _limit(r["dt_max"]), _limit(r["dt_max_damped"]),
-                  _verdict(dt, r["dt_max_damped"])) for r in report["integrators"]],
-                ("integrator", "limit omega dt", "dt_max (s)", "damped dt_max (s)", "at this dt"),
-                right=(1, 2, 3), indent="  "))
+    rows = [(r["integrator"], _limit(r["omega_dt_max"]), _limit(r["dt_max"]), _limit(r["dt_max_damped"]),
+             _verdict(dt, r["dt_max_damped"], r.get("coupled"))) for r in report["integrators"]]
+    header = ("integrator", "limit omega dt", "dt_max (s)", "damped dt_max (s)", "at this dt")
+    if "coupled" in report["integrators"][0]:
+        print(f"  with {rotation.name}: on springs at body-frame points a pair that does not compose steps each "
+              f"system with the other held; its growth a step is the coupled step's, linearised at the start")
+        rows = [row[:4] + (_pair(r["coupled"]),) + row[4:] for row, r in zip(rows, report["integrators"])]
+        header = header[:4] + (f"with {rotation.name}",) + header[4:]
+    print(table(rows, header, right=(1, 2, 3), indent="  "))
     return 0
+
+
+def _coupled(scene) -> bool:
+    """Whether ``scene`` runs the coupled step (:mod:`steplab.integrators.attached`): springs or dampers at
+    body-frame points and no collisions (the contact solver turns those bodies in its own order)."""
+    from steplab.physics.attachments import attached_forces
+
+    return scene.collisions is None and scene.rigid_bodies is not None and bool(attached_forces(scene.model))
+
+
+def _pair(coupled: dict) -> str:
+    """The coupled column: "composes", the pair's growth a step, or why there is none."""
+    rho = coupled["growth_per_step"]
+    return coupled["verdict"] if rho is None else f"x{rho:.6g} a step"
 
 
 def rotation_limit(method, bodies, dt: float) -> dict:
@@ -98,7 +123,13 @@ def _limit(value) -> str:
     return "no limit" if value is None else "none (grows)" if value == 0 else f"{value:.4g}"
 
 
-def _verdict(dt: float, dt_max) -> str:
+def _verdict(dt: float, dt_max, coupled: dict | None = None) -> str:
+    if coupled is not None and coupled["verdict"] == "grows":
+        from steplab.integrators.coupled_stability import fold
+
+        return f"UNSTABLE (the pair grows {fold(coupled['log10_growth_over_run'])} over the run)"
+    if coupled is not None and coupled["verdict"] == "not finite":
+        return "UNSTABLE (the pair's first step is not finite)"
     if dt_max is None:
         return "stable (no limit)"
     if dt_max == 0:

@@ -54,7 +54,7 @@ def command(args) -> int:
     from steplab.integrators.attached import scene_stepper
     from steplab.integrators.run_summary import RunSettings, run_summary, stopped_summary
     from steplab.integrators.scene_rotation import rotation_arrays, run_rotation
-    from steplab.integrators.simulate import MAX_STEPS, simulate
+    from steplab.integrators.simulate import MAX_STEPS, simulate, step_count
     from steplab.integrators.stable_dt import dt_warning
     from steplab.io import check_trajectory_path, save_trajectory
     from steplab.physics.scene import load_scene
@@ -78,6 +78,11 @@ def command(args) -> int:
     energy_start = float(scene.model.energy(scene.y0, scene.rigid_bodies))  # with the spin's 1/2 omega . I omega
     settings = RunSettings(scene, integrator, dt, world, args.precision, energy_start, run_warnings)
     attached = _attached(scene, world)  # forces at body-frame points: the rotation steps with the translation
+    if attached and world is None:  # a pair whose stages do not match may grow at any dt
+        pair = _pair_warning(scene, integrator, rotation_method, dt, args.steps or step_count(scene.t_start, t_end, dt))
+        if pair is not None:
+            print(f"steplab run: warning: {pair}", file=sys.stderr)
+            run_warnings.append(pair)
     # the collision step (the contact solver turns attached forces' lever arms itself), else the coupled one
     stepper = scene_stepper(scene, kept, world, rotation_method, args.save_every)
     try:
@@ -159,6 +164,17 @@ def _importable(name: str) -> str:
             sys.path.append(str(path.resolve().parent))
         name = f"{path.stem}:{attribute}"
     return name
+
+
+def _pair_warning(scene, integrator, rotation, dt: float, steps: int) -> str | None:
+    """:func:`steplab.integrators.coupled_stability.pair_warning` of the run's coupled step, for a
+    fixed-step integrator (the coupled step refuses any other, in one line)."""
+    from steplab.integrators import Stepper
+    from steplab.integrators.coupled_stability import pair_warning
+
+    if not isinstance(integrator, Stepper):
+        return None
+    return pair_warning(scene.model, scene.rigid_bodies, integrator, rotation, scene.y0, dt, steps)
 
 
 def _attached(scene, world) -> bool:
