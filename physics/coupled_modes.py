@@ -44,10 +44,7 @@ def coupled_stiffest_mode(model, bodies, q, v=None) -> StiffestMode:
     free = np.asarray(model.inverse_masses, dtype=float) > 0
     turning = np.asarray(bodies.index)[free[bodies.index]]  # a pinned body neither moves nor turns
     rows = {int(b): k for k, b in enumerate(bodies.index)}
-    orientations = np.tile(quat.IDENTITY, (n, 1)).astype(float)
-    orientations[bodies.index] = bodies.orientations
-    omega0 = np.zeros((n, 3))
-    omega0[bodies.index] = bodies.angular_velocities
+    orientations, omega0 = bodies.of_all(n)
     moved = np.flatnonzero(free)
     size = 3 * (len(moved) + len(turning))
     if size > COUPLED_SIZE:

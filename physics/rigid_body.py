@@ -173,6 +173,14 @@ class RigidBodies:
         """omega in the body frame, (R, 3): what the rotation methods integrate."""
         return quat.rotate_inverse(np, self.orientations, self.angular_velocities)
 
+    def of_all(self, n_bodies: int) -> tuple[np.ndarray, np.ndarray]:
+        """The orientations (N, 4) and world angular velocities (N, 3) of all ``n_bodies`` of the scene, new
+        arrays: these bodies' own at their ``index``, the identity and zero for a point mass."""
+        orientations = np.tile(quat.IDENTITY, (n_bodies, 1)).astype(float)
+        angular_velocities = np.zeros((n_bodies, 3))
+        orientations[self.index], angular_velocities[self.index] = self.orientations, self.angular_velocities
+        return orientations, angular_velocities
+
     def kinetic_energy(self) -> float:
         """Rotational kinetic energy sum 1/2 omega . I omega (body frame), J."""
         return rotational_energy(np, self.inertia, self.body_angular_velocities()).sum()

@@ -214,11 +214,8 @@ class RigidSolverStep:
         self.rounding = np.where(np.asarray(rigid.kind) != BOX, np.asarray(rigid.radius, float), 0.0)
         self.rolling = world.solver.rolling_resistance * self.rounding
         bodies = rigid.bodies
-        self.orientation = np.tile(quat.IDENTITY, (n, 1)).astype(float)
-        self.omega = np.zeros((n, 3))
+        self.orientation, self.omega = bodies.of_all(n)
         self.inverse_principal = np.zeros((n, 3))
-        self.orientation[bodies.index] = bodies.orientations
-        self.omega[bodies.index] = bodies.angular_velocities
         turns = self.inverse_masses[bodies.index] > 0  # a pinned body neither moves nor turns
         self.inverse_principal[bodies.index[turns]] = 1.0 / np.asarray(bodies.inertia, float)[turns]
         self.omega[bodies.index[~turns]] = 0.0
