@@ -36,8 +36,8 @@ RUN_GROWTH = 2.0
 def coupled_growth(model, bodies, integrator, rotation, y0, dt: float) -> float | None:
     """The amplitude's growth per step, rho, of ``integrator`` with ``rotation`` on ``model`` (attached
     forces, its rotating ``bodies``) at the start state ``y0`` (2, N, 3), linearised (see the module);
-    inf where a step from the start is not finite, None above :data:`.coupled_modes.COUPLED_SIZE`
-    coordinates (the eigenproblem is dense)."""
+    inf where a step from the start, or from a state a perturbation away, is not finite; None above
+    :data:`.coupled_modes.COUPLED_SIZE` coordinates (the eigenproblem is dense)."""
     c = Coupling(model.cast(np, np.float64), bodies, integrator, rotation)
     y0 = np.asarray(y0, dtype=float)
     q0, omega0 = bodies.orientations, bodies.body_angular_velocities()
@@ -92,8 +92,8 @@ def pair_growth(model, bodies, integrator, rotation, y0, dt: float, steps: int) 
 
     A record (JSON as it stands): ``rotation``; ``composes`` (:func:`.attached.composes`);
     ``verdict``, one of "composes" (its limit is the integrator's on the coupled stiffest mode),
-    "stays" (within :data:`RUN_GROWTH` over the run), "grows", "not finite" (the first step from the
-    start is not) or "not linearised" (more coordinates than :data:`.coupled_modes.COUPLED_SIZE`);
+    "stays" (within :data:`RUN_GROWTH` over the run), "grows", "not finite" (a step from the start or
+    a perturbation away is not) or "not linearised" (more coordinates than :data:`.coupled_modes.COUPLED_SIZE`);
     ``growth_per_step``, rho of :func:`coupled_growth` (None unless measured), and
     ``log10_growth_over_run``, steps log10(rho)."""
     record = {"rotation": rotation.name, "composes": composes(integrator, rotation), "verdict": "composes",
@@ -130,7 +130,7 @@ def pair_warning(model, bodies, integrator, rotation, y0, dt: float, steps: int)
     if growth["verdict"] == "not linearised":  # too many coordinates: the declaration alone
         return f"{pair}, first order and not symplectic: it may gain energy at any dt; see steplab check"
     if growth["verdict"] == "not finite":
-        return f"{pair}, and its first step from the start is not finite at dt = {dt:g} s"
+        return f"{pair}, and at dt = {dt:g} s its step about the start state is already not finite"
     return (f"{pair}: linearised at the start the step grows a perturbation {growth['growth_per_step']:.6g}-fold a "
             f"step at dt = {dt:g} s, {fold(growth['log10_growth_over_run'])} over the run's {steps} steps; pair "
             f"{rotation.name} with {partners(rotation)}, or see steplab check")

@@ -129,7 +129,7 @@ def _verdict(dt: float, dt_max, coupled: dict | None = None) -> str:
 
         return f"UNSTABLE (the pair grows {fold(coupled['log10_growth_over_run'])} over the run)"
     if coupled is not None and coupled["verdict"] == "not finite":
-        return "UNSTABLE (the pair's first step is not finite)"
+        return "UNSTABLE (the pair's step about the start is not finite)"
     if dt_max is None:
         return "stable (no limit)"
     if dt_max == 0:
