@@ -26,9 +26,16 @@ frames go straight to Pillow (GIF) or ffmpeg (MP4).
 
 from __future__ import annotations
 
+from dataclasses import dataclass
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
+
+if TYPE_CHECKING:  # matplotlib is imported only when an animation is drawn
+    from matplotlib.collections import LineCollection, PatchCollection, PolyCollection
+    from matplotlib.lines import Line2D
+    from matplotlib.text import Text
 
 #: at most this many frames are drawn (the trajectory is subsampled to fit)
 MAX_FRAMES = 150
@@ -114,157 +121,248 @@ def animate(runs: list[tuple[str, object]], model, out: str | Path, fps: int = 3
     """
     import matplotlib
 
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-    from matplotlib.collections import LineCollection, PatchCollection, PolyCollection
-    from matplotlib.patches import Circle
-    from matplotlib.ticker import MaxNLocator
-
-    from steplab.core.records import write_with
-    from steplab.physics import CentralGravity, Springs
-    from steplab.physics import quaternion as quat
-    from steplab.physics.attachments import attached_forces
+    matplotlib.use("Agg")  # drawn off screen, into the frames
 
     out = Path(out)
     check_format(out)
     check_fps(fps)
+    # what every panel shares: the plane, one window, and each body as it is drawn
+    shared = _shared_view(runs, model, view, shapes, rotations, half)
+    # the energy panels: each run's change, in one unit for all
+    energies = [drawn_energies(model, traj, rotation)
+                for (_, traj), rotation in zip(runs, rotations or [None] * len(runs))]
+    changes, unit = energy_changes(energies)
+    # one column for each run: its scene panel over its energy panel
+    frames = min(MAX_FRAMES, max(len(traj.t) for _, traj in runs))
+    fig, grid = _figure(shared, len(runs))
+    panels = [_panel(grid[:, col], shared, col, run, changes[col], unit, frames) for col, run in enumerate(runs)]
+    _energy_scale(grid[1][0], changes)
+    # the static figure once, then each frame's moving artists over it, written as they come
+    _write_frames(fig, panels, shared, frames, out, fps)
+    return out
+
+
+@dataclass(frozen=True)
+class _View:
+    """What every panel of one animation shares: the plane it shows, its window, and each body as it is
+    drawn there; and each run's points that the window was fitted around, which its panel draws."""
+
+    axes: list[int]  # the two world axes shown, across and up (indices into AXIS_NAMES)
+    lo: np.ndarray  # the window's lower left and upper right corners (2,), m
+    hi: np.ndarray
+    radii: np.ndarray  # each body's drawn radius (N,), m: its own, or MIN_DRAWN_RADIUS of the window
+    discs: np.ndarray  # the bodies drawn as circles: all but the rotating boxes, capsules, cylinders
+    pairs: np.ndarray | None  # each spring's two bodies (P, 2), its line drawn centre to centre
+    centers: np.ndarray  # the fixed attracting masses of central gravity (C, 3), drawn as stars
+    statics: tuple  # the static collision shapes, drawn in grey
+    # with rotations: the rotating bodies (RotationTrajectory.bodies), their half extents (R, 3), the spheres
+    # among them (S,) and each sphere's two spokes in its body frame (S, 2, 3)
+    rotating: object = None
+    extents: np.ndarray | None = None
+    spun: np.ndarray | None = None
+    spokes: np.ndarray | None = None
+    orientations: list | None = None  # each run's rotating bodies' orientations at every saved state (K, R, 4)
+    outlines: list | None = None  # each run's rigid_outlines at every saved state (K, R, P, 2)
+    # with springs at body-frame points: each run's springs (K, P, 2, 3) and lever arms (K, B, 2, 3)
+    attached: list | None = None
+
+    def shown(self, points) -> np.ndarray:
+        """World points (..., 3) on the view plane, clipped onto the window's edge."""
+        return np.clip(np.nan_to_num(points[..., self.axes], nan=0.0), self.lo, self.hi)
+
+
+def _shared_view(runs, model, view, shapes, rotations, half) -> _View:
+    """The :class:`_View` of ``runs``: the plane (:func:`_view_plane`), the window around every run
+    (:func:`_fitted_window`), and the bodies' drawn sizes, which follow from the window."""
+    from steplab.physics import CentralGravity, Springs
+    from steplab.physics.attachments import attached_forces
+
     # with springs at body-frame points, each run's springs (end points) and lever arms at every saved state
-    drawn = None if rotations is None or not attached_forces(model) else [
+    attached = None if rotations is None or not attached_forces(model) else [
         attached_frames(model, traj, rotation) for (_, traj), rotation in zip(runs, rotations)]
-    if view is not None:
-        axes_idx = [AXIS_NAMES.index(a) for a in view]
-    elif drawn is not None:
-        axes_idx = motion_view([np.concatenate([traj.positions, springs.reshape(len(traj.t), -1, 3)], axis=1)
-                                for (_, traj), (springs, _) in zip(runs, drawn)])
-    else:
-        positions = np.concatenate([traj.positions for _, traj in runs])
-        spans = np.ptp(positions[np.isfinite(positions).all(axis=-1)], axis=0)
-        axes_idx = sorted(np.argsort(spans)[-2:]) if spans.max() > 0 else [0, 2]
+    axes = _view_plane(view, runs, attached)
     radii = np.asarray(model.radii, dtype=float)
     springs = [f for f in model.forces if isinstance(f, Springs)]
+    pairs = np.concatenate([np.stack([np.asarray(f.i), np.asarray(f.j)], 1) for f in springs]) if springs else None
     # the fixed attracting masses of central gravity, drawn as stars (and kept in the window)
     centers = np.array([np.asarray(f.center, dtype=float) for f in model.forces if isinstance(f, CentralGravity)])
     centers = centers.reshape(-1, 3)
-    pairs = np.concatenate([np.stack([np.asarray(f.i), np.asarray(f.j)], 1) for f in springs]) if springs else None
-    fixed = np.concatenate([_extent(shapes)[:, axes_idx], centers[:, axes_idx]])
-    tracks = [traj.positions[..., axes_idx] for _, traj in runs]
-    if drawn is not None:  # the attachment points stay in the window too
-        tracks = [np.concatenate([q, springs[..., axes_idx].reshape(len(q), -1, 2)], axis=1)
-                  for q, (springs, _) in zip(tracks, drawn)]
-    # with rotations, each run's rotating bodies on the view plane at every saved state: (K, R, P, 2) points
-    # whose hull is each one's outline (a sphere's, a circle), which stay in the window too
-    solid = None
+    fixed = np.concatenate([_extent(shapes)[:, axes], centers[:, axes]])
+    rotating = extents = outlines = None
     if rotations is not None:
+        # each run's rotating bodies on the view plane at every saved state: (K, R, P, 2) points whose hull is
+        # each one's outline (a sphere's, a circle)
         rotating = rotations[0].bodies
         extents = half_extents(model, rotating, half)
-        solid = [rigid_outlines(rotating.shapes, extents, radii[rotating.index], traj.positions[:, rotating.index],
-                                rotation.orientations, axes_idx) for (_, traj), rotation in zip(runs, rotations)]
-        tracks = [np.concatenate([q, points.reshape(len(q), -1, 2)], axis=1) for q, points in zip(tracks, solid)]
-    lo, hi = shared_window(tracks, fixed, radii.max())
+        outlines = [rigid_outlines(rotating.shapes, extents, radii[rotating.index], traj.positions[:, rotating.index],
+                                   rotation.orientations, axes) for (_, traj), rotation in zip(runs, rotations)]
+    lo, hi = _fitted_window(runs, axes, attached, outlines, fixed, radii.max())
+    drawn_radii = np.maximum(radii, MIN_DRAWN_RADIUS * (hi - lo).max())
+    discs = np.arange(len(radii))
+    spun = spokes = None
+    if rotating is not None:
+        round_ = np.array([shape == "sphere" for shape in rotating.shapes], dtype=bool)
+        discs = np.setdiff1d(discs, rotating.index[~round_])
+        spun = np.flatnonzero(round_)
+        # their spokes: from the centre to body-fixed points on the (drawn) surface, along the body x and z axes
+        spokes = np.eye(3)[[0, 2]] * drawn_radii[rotating.index[spun], None, None]
+    orientations = None if rotations is None else [rotation.orientations for rotation in rotations]
+    return _View(axes, lo, hi, drawn_radii, discs, pairs, centers, tuple(shapes), rotating, extents, spun, spokes,
+                 orientations, outlines, attached)
+
+
+def _view_plane(view, runs, attached) -> list[int]:
+    """The two world axes shown: ``view``'s; else, with springs at body-frame points, the two along which the
+    centres and the attachment points move most (:func:`motion_view`); else the two the centres span most."""
+    if view is not None:
+        return [AXIS_NAMES.index(a) for a in view]
+    if attached is not None:
+        return motion_view([np.concatenate([traj.positions, springs.reshape(len(traj.t), -1, 3)], axis=1)
+                            for (_, traj), (springs, _) in zip(runs, attached)])
+    positions = np.concatenate([traj.positions for _, traj in runs])
+    spans = np.ptp(positions[np.isfinite(positions).all(axis=-1)], axis=0)
+    return sorted(np.argsort(spans)[-2:]) if spans.max() > 0 else [0, 2]
+
+
+def _fitted_window(runs, axes, attached, outlines, fixed, pad) -> tuple[np.ndarray, np.ndarray]:
+    """The window the panels share (:func:`shared_window`, padded by ``pad``) around each run's centres, its
+    attachment points and its rotating bodies' ``outlines`` on the plane of ``axes``, and the ``fixed`` points
+    (the static boxes' corners, the attracting masses); one wider than MAX_WINDOW is refused in one line."""
+    tracks = [traj.positions[..., axes] for _, traj in runs]
+    if attached is not None:
+        tracks = [np.concatenate([q, springs[..., axes].reshape(len(q), -1, 2)], axis=1)
+                  for q, (springs, _) in zip(tracks, attached)]
+    if outlines is not None:
+        tracks = [np.concatenate([q, points.reshape(len(q), -1, 2)], axis=1) for q, points in zip(tracks, outlines)]
+    lo, hi = shared_window(tracks, fixed, pad)
     width = float(np.max(hi - lo))
     if not width <= MAX_WINDOW:
         across = f"would be {width:.3g} m across" if np.isfinite(width) else "would overflow float64"
         raise ValueError(f"the picture's width {across} (the bodies with their radii, the static boxes and the "
                          f"attracting masses): animate draws at most {MAX_WINDOW:g} m")
-    drawn_radii = np.maximum(radii, MIN_DRAWN_RADIUS * (hi - lo).max())
-    discs = np.arange(len(radii))  # the bodies drawn as circles: all but the rotating boxes, capsules, cylinders
-    if rotations is not None:
-        round_ = np.array([shape == "sphere" for shape in rotating.shapes], dtype=bool)
-        discs = np.setdiff1d(discs, rotating.index[~round_])
-        spun = np.flatnonzero(round_)  # the rotating spheres, among the rotating bodies
-        # their spokes: from the centre to body-fixed points on the (drawn) surface, along the body x and z axes
-        spokes = np.eye(3)[[0, 2]] * drawn_radii[rotating.index[spun], None, None]
-    energies = [drawn_energies(model, traj, rotation)
-                for (_, traj), rotation in zip(runs, rotations or [None] * len(runs))]
-    changes, unit = energy_changes(energies)
+    return lo, hi
 
-    frames = min(MAX_FRAMES, max(len(traj.t) for _, traj in runs))
-    width, height = panel_size(hi - lo)
-    fig, grid = plt.subplots(2, len(runs), figsize=((width + 1.1) * len(runs), height + ENERGY_HEIGHT + 1.3),
-                             squeeze=False, dpi=DPI, gridspec_kw={"height_ratios": [height, ENERGY_HEIGHT]},
-                             sharex="row", sharey="row")
-    panels = []
-    for col, (label, traj) in enumerate(runs):
-        ax, eax = grid[0][col], grid[1][col]
-        ax.set_xlim(lo[0], hi[0])
-        ax.set_ylim(lo[1], hi[1])
-        ax.set_aspect("equal")
-        ax.set_xlabel(f"{AXIS_NAMES[axes_idx[0]]} (m)")
-        ax.set_ylabel(f"{AXIS_NAMES[axes_idx[1]]} (m)")
-        ax.set_title(label, fontsize=10)
-        _draw_shapes(ax, shapes, axes_idx, lo, hi)
-        if len(centers):
-            ax.plot(centers[:, axes_idx[0]], centers[:, axes_idx[1]], "*", color="tab:orange", ms=12,
-                    label="attracting mass")
-            ax.legend(loc="lower right", fontsize=8)
-        lines = LineCollection([], colors="0.5", linewidths=0.8, animated=True)
-        ax.add_collection(lines)
-        circles = PatchCollection([Circle((0, 0), r) for r in drawn_radii[discs]], facecolor="tab:blue",
-                                  edgecolor="k", linewidth=0.5, animated=True)
-        ax.add_collection(circles)
-        turned = solids = None
-        if solid is not None:  # the rotating bodies at each frame's orientation, spokes on the spheres
-            outlines = PolyCollection([], animated=True)
-            ax.add_collection(outlines)
-            spinning = LineCollection([], colors="k", linewidths=1.2, animated=True)
-            ax.add_collection(spinning)
-            solids = (solid[col], rotations[col].orientations, outlines, spinning)
-        if drawn is not None:  # over the bodies: each one's orientation, and the points its springs pull at
-            pointers = LineCollection([], colors="k", linewidths=1.5, animated=True)
-            ax.add_collection(pointers)
-            points, = ax.plot([], [], "o", color="tab:orange", mec="k", mew=0.5, ms=4, animated=True)
-            turned = (drawn[col], pointers, points)
-        clock = ax.text(0.02, 0.95, "", transform=ax.transAxes, fontsize=9, va="top", animated=True)
-        eax.plot(traj.t, changes[col], color="0.6", lw=1)
-        eax.axhline(0.0, color="0.85", lw=0.8, zorder=0)
-        marker, = eax.plot([], [], "o", color="tab:red", ms=4, animated=True)
-        eax.set_xlabel("time t (s)")
-        eax.set_ylabel(f"energy change\n({unit})", fontsize=9)
-        for axis in (ax.xaxis, ax.yaxis, eax.xaxis):
-            axis.set_major_locator(MaxNLocator(MAX_TICKS))
-        picks = np.linspace(0, len(traj.t) - 1, frames).round().astype(int)
-        panels.append((traj, picks, lines, circles, clock, marker, changes[col], turned, solids))
-    _energy_scale(grid[1][0], changes)
 
-    def shown(points):  # world points (..., 3) on the view plane, clipped onto the window's edge
-        return np.clip(np.nan_to_num(points[..., axes_idx], nan=0.0), lo, hi)
+def _figure(shared: _View, columns: int):
+    """The figure and its (2, columns) grid of axes: each run's scene panel, sized to the window's aspect ratio
+    (:func:`panel_size`), over its energy panel; the panels of a row share their axes."""
+    import matplotlib.pyplot as plt
 
-    def draw(frame):
-        for traj, picks, lines, circles, clock, marker, change, turned, solids in panels:
-            k = picks[frame]
-            centres = traj.positions[k][:, axes_idx]
-            inside = np.isfinite(centres).all(axis=1) & (centres >= lo).all(axis=1) & (centres <= hi).all(axis=1)
-            q = np.clip(np.nan_to_num(centres, nan=0.0), lo, hi)  # clipped onto the edge, and marked red
-            circles.set_paths([Circle(tuple(c), r) for c, r in zip(q[discs], drawn_radii[discs])])
-            circles.set_facecolor(np.where(inside[discs], "tab:blue", "tab:red"))
-            artists = [lines, circles, clock, marker]
-            if solids is not None:  # each outline and spoke moved with its centre where that is clipped
-                points, orientations, outlines, spinning = solids
-                at = rotating.index
-                shift = (q - np.nan_to_num(centres, nan=0.0))[at]
-                verts, faces, edges, widths = rigid_polygons(rotating.shapes, extents, traj.positions[k][at],
-                                                             orientations[k], points[k], axes_idx, inside[at])
-                outlines.set_verts([v + shift[b] for v, b in verts])
-                outlines.set_facecolor(faces)
-                outlines.set_edgecolor(edges)
-                outlines.set_linewidth(widths)
-                turned_spokes = quat.rotate(np, orientations[k][spun, None], spokes)[..., axes_idx]
-                ends = q[at[spun], None] + np.nan_to_num(turned_spokes, nan=0.0)
-                spinning.set_segments([[c, e] for c, pair in zip(q[at[spun]], ends) for e in pair])
-                artists[2:2] = [outlines, spinning]
-            if turned is not None:  # to the attachment points, not the centres
-                (springs, arms), pointers, points = turned
-                lines.set_segments(shown(springs[k]))
-                pointers.set_segments(shown(arms[k]))
-                ends = shown(springs[k].reshape(-1, 3))
-                points.set_data(ends[:, 0], ends[:, 1])
-                artists[-2:-2] = [pointers, points]
-            elif pairs is not None:
-                lines.set_segments(np.stack([q[pairs[:, 0]], q[pairs[:, 1]]], axis=1))
-            clock.set_text(f"t = {traj.t[k]:.2f} s")
-            marker.set_data([traj.t[k]], [change[k]])
-            for artist in artists:
-                artist.axes.draw_artist(artist)
+    width, height = panel_size(shared.hi - shared.lo)
+    return plt.subplots(2, columns, figsize=((width + 1.1) * columns, height + ENERGY_HEIGHT + 1.3),
+                        squeeze=False, dpi=DPI, gridspec_kw={"height_ratios": [height, ENERGY_HEIGHT]},
+                        sharex="row", sharey="row")
+
+
+@dataclass(frozen=True)
+class _Rotating:
+    """A panel's rotating bodies: their orientations (K, R, 4) and outline points (K, R, P, 2) at each saved
+    state, and the artists that draw them at a frame's."""
+
+    orientations: np.ndarray
+    points: np.ndarray
+    outlines: PolyCollection  # all but the spheres: a box's faces and outline, a capsule's or cylinder's outline
+    spokes: LineCollection  # the spheres' spokes
+
+
+@dataclass(frozen=True)
+class _Attached:
+    """A panel's springs at body-frame points: their end points (K, P, 2, 3) and the rotating bodies' lever
+    arms (K, B, 2, 3) at each saved state (:func:`attached_frames`), and the artists that draw a frame's
+    arms and attachment points."""
+
+    springs: np.ndarray
+    arms: np.ndarray
+    arm_lines: LineCollection
+    points: Line2D
+
+
+@dataclass(frozen=True)
+class _Panel:
+    """One run's column as each frame redraws it: the run, the saved state each frame shows, and the artists
+    that move (``animated=True``, so that the static figure is drawn once without them)."""
+
+    traj: object  # the run's Trajectory
+    picks: np.ndarray  # the saved state each frame shows (frames,)
+    change: np.ndarray  # the energy change at each saved state (K,)
+    springs: LineCollection  # centre to centre, or to the attachment points
+    discs: PatchCollection  # the bodies drawn as circles
+    rotating: _Rotating | None
+    attached: _Attached | None
+    clock: Text
+    marker: Line2D  # the frame's time on the energy curve
+
+    def animated(self) -> list:
+        """The moving artists in the order each frame draws them: the springs under the bodies, the lever arms
+        and attachment points over them."""
+        rotating = (self.rotating.outlines, self.rotating.spokes) if self.rotating is not None else ()
+        attached = (self.attached.arm_lines, self.attached.points) if self.attached is not None else ()
+        return [self.springs, self.discs, *rotating, *attached, self.clock, self.marker]
+
+
+def _panel(column, shared: _View, col: int, run, change, unit: str, frames: int) -> _Panel:
+    """Run ``col``'s column of the figure, ``column`` its two axes: the scene panel's static parts
+    (:func:`_scene_axes`) and its moving artists, then the energy panel (:func:`_energy_panel`)."""
+    from matplotlib.collections import LineCollection, PatchCollection, PolyCollection
+    from matplotlib.patches import Circle
+    from matplotlib.ticker import MaxNLocator
+
+    (ax, eax), (label, traj) = column, run
+    _scene_axes(ax, shared, label)
+    # added in the order they are drawn, so that the bodies cover the springs' ends
+    springs = ax.add_collection(LineCollection([], colors="0.5", linewidths=0.8, animated=True))
+    discs = ax.add_collection(PatchCollection([Circle((0, 0), r) for r in shared.radii[shared.discs]],
+                                              facecolor="tab:blue", edgecolor="k", linewidth=0.5, animated=True))
+    rotating = attached = None
+    if shared.outlines is not None:  # the rotating bodies at each frame's orientation, spokes on the spheres
+        rotating = _Rotating(shared.orientations[col], shared.outlines[col],
+                             ax.add_collection(PolyCollection([], animated=True)),
+                             ax.add_collection(LineCollection([], colors="k", linewidths=1.2, animated=True)))
+    if shared.attached is not None:  # over the bodies: each one's orientation, and the points its springs pull at
+        arm_lines = ax.add_collection(LineCollection([], colors="k", linewidths=1.5, animated=True))
+        points, = ax.plot([], [], "o", color="tab:orange", mec="k", mew=0.5, ms=4, animated=True)
+        attached = _Attached(*shared.attached[col], arm_lines, points)
+    clock = ax.text(0.02, 0.95, "", transform=ax.transAxes, fontsize=9, va="top", animated=True)
+    marker = _energy_panel(eax, traj.t, change, unit)
+    for axis in (ax.xaxis, ax.yaxis, eax.xaxis):
+        axis.set_major_locator(MaxNLocator(MAX_TICKS))
+    picks = np.linspace(0, len(traj.t) - 1, frames).round().astype(int)
+    return _Panel(traj, picks, change, springs, discs, rotating, attached, clock, marker)
+
+
+def _scene_axes(ax, shared: _View, label: str) -> None:
+    """A scene panel's static parts: the shared window at equal aspect, its axes named, the run's ``label`` as
+    its title, the static shapes in grey and the attracting masses as stars."""
+    ax.set_xlim(shared.lo[0], shared.hi[0])
+    ax.set_ylim(shared.lo[1], shared.hi[1])
+    ax.set_aspect("equal")
+    ax.set_xlabel(f"{AXIS_NAMES[shared.axes[0]]} (m)")
+    ax.set_ylabel(f"{AXIS_NAMES[shared.axes[1]]} (m)")
+    ax.set_title(label, fontsize=10)
+    _draw_shapes(ax, shared.statics, shared.axes, shared.lo, shared.hi)
+    if len(shared.centers):
+        ax.plot(shared.centers[:, shared.axes[0]], shared.centers[:, shared.axes[1]], "*", color="tab:orange",
+                ms=12, label="attracting mass")
+        ax.legend(loc="lower right", fontsize=8)
+
+
+def _energy_panel(eax, t, change, unit: str):
+    """A run's energy panel: its energy ``change`` against the saved times ``t``, drawn once, about a line at 0;
+    returns the marker each frame moves along it."""
+    eax.plot(t, change, color="0.6", lw=1)
+    eax.axhline(0.0, color="0.85", lw=0.8, zorder=0)
+    marker, = eax.plot([], [], "o", color="tab:red", ms=4, animated=True)
+    eax.set_xlabel("time t (s)")
+    eax.set_ylabel(f"energy change\n({unit})", fontsize=9)
+    return marker
+
+
+def _write_frames(fig, panels: list[_Panel], shared: _View, frames: int, out: Path, fps: int) -> None:
+    """Draw the static figure once, then each frame's moving artists over a copy of it (blitting), and write the
+    frames to ``out`` as they are drawn; the figure is closed after."""
+    import matplotlib.pyplot as plt
+
+    from steplab.core.records import write_with
 
     fig.tight_layout()
     try:
@@ -274,7 +372,8 @@ def animate(runs: list[tuple[str, object]], model, out: str | Path, fps: int = 3
         def images():
             for frame in range(frames):
                 fig.canvas.restore_region(background)
-                draw(frame)
+                for panel in panels:
+                    _draw_frame(panel, shared, frame)
                 yield np.asarray(fig.canvas.buffer_rgba())[..., :3]
 
         # Pillow and ffmpeg pick the format from the file's name: the one atomic writer hands
@@ -283,7 +382,59 @@ def animate(runs: list[tuple[str, object]], model, out: str | Path, fps: int = 3
         write_with(out, lambda tmp: save(tmp, images(), fps))
     finally:
         plt.close(fig)
-    return out
+
+
+def _draw_frame(panel: _Panel, shared: _View, frame: int) -> None:
+    """Move one panel's artists to the saved state ``frame`` shows, and draw them: a body outside the window
+    is drawn on its edge, in red."""
+    from matplotlib.patches import Circle
+
+    traj, k, discs = panel.traj, panel.picks[frame], shared.discs
+    centres = traj.positions[k][:, shared.axes]
+    inside = (np.isfinite(centres).all(axis=1) & (centres >= shared.lo).all(axis=1)
+              & (centres <= shared.hi).all(axis=1))
+    q = shared.shown(traj.positions[k])  # clipped onto the edge, and marked red
+    panel.discs.set_paths([Circle(tuple(c), r) for c, r in zip(q[discs], shared.radii[discs])])
+    panel.discs.set_facecolor(np.where(inside[discs], "tab:blue", "tab:red"))
+    if panel.rotating is not None:
+        _draw_rotating(panel.rotating, shared, k, traj.positions[k], centres, q, inside)
+    if panel.attached is not None:  # to the attachment points, not the centres
+        _draw_attached(panel.attached, panel.springs, shared, k)
+    elif shared.pairs is not None:
+        panel.springs.set_segments(np.stack([q[shared.pairs[:, 0]], q[shared.pairs[:, 1]]], axis=1))
+    panel.clock.set_text(f"t = {traj.t[k]:.2f} s")
+    panel.marker.set_data([traj.t[k]], [panel.change[k]])
+    for artist in panel.animated():
+        artist.axes.draw_artist(artist)
+
+
+def _draw_rotating(rotating: _Rotating, shared: _View, k: int, x, centres, q, inside) -> None:
+    """The rotating bodies at saved state ``k`` (centres ``x`` (N, 3)): their faces and outlines
+    (:func:`rigid_polygons`) and the spheres' spokes, each moved with its centre where that is clipped
+    onto the window's edge (from ``centres`` to ``q``, both (N, 2))."""
+    from steplab.physics import quaternion as quat
+
+    at, spun = shared.rotating.index, shared.spun
+    orientations = rotating.orientations[k]
+    shift = (q - np.nan_to_num(centres, nan=0.0))[at]
+    verts, faces, edges, widths = rigid_polygons(shared.rotating.shapes, shared.extents, x[at], orientations,
+                                                 rotating.points[k], shared.axes, inside[at])
+    rotating.outlines.set_verts([v + shift[b] for v, b in verts])
+    rotating.outlines.set_facecolor(faces)
+    rotating.outlines.set_edgecolor(edges)
+    rotating.outlines.set_linewidth(widths)
+    turned_spokes = quat.rotate(np, orientations[spun, None], shared.spokes)[..., shared.axes]
+    ends = q[at[spun], None] + np.nan_to_num(turned_spokes, nan=0.0)
+    rotating.spokes.set_segments([[c, e] for c, pair in zip(q[at[spun]], ends) for e in pair])
+
+
+def _draw_attached(attached: _Attached, springs, shared: _View, k: int) -> None:
+    """The springs at saved state ``k`` to their attachment points, each rotating body's lever arms, and the
+    points themselves; ``springs`` is the panel's spring lines."""
+    springs.set_segments(shared.shown(attached.springs[k]))
+    attached.arm_lines.set_segments(shared.shown(attached.arms[k]))
+    ends = shared.shown(attached.springs[k].reshape(-1, 3))
+    attached.points.set_data(ends[:, 0], ends[:, 1])
 
 
 def _write_gif(path: Path, images, fps: int) -> None:
