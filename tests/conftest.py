@@ -2,7 +2,9 @@
 
 from __future__ import annotations
 
+import contextlib
 import os
+import shutil
 import sys
 from pathlib import Path
 
@@ -70,31 +72,49 @@ def lecture_projectile():
     return helpers.lecture_projectile()
 
 
+@contextlib.contextmanager
+def _locked(path: Path):
+    """An exclusive lock on ``path`` among this run's processes (xdist's workers)."""
+    import fcntl
+
+    with open(path, "a") as handle:
+        fcntl.flock(handle, fcntl.LOCK_EX)
+        try:
+            yield
+        finally:
+            fcntl.flock(handle, fcntl.LOCK_UN)
+
+
+@pytest.fixture(scope="session")
+def quick_records(tmp_path_factory):
+    """``copy(out, names)``: the quick records and figures of the built-in studies ``names`` copied into
+    ``out``, where runner.run_study then finds them cached (the same parameters and code). Each is run
+    once per test run rather than once per test file that shows or compares it: by the first process
+    to ask, into a folder that every xdist worker of the run shares, under a lock; a quick record is
+    the same bytes whichever process computes it (less its provenance), as tests/test_dask.py checks."""
+    from steplab.studies import STUDIES, runner
+
+    base = tmp_path_factory.getbasetemp()
+    shared = (base.parent if os.environ.get("PYTEST_XDIST_WORKER") else base) / "quick-records"
+
+    def copy(out: Path, names) -> Path:
+        for name in names:
+            folder = shared / name  # a folder each: run_study clears its folder's temporary files
+            folder.mkdir(parents=True, exist_ok=True)
+            with _locked(shared / f"{name}.lock"):
+                record = runner.run_study(STUDIES[name], folder, quick=True)
+                for file in (f"{name}.json", *record["figures"]):
+                    shutil.copy2(folder / file, Path(out) / file)
+        return Path(out)
+
+    return copy
+
+
 @pytest.fixture
 def drawn(monkeypatch):
     """What ``steplab animate`` gives steplab.animate and draws: each call's runs and rotations, the
-    energies of its energy panel and the view's axes that motion_view picks."""
-    import steplab.animate
-
-    seen = {"calls": [], "energies": [], "views": []}
-    animate, changes, view = steplab.animate.animate, steplab.animate.energy_changes, steplab.animate.motion_view
-
-    def animate_(runs, model, out, **kw):
-        seen["calls"].append((runs, kw.get("rotations")))
-        return animate(runs, model, out, **kw)
-
-    def changes_(energies):
-        seen["energies"].append(energies)
-        return changes(energies)
-
-    def view_(tracks):
-        seen["views"].append(view(tracks))
-        return seen["views"][-1]
-
-    monkeypatch.setattr(steplab.animate, "animate", animate_)
-    monkeypatch.setattr(steplab.animate, "energy_changes", changes_)
-    monkeypatch.setattr(steplab.animate, "motion_view", view_)
-    return seen
+    energies of its energy panel and the view's axes that motion_view picks (helpers.spy_on_animate)."""
+    return helpers.spy_on_animate(monkeypatch)
 
 
 def pytest_terminal_summary(terminalreporter):

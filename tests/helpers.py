@@ -246,6 +246,33 @@ def spring_net(seed, n=8, p=16):
     return model, np.stack([q, rng.normal(0.0, 1.0, (n, 3))])
 
 
+def spy_on_animate(patch) -> dict:
+    """What ``steplab animate`` gives steplab.animate and draws, while ``patch`` (a pytest.MonkeyPatch) holds:
+    each call's runs and rotations, the energies of its energy panel and the view's axes that motion_view
+    picks (the ``drawn`` fixture of tests/conftest.py)."""
+    import steplab.animate
+
+    seen = {"calls": [], "energies": [], "views": []}
+    animate, changes, view = steplab.animate.animate, steplab.animate.energy_changes, steplab.animate.motion_view
+
+    def animate_(runs, model, out, **kw):
+        seen["calls"].append((runs, kw.get("rotations")))
+        return animate(runs, model, out, **kw)
+
+    def changes_(energies):
+        seen["energies"].append(energies)
+        return changes(energies)
+
+    def view_(tracks):
+        seen["views"].append(view(tracks))
+        return seen["views"][-1]
+
+    patch.setattr(steplab.animate, "animate", animate_)
+    patch.setattr(steplab.animate, "energy_changes", changes_)
+    patch.setattr(steplab.animate, "motion_view", view_)
+    return seen
+
+
 def run_main(capsys, argv) -> tuple[int, str, str]:
     """``steplab *argv`` in this process: (status, stdout, stderr); argparse's refusals, which exit, caught."""
     from steplab.cli import main

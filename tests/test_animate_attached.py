@@ -2,15 +2,20 @@
 with the rotation as ``steplab run`` steps it, its energy the one run reports, its springs drawn to
 their attachment points and the view the plane of the swing."""
 
+import contextlib
+import io
 import json
 from pathlib import Path
 
 import numpy as np
 import pytest
-from helpers import refused, run_main
+from helpers import refused, run_main, spy_on_animate
 from steplab.physics.scene import load_scene
 
 T_END = "0.05"  # 50 steps of the scene's 1 ms
+#: what the tests of the panels' runs and of the view need: 20 steps, 21 frames to draw rather than 51 (the two
+#: methods' final energies already differ by 2e-4 of them, and the swing is already in x-z)
+SHORT = "0.02"
 #: the spring-pendulum's cube: 1 kg, 0.1 m on a side, hung at its corner (a/2, a/2, a/2) by k = 1e5 N/m, L = 0
 MASS, SIDE, STIFFNESS, CORNER = 1.0, 0.1, 1e5, np.array([0.05, 0.05, 0.05])
 
@@ -29,12 +34,27 @@ def run_json(capsys, *argv) -> dict:
     return json.loads(out)
 
 
-def test_animate_draws_the_spring_pendulum_with_the_energy_run_reports(capsys, tmp_path, drawn):
+@pytest.fixture(scope="module")
+def animated(tmp_path_factory):
+    """``steplab animate spring-pendulum --t-end T_END --fps 5``, run once for the tests of that one run (rendering
+    its GIF takes seconds): the status, stdout, stderr, the GIF's path and what it drew (the ``drawn`` fixture's)."""
+    from steplab.cli import main
+
+    out = tmp_path_factory.mktemp("animate") / "a.gif"
+    stdout, stderr = io.StringIO(), io.StringIO()
+    with pytest.MonkeyPatch.context() as patch, contextlib.redirect_stdout(stdout), contextlib.redirect_stderr(stderr):
+        drawn = spy_on_animate(patch)
+        try:
+            status = main(["animate", "spring-pendulum", "--t-end", T_END, "--fps", "5", "--out", str(out)])
+        except SystemExit as exit_:
+            status = exit_.code
+    return status, stdout.getvalue(), stderr.getvalue(), out, drawn
+
+
+def test_animate_draws_the_spring_pendulum_with_the_energy_run_reports(capsys, animated):
     from PIL import Image
 
-    out = tmp_path / "a.gif"
-    status, text, err = run_main(capsys, ["animate", "spring-pendulum", "--t-end", T_END, "--fps", "5",
-                                          "--out", str(out)])
+    status, text, err, out, drawn = animated
     assert status == 0, err
     assert "rotation: exponential-map (coupled)" in text  # the scene's rotation method, as run's without --rotation
     with Image.open(out) as gif:
@@ -48,9 +68,8 @@ def test_animate_draws_the_spring_pendulum_with_the_energy_run_reports(capsys, t
     assert drawn["views"] == [[1, 2]]  # it swings about x: y-z
 
 
-def test_the_energy_drawn_is_the_whole_energy_at_each_frames_orientation(capsys, tmp_path, drawn):
-    status, _, err = run_main(capsys, ["animate", "spring-pendulum", "--t-end", T_END, "--fps", "5",
-                                       "--out", str(tmp_path / "a.gif")])
+def test_the_energy_drawn_is_the_whole_energy_at_each_frames_orientation(animated):
+    status, _, err, _, drawn = animated
     assert status == 0, err
     [([(_, traj)], [rotation])] = drawn["calls"]
     [[energies]] = drawn["energies"]
@@ -67,7 +86,7 @@ def test_the_energy_drawn_is_the_whole_energy_at_each_frames_orientation(capsys,
 
 def test_compare_runs_each_integrator_with_the_rotation(capsys, tmp_path, drawn):
     names = ["semi-implicit-euler", "velocity-verlet"]
-    status, _, err = run_main(capsys, ["animate", "spring-pendulum", "--compare", ",".join(names), "--t-end", T_END,
+    status, _, err = run_main(capsys, ["animate", "spring-pendulum", "--compare", ",".join(names), "--t-end", SHORT,
                                        "--fps", "5", "--out", str(tmp_path / "a.gif")])
     assert status == 0, err
     [energies] = drawn["energies"]
@@ -76,7 +95,7 @@ def test_compare_runs_each_integrator_with_the_rotation(capsys, tmp_path, drawn)
     for name, (_, traj), e in zip(names, runs, energies):
         assert traj.integrator == name
         assert e[-1] == pytest.approx(run_json(capsys, "spring-pendulum", "--integrator", name, "--t-end",
-                                               T_END)["energy_end"], rel=1e-12)
+                                               SHORT)["energy_end"], rel=1e-12)
 
 
 def test_springs_are_drawn_to_the_attachment_points():
@@ -136,7 +155,7 @@ def _two_pendulums_swinging_in_xz(tmp_path):
 
 def test_the_default_view_is_the_plane_of_the_swing(capsys, tmp_path, drawn):
     scene = _two_pendulums_swinging_in_xz(tmp_path)
-    status, _, err = run_main(capsys, ["animate", str(scene), "--t-end", T_END, "--fps", "5",
+    status, _, err = run_main(capsys, ["animate", str(scene), "--t-end", SHORT, "--fps", "5",
                                        "--out", str(tmp_path / "a.gif")])
     assert status == 0, err
     # the pendulums 0.3 m apart along y do not move along it: the extent of all the bodies picked y-z

@@ -28,11 +28,11 @@ def without_provenance(path) -> bytes:
 
 
 @pytest.fixture(scope="module")
-def serial(tmp_path_factory):
-    """The serial quick records of the compared studies."""
-    out = tmp_path_factory.mktemp("serial")
+def serial(tmp_path_factory, quick_records):
+    """The serial quick records of the compared studies (run in this test run's first process to ask)."""
+    out = quick_records(tmp_path_factory.mktemp("serial"), STUDIES_COMPARED)
     for name in STUDIES_COMPARED:
-        runner.run_study(STUDIES[name], out, quick=True)
+        runner.run_study(STUDIES[name], out, quick=True)  # cached
     return out
 
 

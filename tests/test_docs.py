@@ -77,9 +77,9 @@ def test_without_records_the_study_pages_show_the_papers_figures_and_numbers(tmp
 
 
 @pytest.fixture(scope="module")
-def results(tmp_path_factory):
-    out = tmp_path_factory.mktemp("results")
-    run_study(STUDIES["frame_rate"], out, quick=True)
+def results(tmp_path_factory, quick_records):
+    out = quick_records(tmp_path_factory.mktemp("results"), ["frame_rate"])
+    run_study(STUDIES["frame_rate"], out, quick=True)  # cached
     return out
 
 
@@ -126,16 +126,23 @@ def test_the_site_builds_strictly_with_a_page_per_study(site):
 
 
 @pytest.fixture(scope="module")
-def browser(site):
+def server(site):
+    """The site over HTTP (its search runs in a web worker, which a file:// page may not start)."""
+    server = http.server.ThreadingHTTPServer(("127.0.0.1", 0), partial(_QuietHandler, directory=str(site)))
+    server.search_index = None  # bytes: sent for search/search_index.json in place of the file (_QuietHandler)
+    threading.Thread(target=server.serve_forever, daemon=True).start()
+    yield server
+    server.shutdown()
+
+
+@pytest.fixture(scope="module")
+def browser(server):
     browser, driver = shutil.which("chromium") or shutil.which("chromium-browser"), shutil.which("chromedriver")
     if browser is None or driver is None:
         helpers.browser_missing()
     from selenium import webdriver
     from selenium.webdriver.chrome.service import Service
 
-    # the site over HTTP (its search runs in a web worker, which a file:// page may not start)
-    server = http.server.ThreadingHTTPServer(("127.0.0.1", 0), partial(_QuietHandler, directory=str(site)))
-    threading.Thread(target=server.serve_forever, daemon=True).start()
     options = webdriver.ChromeOptions()
     options.binary_location = browser
     for flag in ("--headless=new", "--no-sandbox", "--disable-gpu", "--window-size=1280,1600",
@@ -146,10 +153,30 @@ def browser(site):
     chrome.set_page_load_timeout(60)
     yield chrome, f"http://127.0.0.1:{server.server_address[1]}/"
     chrome.quit()
-    server.shutdown()
 
 
 class _QuietHandler(http.server.SimpleHTTPRequestHandler):
+    """The site's files; search/search_index.json never cached by the browser, and replaced by
+    ``server.search_index`` where that is set."""
+
+    def _is_search_index(self) -> bool:
+        return Path(self.translate_path(self.path)) == Path(self.directory) / "search" / "search_index.json"
+
+    def do_GET(self):
+        stub = self.server.search_index
+        if stub is None or not self._is_search_index() or not Path(self.translate_path(self.path)).is_file():
+            return super().do_GET()
+        self.send_response(200)
+        self.send_header("Content-Type", "application/json")
+        self.send_header("Content-Length", str(len(stub)))
+        self.end_headers()
+        self.wfile.write(stub)
+
+    def end_headers(self):
+        if self._is_search_index():  # each page's worker fetches what the server sends now
+            self.send_header("Cache-Control", "no-store")
+        super().end_headers()
+
     def log_message(self, *args):
         pass
 
@@ -159,7 +186,20 @@ def _console_errors(chrome) -> list[str]:
     return [entry["message"] for entry in chrome.get_log("browser") if entry["level"] == "SEVERE"]
 
 
-def test_every_page_loads_without_console_errors_and_its_images_and_links_resolve(site, browser):
+@pytest.fixture
+def one_page_search_index(site, server):
+    """The search index cut to its first page while a test loads every page: each page's search worker
+    still fetches it (a wrong URL still fails) and builds an index with it, but not the whole site's
+    (over a megabyte: most of the CPU time of loading the pages, the same work on every one). The
+    whole index is built and searched, and the console checked, in test_the_search_finds_restitution."""
+    index = json.loads((site / "search" / "search_index.json").read_text())
+    server.search_index = json.dumps(index | {"docs": index["docs"][:1]}).encode()
+    yield
+    server.search_index = None
+
+
+def test_every_page_loads_without_console_errors_and_its_images_and_links_resolve(site, browser,
+                                                                                  one_page_search_index):
     chrome, base = browser
     pages = sorted(p.relative_to(site).as_posix() for p in site.rglob("*.html") if p.name != "404.html")
     assert len(pages) > 30

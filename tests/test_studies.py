@@ -248,14 +248,32 @@ def test_interrupted_run_leaves_no_partial_files_and_resumes(tmp_path):
     assert json.loads((tmp_path / "b.json").read_text())["value"] == 3
 
 
-def test_recommend_meets_the_tolerance_when_run_independently():
-    """Re-run what `recommend` picks on the NumPy path: the error stays under the tolerance."""
-    from steplab.integrators import simulate
+@pytest.fixture(scope="module")
+def drag_projectile():
+    """recommend's drag projectile and its true final state (an adaptive reference solve of seconds)."""
     from steplab.studies.problems import scene_problem
-    from steplab.studies.recommend import recommend
 
     problem = scene_problem("drag-projectile", 2.0, "drag")
-    truth, _ = true_final(problem)
+    return problem, true_final(problem)
+
+
+@pytest.fixture
+def solved_once(drag_projectile, monkeypatch):
+    """The drag projectile, whose reference recommend takes from its fixture rather than solving it again on
+    every call: the same deterministic solve of the same problem (any other problem is solved as before)."""
+    from steplab.studies import recommend as rec
+
+    problem, solved = drag_projectile
+    monkeypatch.setattr(rec, "true_final", lambda p: solved if p is problem else true_final(p))
+    return problem, solved
+
+
+def test_recommend_meets_the_tolerance_when_run_independently(solved_once):
+    """Re-run what `recommend` picks on the NumPy path: the error stays under the tolerance."""
+    from steplab.integrators import simulate
+    from steplab.studies.recommend import recommend
+
+    problem, (truth, _) = solved_once
     for tol in (1e-3, 1e-7):
         choice = recommend(problem, tol)
         traj = simulate(problem.model, choice["integrator"], problem.y0, problem.t_start, problem.t_end,
@@ -265,10 +283,9 @@ def test_recommend_meets_the_tolerance_when_run_independently():
         assert choice["error"] <= tol and choice["seconds"] > 0
 
 
-def test_recommend_times_every_answer_in_the_same_interleaved_rounds(monkeypatch):
+def test_recommend_times_every_answer_in_the_same_interleaved_rounds(monkeypatch, solved_once):
     # timed one after another, a burst of load on one answer made a slower method the cheapest
     from steplab.studies import recommend as rec
-    from steplab.studies.problems import scene_problem
 
     rounds = []
 
@@ -277,7 +294,7 @@ def test_recommend_times_every_answer_in_the_same_interleaved_rounds(monkeypatch
         return {m: 1.0 if m == "heun" else 2.0 for m in calls}  # heun the cheapest in these rounds
 
     monkeypatch.setattr(rec, "interleaved_medians", interleaved)
-    problem = scene_problem("drag-projectile", 2.0, "drag")
+    problem, _ = solved_once
     choice = rec.recommend(problem, 1e-3, integrators=["rk4", "midpoint", "heun"])
     assert rounds == [["heun", "midpoint", "rk4"]] and choice["integrator"] == "heun" and choice["seconds"] == 1.0
 
