@@ -19,7 +19,11 @@ from .table import table
 
 
 def add_parser(sub, name: str) -> None:
-    p = sub.add_parser(name, help="predict the largest stable dt of each fixed-step integrator on a scene")
+    p = sub.add_parser(name, help="predict the largest stable dt of each fixed-step integrator on a scene",
+                       description="Predict the largest stable dt of each fixed-step integrator on a scene, from its "
+                       "stiffest mode; with rotating bodies, the rotation method's too; with springs at body-frame "
+                       "points, each integrator paired with the rotation method (--rotation): 'composes', or how "
+                       "fast the pair grows a step (JSON: integrators[].coupled).")
     scene_argument(p)
     p.add_argument("--integrator", type=nonempty, help="only this integrator (default: every fixed-step one)")
     p.add_argument("--dt", type=positive, help="the dt to check, s (default: the scene's)")
