@@ -62,7 +62,7 @@ def command(args) -> int:
     if _coupled(scene):  # springs at body-frame points without collisions: the coupled step's pair
         from steplab.integrators.coupled_stability import grows, pair_growth
 
-        for row, stepper in zip(report["integrators"], [s for s in steppers if isinstance(s, Stepper)]):
+        for row, stepper in zip(report["integrators"], steppers):  # every one a Stepper (above)
             row["coupled"] = pair_growth(scene.model, scene.rigid_bodies, stepper, rotation, scene.y0, dt, steps)
             row["stable"] = row["stable"] and not grows(row["coupled"])
     if scene.rigid_bodies is not None:
