@@ -97,8 +97,8 @@ def composes(integrator, rotation) -> bool:
 
 
 def model_at(c: Coupling, q, omega):
-    """The model with its lever arms at the rotating bodies' ``q`` (R, 4) and body-frame ``omega`` (R, 3);
-    with the orientations (N, 4) of all bodies (the identity and zero for a point mass)."""
+    """The model with its lever arms at the rotating bodies' ``q`` (R, 4) and body-frame ``omega`` (R, 3)
+    (a point mass's at the identity and zero)."""
     xp, n, index = c.xp, c.model.n_bodies, c.bodies.index
     identity = np.broadcast_to(quat.IDENTITY, (n, 4))
     world = quat.rotate(xp, q, omega)
@@ -108,21 +108,21 @@ def model_at(c: Coupling, q, omega):
     else:
         orientations = xp.asarray(identity, dtype=q.dtype).at[index].set(q)
         angular_velocities = xp.zeros((n, 3), dtype=q.dtype).at[index].set(world)
-    return attachments.model_at(c.model, orientations, angular_velocities, xp, c.dtype), orientations
+    return attachments.model_at(c.model, orientations, angular_velocities, xp, c.dtype)
 
 
 def accelerations(c: Coupling, t, x, v, q, omega):
     """The centres' acceleration (N, 3) and the rotating bodies' body-frame torque (R, 3) at one state."""
-    model, orientations = model_at(c, q, omega)
-    torque = attachments.torques(model, x, v, orientations)[c.bodies.index]
+    model = model_at(c, q, omega)
+    torque = attachments.torques(model, x, v)[c.bodies.index]
     return model.acceleration(t, x, v), quat.rotate_inverse(c.xp, q, torque)
 
 
 def held_step(c: Coupling, t, y, q, omega, dt):
     """One step in which each system steps with the other held at the start of the step: (y, q, omega)."""
-    model, orientations = model_at(c, q, omega)
+    model = model_at(c, q, omega)
     y1, _ = c.integrator.step(model, t, y, dt, c.integrator.init(model, t, y))
-    torque = _HeldTorque(c, y[0], y[1], (q, omega, model, orientations))
+    torque = _HeldTorque(c, y[0], y[1], (q, omega, model))
     q1, omega1 = c.rotation.step(c.rotation_model((torque,)), t, q, omega, dt)
     return y1, q1, omega1
 
@@ -156,8 +156,8 @@ def joint_step(c: Coupling, t, y, q, omega, dt):
 
     def rate(t, z):
         y, q, omega = packed.unpack(xp, z)
-        model, orientations = model_at(c, q, omega)
-        torque = quat.rotate_inverse(xp, q, attachments.torques(model, y[0], y[1], orientations)[c.bodies.index])
+        model = model_at(c, q, omega)
+        torque = quat.rotate_inverse(xp, q, attachments.torques(model, y[0], y[1])[c.bodies.index])
         alpha = (torque - quat.cross(xp, omega, inertia * omega)) / inertia  # Euler's equations
         return packed.pack(xp, model.vector_field(t, y), 0.5 * quat.multiply_vector(xp, q, omega), alpha)
 
@@ -208,12 +208,13 @@ class AttachedStep:
         self._kept = None  # the Strang splitting's last acceleration and torque, for the next first kick
 
     def model_at(self, q, omega):
-        """:func:`model_at` of this run: (model, orientations of all bodies)."""
+        """:func:`model_at` of this run: the model with its lever arms at ``q`` (R, 4) and body-frame
+        ``omega`` (R, 3)."""
         return model_at(self.coupling, q, omega)
 
     def final_model(self):
         """The model with its lever arms at the last step's orientations (for the energy at the end)."""
-        return self.model_at(self.q, self.omega)[0]
+        return self.model_at(self.q, self.omega)
 
     def __call__(self, t, y, dt, carry):
         c = self.coupling
@@ -293,16 +294,16 @@ class _Packed:
 
 class _HeldTorque:
     """The attached forces' torque at positions ``x`` and velocities ``v`` held over a rotation step;
-    ``start`` is (q, omega, model, orientations) at the step's start, which most methods ask for."""
+    ``start`` is (q, omega, model) at the step's start, which most methods ask for."""
 
     def __init__(self, c: Coupling, x, v, start):
         self.coupling, self.x, self.v, self.start = c, x, v, start
 
     def torque(self, xp, t, q, omega_body):
-        q0, omega0, model, orientations = self.start
+        q0, omega0, model = self.start
         if q is not q0 or omega_body is not omega0:  # a stage inside the step (rk4, dlm's second kick)
-            model, orientations = model_at(self.coupling, q, omega_body)
-        return attachments.torques(model, self.x, self.v, orientations)[self.coupling.bodies.index]
+            model = model_at(self.coupling, q, omega_body)
+        return attachments.torques(model, self.x, self.v)[self.coupling.bodies.index]
 
 
 def scene_stepper(scene, kept: list | None = None, world=None, rotation=None, save_every: int = 1):

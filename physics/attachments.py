@@ -13,10 +13,14 @@ non-zero offset on a body that does not rotate is refused. A spring to a fixed w
 spring to a pinned point mass there (``pinned = true``), with a zero offset at that end.
 
 A force carries its points as an :class:`Attachment`, with their lever arms R(q) r at the
-orientations it is evaluated at; :func:`model_at` gives the model at other orientations. The
-rotation and the translation are then coupled: :mod:`steplab.integrators.attached` steps them
-together. A force without offsets has no attachment and does exactly what it did before.
-Every function here takes the model's array namespace (NumPy, or jax.numpy inside the
+orientations it is evaluated at; :func:`model_at` gives the model at other orientations, a new
+one each time, and :class:`LeverArms` one model whose arms it turns in place, for a step that
+takes them at every substep (the contact solver's). Both rotate all the attached forces' points
+at once (:class:`AttachedPoints`): a scene's springs and dampers are few, so a step's cost is
+NumPy's per-call overhead on arrays of a few rows, which grows with the number of calls, not of
+rows. The rotation and the translation are then coupled: :mod:`steplab.integrators.attached`
+steps them together. A force without offsets has no attachment and does exactly what it did
+before. Every function here takes the model's array namespace (NumPy, or jax.numpy inside the
 compiled loop), so both backends evaluate the same formulas.
 """
 
@@ -30,7 +34,6 @@ import numpy as np
 
 from . import quaternion as quat
 from . import rules
-from .rigid_body import torque_of_forces
 
 #: what a scene is told when it attaches off-centre to a point mass
 NEEDS_ROTATION = ("a point attachment needs a rotating body: give it a shape, inertia, orientation or "
@@ -55,7 +58,11 @@ class Attachment(NamedTuple):
 
 def attachment_at(xp, offsets, i, j, orientations, angular_velocities) -> Attachment:
     """The :class:`Attachment` of pairs (i, j) at body-frame ``offsets`` (P, 2, 3) for the bodies'
-    ``orientations`` (N, 4) and world ``angular_velocities`` (N, 3) (identity and zero for a point mass)."""
+    ``orientations`` (N, 4) and world ``angular_velocities`` (N, 3) (identity and zero for a point mass).
+
+    Each end rotated on its own and the two stacked: the 2P points in one column would take half
+    the NumPy calls, but XLA compiles that column into other roundings (an ulp here and there), and
+    the compiled loop keeps the numbers it had."""
     offsets = xp.asarray(offsets, dtype=orientations.dtype)
     arms = xp.stack([quat.rotate(xp, orientations[i], offsets[:, 0]), quat.rotate(xp, orientations[j], offsets[:, 1])],
                     axis=1)
@@ -112,21 +119,93 @@ def attached_forces(model) -> tuple:
     return tuple(f for f in model.forces if getattr(f, "attachment", None) is not None)
 
 
+class AttachedPoints(NamedTuple):
+    """The points of all of a model's attached forces as one block: their lever arms at new
+    orientations are then one :func:`attachment_at`, whatever the number of springs and dampers
+    (``hung-box`` has a spring and a damper on the same corner).
+
+    places : tuple of int
+        Where the attached forces are in ``model.forces``.
+    rows : tuple of slice
+        Each one's pairs in the block.
+    offsets : ndarray, shape (P, 2, 3)
+        Their body-frame points, one force's after the other's, m.
+    i, j : int ndarray, shape (P,)
+        The bodies of the pairs' first and second ends.
+    """
+
+    places: tuple
+    rows: tuple
+    offsets: np.ndarray
+    i: np.ndarray
+    j: np.ndarray
+
+    @classmethod
+    def of(cls, model) -> AttachedPoints:
+        """The attached forces' points of ``model`` (none: an empty block)."""
+        places = tuple(k for k, f in enumerate(model.forces) if getattr(f, "attachment", None) is not None)
+        if not places:
+            return cls((), (), np.zeros((0, 2, 3)), np.zeros(0, int), np.zeros(0, int))
+        forces = [model.forces[k] for k in places]
+        ends = np.cumsum([0] + [len(f.attachment.offsets) for f in forces])
+        return cls(places, tuple(slice(a, b) for a, b in zip(ends[:-1], ends[1:])),
+                   np.concatenate([np.asarray(f.attachment.offsets, float) for f in forces]),
+                   np.concatenate([np.asarray(f.i) for f in forces]), np.concatenate([np.asarray(f.j) for f in forces]))
+
+    def at(self, xp, orientations, angular_velocities) -> Attachment:
+        """The block's :class:`Attachment` at ``orientations`` (N, 4) and world ``angular_velocities`` (N, 3)."""
+        return attachment_at(xp, self.offsets, self.i, self.j, orientations, angular_velocities)
+
+    def model(self, model, block: Attachment, xp=np, dtype=np.float64):
+        """``model`` on ``xp`` in ``dtype``, each attached force acting with its rows of ``block`` (on
+        NumPy, views of its arrays); the other forces are the same objects.
+
+        ``model`` is a NumPy model (its arrays are read as constants, also when a compiled step traces
+        this with jax.numpy). The result is a model of the same class: the model imports the forces,
+        which import this module, so it is not imported here.
+        """
+        forces = list(model.forces)
+        with rules.trusted():  # the parts of a checked model, every step: not checked again
+            for place, rows in zip(self.places, self.rows):
+                forces[place] = dataclasses.replace(forces[place], attachment=Attachment(*(a[rows] for a in block)))
+            with contextlib.nullcontext() if xp is np else _constants_folded():
+                return type(model)(np.asarray(model.masses), np.asarray(model.radii), forces, model.pinned,
+                                   model.names, xp, dtype)
+
+
 def model_at(model, orientations, angular_velocities, xp=np, dtype=np.float64):
     """``model`` with every attached force's lever arms at these ``orientations`` (N, 4) and world
-    ``angular_velocities`` (N, 3), on the array namespace ``xp`` in precision ``dtype``.
+    ``angular_velocities`` (N, 3), on the array namespace ``xp`` in precision ``dtype``: a new model,
+    which nothing changes later (:class:`LeverArms` is the one that does)."""
+    points = AttachedPoints.of(model)
+    return points.model(model, points.at(xp, orientations, angular_velocities), xp, dtype)
 
-    ``model`` is a NumPy model (its arrays are read as constants, also when a compiled step traces
-    this with jax.numpy); the other forces are the same objects. The result is a model of the same
-    class: the model imports the forces, which import this module, so it is not imported here.
+
+class LeverArms:
+    """One float64 NumPy model of ``model`` whose attached forces' lever arms :meth:`turn` rewrites in place.
+
+    Building a model (:func:`model_at`: a Model, a copy of each force, each cast again) is some 60
+    of the 270 us that ``hung-box``'s forces and torques would cost the contact solver at each
+    substep (its points rotated as one block; 390 us before that). A step that takes them at every
+    substep and lets no model out (:class:`.collision.rigid_solver_step.RigidSolverStep`) builds it
+    once here: its attached forces' arms and velocities are views of one :class:`Attachment`
+    (:meth:`AttachedPoints.model`), and :meth:`turn` copies those at the new orientations into it.
+    The forces read them when they are evaluated, so :attr:`model` is the model at the last turn's
+    orientations, bit for bit what :func:`model_at` builds there; a caller that keeps it past the
+    next turn sees it turn too.
     """
-    with rules.trusted():  # the parts of a checked model, every step: not checked again
-        forces = [dataclasses.replace(f, attachment=attachment_at(xp, f.attachment.offsets, f.i, f.j, orientations,
-                                                                  angular_velocities))
-                  if getattr(f, "attachment", None) is not None else f for f in model.forces]
-        with contextlib.nullcontext() if xp is np else _constants_folded():
-            return type(model)(np.asarray(model.masses), np.asarray(model.radii), forces, model.pinned, model.names,
-                               xp, dtype)
+
+    def __init__(self, model, orientations, angular_velocities):
+        self.points = AttachedPoints.of(model)
+        self.block = self.points.at(np, orientations, angular_velocities)
+        self.model = self.points.model(model, self.block)
+
+    def turn(self, orientations, angular_velocities):
+        """:attr:`model`, its lever arms now at ``orientations`` (N, 4) and world ``angular_velocities`` (N, 3)."""
+        turned = self.points.at(np, orientations, angular_velocities)
+        np.copyto(self.block.arms, turned.arms)
+        np.copyto(self.block.velocities, turned.velocities)
+        return self.model
 
 
 def _constants_folded():
@@ -137,20 +216,21 @@ def _constants_folded():
     return jax.ensure_compile_time_eval()
 
 
-def torques(model, q, v, orientations):
+def torques(model, q, v):
     """The torque about each body's centre, world frame, (N, 3), N m, of ``model``'s attached forces
-    at positions ``q`` and velocities ``v`` (N, 3), their arms at ``orientations`` (N, 4).
+    at positions ``q`` and velocities ``v`` (N, 3).
 
     Each pair's force F on its first end (-F on its second) at the body-frame point r gives
-    (R r) x F (:func:`.rigid_body.torque_of_forces`); a point mass's entries are zero.
+    (R r) x F (:func:`.rigid_body.torque_of_forces`) with the lever arm R r its attachment holds:
+    the one F was evaluated with, not rotated again. A point mass's entries are zero.
     """
     xp = model.xp
     total = xp.zeros_like(q)
     for f in attached_forces(model):
         force = f.pair_force(xp, q, v)
-        offsets = f.attachment.offsets
-        total = _add_rows(xp, total, f.i, torque_of_forces(xp, orientations[f.i], offsets[:, 0], force))
-        total = _add_rows(xp, total, f.j, torque_of_forces(xp, orientations[f.j], offsets[:, 1], -force))
+        arms = f.attachment.arms  # each end on its own, as attachment_at rotates them (XLA rounds alike)
+        total = _add_rows(xp, total, f.i, quat.cross(xp, arms[:, 0], force))
+        total = _add_rows(xp, total, f.j, quat.cross(xp, arms[:, 1], -force))
     return total
 
 

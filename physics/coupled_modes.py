@@ -63,7 +63,7 @@ def coupled_stiffest_mode(model, bodies, q, v=None) -> StiffestMode:
         omega[turning] += dw[3 * len(moved):].reshape(-1, 3)
         at = attachments.model_at(model, turned, omega)
         force = np.asarray(at.acceleration(0.0, x, u), dtype=float) / np.where(free, at.inverse_masses, 1.0)[:, None]
-        torque = attachments.torques(at, x, u, turned)
+        torque = attachments.torques(at, x, u)
         return np.concatenate([force[moved].ravel(), np.asarray(torque, dtype=float)[turning].ravel()])
 
     scale = np.concatenate([np.full(3 * len(moved), max(1.0, float(np.max(np.abs(q0))))), np.ones(3 * len(turning))])

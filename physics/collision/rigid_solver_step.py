@@ -27,14 +27,15 @@ position stages and are refused in one line.
 Springs and dampers at body-frame points (:mod:`steplab.physics.attachments`, a box hung by a
 spring at its corner): their force on a centre depends on the orientations, through the lever
 arms R(q) r, and they turn the bodies with the torque (R r) x F. With them, every substep
-(the first's included, whose acceleration the step's bounds use) rebuilds the model at the
-orientations and angular velocities now (:func:`.attachments.model_at`) for the centres'
-acceleration, and kicks each body's world angular velocity by h I_w^-1 tau, I_w^-1 = R diag(1/I1,
-1/I2, 1/I3) R^T, just before the kernel's substep: the torque is explicit, from the state at the
-substep's start, and the kernel's velocity stage then adds the gyroscopic term to the kicked
-omega, Box3D's order and that of ``implicit-gyroscopic`` (torque, then the gyroscopic term), so
-that with one substep and no contact the step is :mod:`steplab.integrators.attached`'s coupled step
-of semi-implicit Euler with that method. The methods that take the torque and the gyroscopic
+(the first's included, whose acceleration the step's bounds use) turns the lever arms of the
+step's own model to the orientations and angular velocities now (:class:`.attachments.LeverArms`:
+built once, turned in place) for the centres' acceleration, and kicks each body's world angular
+velocity by h I_w^-1 tau, I_w^-1 = R diag(1/I1, 1/I2, 1/I3) R^T, just before the kernel's
+substep: the torque is explicit, from the state at the substep's start, and the kernel's velocity
+stage then adds the gyroscopic term to the kicked omega, Box3D's order and that of
+``implicit-gyroscopic`` (torque, then the gyroscopic term), so that with one substep and no
+contact the step is :mod:`steplab.integrators.attached`'s coupled step of semi-implicit Euler with
+that method. The methods that take the torque and the gyroscopic
 term both at the substep's start (``exponential-map``, ``first-order-quaternion``) or rescale
 first (``momentum-rescaled``) differ from their coupled step by h^2 I^-1 (d(omega x I omega) /
 d omega) I^-1 tau a step, first order as both are (nothing for a body of equal moments). The
@@ -223,6 +224,8 @@ class RigidSolverStep:
         self._previous = _NOTHING
         self._steps = 0
         self.history = {0: (self.orientation.copy(), self.omega.copy())}
+        # the model whose lever arms every substep turns in place (it never leaves the step)
+        self.lever_arms = attachments.LeverArms(self.model, self.orientation, self.omega) if self.attached else None
         keep_freed_memory()  # each step's columns reuse the last one's memory (:mod:`.heap`)
 
     def __call__(self, t, y, dt, carry):
@@ -261,28 +264,31 @@ class RigidSolverStep:
         """:meth:`_advance` of a model with springs or dampers at body-frame points (see the module): at
         each substep the acceleration and the torque's kick h I_w^-1 tau at the orientations now."""
         q0, v0 = state[0], state[1]
-        a, alpha = self.attached_rates(t, q0, v0)
+        a, alpha, torque = self.attached_rates(t, q0, v0)
         points = self.contact_points(t, state, dt, a, alpha)
         bodies, contacts, sub, layout = self.columns(q0, v0, a, points, dt)
         for k in range(self.world.solver.substeps):
             if k:
-                a, alpha = self.attached_rates(t + k * sub.h, bodies.q, bodies.v)
+                a, alpha, torque = self.attached_rates(t + k * sub.h, bodies.q, bodies.v)
                 bodies = bodies._replace(accel=a)
-            # the torque's kick, in place (self.omega), before the velocity stage adds the gyroscopic term
+            # the torque's kick, in place (self.omega), before the velocity stage adds the gyroscopic term;
+            # its work joins the energy the restitution budget starts from (see _kick_work)
+            omega = bodies.omega.copy()
             np.add(bodies.omega, sub.h * alpha, out=bodies.omega)
+            np.add(bodies.energy, _kick_work(torque, omega, bodies.omega, sub.h), out=bodies.energy)
             rs.substep(bodies, contacts, sub, layout)
         residual = rs.finish(bodies, contacts, sub, layout)
         return self._end_step(t, dt, state, carry, contacts, bodies, residual)
 
     def attached_rates(self, t, x, v):
-        """The centres' acceleration (N, 3) and the bodies' angular acceleration from the attached
-        forces' torque, I_w^-1 tau (N, 3, world frame; zero for a pinned body or a point mass), with
-        the lever arms at the orientations and angular velocities now."""
-        model = attachments.model_at(self.model, self.orientation, self.omega)
-        torque = attachments.torques(model, x, v, self.orientation)
+        """The centres' acceleration (N, 3), the bodies' angular acceleration from the attached forces'
+        torque, I_w^-1 tau (N, 3, world frame; zero for a pinned body or a point mass), and that torque
+        tau (N, 3, world frame), with the lever arms at the orientations and angular velocities now."""
+        model = self.lever_arms.turn(self.orientation, self.omega)
+        torque = attachments.torques(model, x, v)
         alpha = quat.rotate(np, self.orientation, quat.rotate_inverse(np, self.orientation, torque)
                             * self.inverse_principal)
-        return np.ascontiguousarray(model.acceleration(t, x, v), dtype=float), alpha
+        return np.ascontiguousarray(model.acceleration(t, x, v), dtype=float), alpha, torque
 
     def final_model(self):
         """The model with its lever arms at the orientations now (after a run, the last step's): the
@@ -389,3 +395,17 @@ class RigidSolverStep:
             raise ValueError(f"the solver recorded its rotation every {self.record_every} steps, not after step "
                              f"{missing[0]}")
         return (np.array([recorded[int(k)][0] for k in steps]), np.array([recorded[int(k)][1] for k in steps]))
+
+
+def _kick_work(torque, before, after, h):
+    """The work of each body's torque kick omega -> omega + h I_w^-1 tau, (N,), J: h tau . (omega_before +
+    omega_after) / 2, which is exactly the spin energy the kick adds, 1/2 omega . I_w omega after less
+    before (I_w symmetric and I_w (after - before) = h tau; zero for a body that does not turn).
+
+    The restitution pass gives back at most the kinetic energy the step took, counted from the
+    step's start plus the forces' work (:func:`.rigid_solver._limit_to_the_energy_taken`). The
+    attached torques' work belongs to that budget as the field's m a . dq does: without it a torque
+    that slowed a spin counted as energy the contacts took, which the bounce then returned (a hung box
+    at restitution 1, without friction or damping, gained 4.4 % of its energy at its first impacts
+    at dt = 1/60 s, 2.1 % with it counted)."""
+    return h * np.einsum("ij,ij->i", torque, 0.5 * (before + after))
