@@ -53,10 +53,11 @@ def small_system(config: Config, record: Record, progress) -> None:
     model = problem.model.cast(jnp)
     y0, n, dt = jnp.asarray(problem.y0), config.small_steps, config.small_dt
     system = peers.PointMasses.from_model(problem.model)
-    calls, finals = {}, {}
+    calls, finals, compiled = {}, {}, {}
     for method in peers.DIFFRAX_METHODS:
         run = final_state_function(model, method)
         solve = peers.diffrax_fixed_step(model, method, 0.0, dt, n)
+        compiled[method] = run, solve  # their programs' texts below, without compiling them again
         calls[("steplab", method)] = lambda run=run: ready(run(y0, 0.0, dt, n)[0])
         calls[("diffrax", method)] = lambda solve=solve: ready(solve(y0)[0])
         finals[("steplab", method)] = run(y0, 0.0, dt, n)[0]
@@ -70,11 +71,9 @@ def small_system(config: Config, record: Record, progress) -> None:
     t = settled_times(calls, config)
     what = f"one oscillator, {n:,} steps of dt = {dt:g} s"
     for method in peers.DIFFRAX_METHODS:
-        key = method.replace("-", "_")
-        kernels = {"steplab_loop_kernels": loop_kernels(compiled_text(final_state_function(model, method),
-                                                                       y0, 0.0, dt, n)),
-                   "peer_loop_kernels": loop_kernels(compiled_text(peers.diffrax_fixed_step(model, method, 0.0, dt, n),
-                                                                    y0))}
+        key, (run, solve) = method.replace("-", "_"), compiled[method]
+        kernels = {"steplab_loop_kernels": loop_kernels(compiled_text(run, y0, 0.0, dt, n)),
+                   "peer_loop_kernels": loop_kernels(compiled_text(solve, y0))}
         record.compare(f"vs_diffrax_{key}", "small system", f"{method}: {what}", f"diffrax {_diffrax_name(method)}",
                        t[("steplab", method)], t[("diffrax", method)],
                        final_difference(finals[("steplab", method)], finals[("diffrax", method)]), **kernels)
@@ -82,7 +81,7 @@ def small_system(config: Config, record: Record, progress) -> None:
                    t[("steplab", sie)], t[("numba", sie)],
                    final_difference(finals[("steplab", sie)], finals[("numba", sie)]))
     # the plain Python loop is slow: fewer rounds, each interleaved with a steplab run
-    m, run = config.python_steps, final_state_function(model, sie)
+    m, (run, _) = config.python_steps, compiled[sie]  # n traced: the same program for m steps
     python = {"steplab": lambda: ready(run(y0, 0.0, dt, m)[0]),
               "python": lambda: peers.numpy_semi_implicit_euler(system, problem.y0, dt, m)}
     tp = settled_times(python, config, config.python_repeats)
