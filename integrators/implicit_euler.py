@@ -158,7 +158,10 @@ class ImplicitEuler(Stepper):
             q1 = q + dt * v1
             residual = v1 - v - dt * model.acceleration(t1, q1, v1)
             dadq, dadv = model.jacobian(t1, q1, v1)
-            delta = xp.linalg.solve(eye - (dt * dt) * dadq - dt * dadv, -residual.reshape(n3))
+            try:
+                delta = xp.linalg.solve(eye - (dt * dt) * dadq - dt * dadv, -residual.reshape(n3))
+            except np.linalg.LinAlgError:  # singular in float64 (a damper of 1e300 N s/m): NaN, as Newton's
+                delta = xp.full(n3, xp.nan)  # never converging is (JAX's solve returns it itself)
             return v1 + delta.reshape(v.shape), xp.max(xp.abs(delta)) <= rtol * (1 + xp.max(xp.abs(v1)))
 
         v1 = _newton(xp, update, v, self.newton_iterations)

@@ -156,19 +156,33 @@ class PositionBased(Integrator):
         return SweepCarry(c, coordinates(in_rows(external, rows)), in_rows(inverse_mass, rows),
                           workspace(model.n_bodies, len(c.i)), segments, rows)
 
+    def substep(self, dt: float) -> float:
+        """The substep h = dt / substeps; ValueError (one line) where it underflows to 0 (dt = 5e-324 s in 2
+        substeps), which every projection and vertex solve divides by."""
+        h = dt / self.substeps
+        if not h > 0:
+            raise ValueError(f"{self.name}: dt = {dt:g} s in {self.substeps} substeps gives the substep h = dt / "
+                             f"substeps = {h:g} s (it underflows): a larger dt, or fewer substeps")
+        return h
+
     def check_dt(self, model, dt: float) -> None:
-        """Refuses (one line, naming the spring) a damper too heavy for the substeps of ``dt``: where
-        gamma = alpha c / h passes the float range the projection moves bodies by NaN. Both backends
-        (:func:`.simulate.simulate` calls it for JAX, whose step traces dt)."""
+        """Refuses (one line, naming the spring) a spring too soft or a damper too heavy for the substeps of
+        ``dt``: where alpha / h^2 or gamma = alpha c / h passes the float range the projection moves bodies by
+        NaN. Both backends (:func:`.simulate.simulate` calls it for JAX, whose step traces dt)."""
         from .projection_law import factors
 
         c, _, inverse_mass = self.constraints(model)
-        h = dt / self.substeps
+        h = self.substep(dt)
         with np.errstate(over="ignore", invalid="ignore"):
-            _, gamma, denominator = factors(c.compliance, c.damping, inverse_mass[c.i] + inverse_mass[c.j], h)
+            alpha_tilde, gamma, denominator = factors(c.compliance, c.damping, inverse_mass[c.i] + inverse_mass[c.j],
+                                                      h)
         bad = np.flatnonzero(~np.isfinite(denominator))
         if bad.size:
             p = bad[0]
+            if not np.isfinite(alpha_tilde[p]):  # the compliance's term, whatever the damping
+                raise ValueError(f"{self.name}: the spring between bodies {c.i[p]} and {c.j[p]}: its compliance "
+                                 f"{c.compliance[p]:g} m/N gives alpha / h^2 = {alpha_tilde[p]:g} at the substep "
+                                 f"h = {h:g} s; it must be finite (a stiffer spring, or a longer substep)")
             raise ValueError(f"{self.name}: the spring between bodies {c.i[p]} and {c.j[p]}: its damping "
                              f"{c.damping[p]:g} N s/m with compliance {c.compliance[p]:g} m/N gives "
                              f"gamma = alpha c / h = {gamma[p]:g} at the substep h = {h:g} s; it must be finite "

@@ -16,6 +16,10 @@ from .base import Solver, check_real
 
 #: step budget of one reference solve; exceeding it is reported, never truncated silently
 MAX_REFERENCE_STEPS = 1_000_000
+#: the most vector-field evaluations a scipy solve takes per step of its budget: DOP853 makes 12 a step, Radau
+#: one a Newton iteration (at most 6) plus its error estimate; scipy counts no steps of its own, so the budget
+#: of MAX_REFERENCE_STEPS steps is kept in evaluations (without it a span of 1e300 s never ended)
+EVALUATIONS_PER_STEP = 12
 #: the smallest rtol a reference takes: scipy's solve_ivp raises any rtol below 100 x the float64
 #: machine epsilon to it (with a warning), so a tighter one would not be the tolerance recorded
 MIN_RTOL = 100 * float(np.finfo(float).eps)
@@ -24,6 +28,10 @@ MIN_RTOL = 100 * float(np.finfo(float).eps)
 #: solve that never ends; a subnormal atol overflows y / atol to inf the same way. 1e-100 leaves
 #: y / atol finite for any |y| < 1e200
 MIN_ATOL = 1e-100
+
+
+class _OutOfBudget(Exception):
+    """A scipy solve past its evaluations (:data:`EVALUATIONS_PER_STEP`): raised from its vector field."""
 
 
 class ReferenceFailedError(RuntimeError):
@@ -85,7 +93,8 @@ def solve_adaptive(vector_field, ts, y0, method: str, rtol, atol, *, at_saved_ti
     jacobian : callable, optional
         ``jacobian(t, y) -> d(dy/dt)/dy`` on the flat state (scipy's implicit methods).
     max_steps : int
-        diffrax's step budget.
+        The step budget: diffrax's ``max_steps``; scipy's kept in vector-field evaluations,
+        :data:`EVALUATIONS_PER_STEP` a step (solve_ivp has none, and counts no steps).
 
     Notes
     -----
@@ -114,13 +123,22 @@ def solve_adaptive(vector_field, ts, y0, method: str, rtol, atol, *, at_saved_ti
 
     y0 = np.asarray(y0, dtype=float)
     shape = y0.shape
+    evaluations = 0
 
     def fun(t, y):
+        nonlocal evaluations
+        evaluations += 1
+        if evaluations > max_steps * EVALUATIONS_PER_STEP:
+            raise _OutOfBudget
         return np.asarray(vector_field(t, y.reshape(shape))).ravel()
 
     kwargs = {} if jacobian is None else {"jac": jacobian}
-    sol = solve_ivp(fun, (ts[0], ts[-1]), y0.ravel(), method=solver, t_eval=ts if at_saved_times else None,
-                    rtol=rtol, atol=atol, **kwargs)
+    try:
+        sol = solve_ivp(fun, (ts[0], ts[-1]), y0.ravel(), method=solver, t_eval=ts if at_saved_times else None,
+                        rtol=rtol, atol=atol, **kwargs)
+    except _OutOfBudget:  # as diffrax reports its max_steps: the steps taken, the budget
+        return AdaptiveSolution(np.empty((0,) + shape), max_steps, evaluations - 1, False,
+                                f"{max_steps * EVALUATIONS_PER_STEP:,} evaluations, the step budget's")
     if not sol.success and isinstance(sol.y, list):  # stopped before the first saved time: solve_ivp leaves []
         return AdaptiveSolution(np.empty((0,) + shape), None, int(sol.nfev), False, sol.message)
     ys = sol.y.T.reshape((-1,) + shape)

@@ -85,13 +85,29 @@ def step_count(t_start: float, t_end: float, dt: float) -> int:
     return int(steps)
 
 
+def steps_end(t_start: float, n_steps: int, dt: float) -> float:
+    """The time ``n_steps`` steps of ``dt`` from ``t_start`` end at, t_start + n dt; ValueError when
+    that overflows float64 (3 steps of dt = 1e308 s), as no clock of the run could count it."""
+    t_end = t_start + int(n_steps) * dt
+    if not np.isfinite(t_end):
+        raise ValueError(f"{n_steps} steps of dt = {dt:g} s from t = {t_start:g} s end beyond the largest float64 "
+                         f"time, {np.finfo(np.float64).max:g} s: use a smaller dt or fewer steps")
+    return t_end
+
+
 def check_time_advances(t_start: float, t_end: float, dt: float, dtype) -> None:
     """ValueError unless every step advances time: dt must be at least the floating-point
-    spacing (one unit in the last place) at the run's largest |t|, in the run's precision.
+    spacing (one unit in the last place) at the run's largest |t|, in the run's precision,
+    and that largest |t| a number of the precision (t_end = 1e300 s is none in float32).
 
     A smaller dt makes ``t + dt == t`` (or t + dt skip ahead unevenly): time would stand
     still while the state moves, or a loop ``while t < t_end: t += dt`` would never end.
     """
+    largest = float(np.finfo(dtype).max)
+    if not max(abs(t_start), abs(t_end)) <= largest:
+        raise ValueError(f"t = {max(abs(t_start), abs(t_end)):g} s is beyond the largest {np.dtype(dtype).name} "
+                         f"number, {largest:g}: the run's times cannot be represented (use times nearer 0, or a "
+                         "wider precision)")
     t_far = np.asarray(max(abs(t_start), abs(t_end)), dtype=dtype)
     smallest = float(np.spacing(t_far))
     if not dt >= smallest:
@@ -115,6 +131,24 @@ def divergence_limit(y0, dtype) -> float:
     """
     scale = max(1.0, float(np.max(np.abs(y0))))
     return min(DIVERGENCE_FACTOR * scale, float(np.sqrt(np.finfo(dtype).max)))
+
+
+def check_initial_state(model, y0, dtype) -> float:
+    """The run's :func:`divergence_limit`; ValueError, one line naming the first body beyond it, when ``y0``
+    (2, N, 3) already is: not finite, or so large that its squares (distances, energies) overflow ``dtype``
+    (a body 1e300 m out in float64, 1e30 m in float32)."""
+    dtype = np.dtype(dtype)
+    limit = divergence_limit(y0, dtype)
+    largest = float(np.max(np.abs(y0)))
+    if not largest <= limit:  # also NaN
+        y0 = np.asarray(y0, dtype=float)
+        beyond = ~(np.abs(y0) <= limit)  # (2, N, 3)
+        body = int(np.argmax(np.any(beyond, axis=(0, 2))))
+        which = "position" if np.any(beyond[0, body]) else "velocity"
+        raise ValueError(f"the initial state is non-finite or too large to integrate in {dtype.name}: body "
+                         f"{model.names[body]!r} has {which} {y0[int(which == 'velocity'), body].tolist()} (largest "
+                         f"|component| {largest:g}; states beyond {limit:g} count as diverged)")
+    return limit
 
 
 def simulate(model, integrator, y0, t_start: float, t_end: float | None = None, dt: float | None = None, *,
@@ -191,11 +225,7 @@ def simulate(model, integrator, y0, t_start: float, t_end: float | None = None, 
                          f"more than the limit of {MAX_TRAJECTORY_BYTES / 2**30:g} GiB (save fewer states: "
                          "save_every / --save-every)")
     ts = t_start + saves * dt
-    limit = divergence_limit(y0, dtype)
-    largest = float(np.max(np.abs(y0)))
-    if not largest <= limit:  # also NaN
-        raise ValueError(f"the initial state is non-finite or too large to integrate in {dtype.name} (largest "
-                         f"|component| {largest:g}; states beyond {limit:g} count as diverged)")
+    limit = check_initial_state(model, y0, dtype)
     # the step the loop calls, built once with its context (a collision world's log, ...)
     step = None if stepper is None else stepper(_on_backend(model, backend, dtype), integrator)
     if step is None and attached_forces(model):
@@ -258,7 +288,7 @@ def _requested_steps(t_start, t_end, n_steps, dt, dtype) -> int:
     if n_steps is not None:
         if isinstance(n_steps, bool) or not isinstance(n_steps, (int, np.integer)) or n_steps < 1:
             raise ValueError(f"n_steps must be a whole number of steps >= 1, got {n_steps!r}")
-        check_time_advances(t_start, t_start + int(n_steps) * dt, dt, dtype)
+        check_time_advances(t_start, steps_end(t_start, n_steps, dt), dt, dtype)
         return int(n_steps)
     check_time_advances(t_start, t_end, dt, dtype)
     return step_count(t_start, t_end, dt)

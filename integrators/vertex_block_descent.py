@@ -75,10 +75,21 @@ class VBD(PositionBased):
         """Refuses (one line, naming the body) a vertex whose 3x3 Hessian block the cofactor solve cannot take
         at substeps of ``dt``: its determinant, a sum of six products of three entries, stays below 6 H^3, with
         H = m / h^2 + the sum of 2 k + c / h over the vertex's springs the largest an entry can be; past the
-        float range the step moves by NaN. Springs of stiffness inf are :meth:`init`'s to refuse."""
+        float range the step moves by NaN. The springs' part of the block is positive semidefinite, so the
+        determinant is at least (m / h^2)^3: below the smallest normal float it may be 0, and the solve
+        divides by it. Springs of stiffness inf are :meth:`init`'s to refuse."""
         c, _, inverse_mass = self.constraints(model)
-        h = dt / self.substeps
+        h = self.substep(dt)
         limit = float(np.cbrt(np.finfo(float).max / 6))
+        smallest = float(np.cbrt(np.finfo(float).tiny))
+        with np.errstate(over="ignore", under="ignore", divide="ignore"):
+            inertia = np.divide(1.0, inverse_mass, out=np.zeros_like(inverse_mass), where=inverse_mass > 0) / (h * h)
+        light = np.flatnonzero((inverse_mass > 0) & ~(inertia >= smallest))
+        if light.size:
+            b = int(light[0])
+            raise ValueError(f"{self.name}: body {b}: its inertia term m / h^2 = {inertia[b]:g} at the substep h = "
+                             f"{h:g} s is below {smallest:.3g}, where its 3x3 solve's determinant, at least "
+                             "(m / h^2)^3, may underflow to 0 (a larger mass, or a shorter substep)")
         with np.errstate(over="ignore", divide="ignore"):
             per_spring = np.where(c.compliance > 0, 2.0 / np.where(c.compliance > 0, c.compliance, 1.0), 0.0)
             per_spring = per_spring + c.damping / h

@@ -92,7 +92,7 @@ def stiffest_mode(model, q, v=None, derivative: str = "jvp") -> StiffestMode:
     if size > SPARSE_SIZE and _sparse_is_exact(model):
         derivatives = _sparse_derivatives(model, q0, v0)
     elif derivative == "jvp":
-        derivatives = _autodiff_derivatives(model, q0, v0)
+        derivatives = _finite_or_difference(_autodiff_derivatives(model, q0, v0), model, q0, v0)
     else:
         derivatives = _difference_derivatives(model, q0, v0)
     inverse_masses = np.asarray(model.inverse_masses, dtype=float)
@@ -119,7 +119,7 @@ def stiffest_mode(model, q, v=None, derivative: str = "jvp") -> StiffestMode:
 
     if size <= DENSE_SIZE:
         s = np.column_stack([stiffness(e) for e in np.eye(size)])
-        values, vectors = np.linalg.eigh(0.5 * (s + s.T))  # symmetric up to round-off
+        values, vectors = np.linalg.eigh(0.5 * s + 0.5 * s.T)  # symmetric up to round-off; halved, then summed
         omega2, z = float(values[-1]), vectors[:, -1]
     else:
         # a fixed start, so that a scene's prediction is reproducible; S of a model without
@@ -144,8 +144,20 @@ def stiffest_mode(model, q, v=None, derivative: str = "jvp") -> StiffestMode:
     omega = float(np.sqrt(omega2))
     # zeta = x^T C x / (2 omega x^T M x) with x = D z, |z| = 1: x^T M x = 1, D C D z = -sqrt(M) J_v (D z)
     zeta = float(np.sum(z * weighted(pattern, 1)[0]) / (2 * omega))
+    check_finite_mode(omega, zeta)
     scale = np.max(np.abs(pattern))
     return StiffestMode(omega, zeta if zeta > 0 else 0.0, pattern / scale)
+
+
+def check_finite_mode(omega: float, zeta: float) -> None:
+    """NonFiniteModelError when the stiffest mode's omega or damping ratio overflowed float64 though the
+    forces' derivatives are finite (a spring of 1e308 N/m or a damper of 1e308 N s/m on light bodies): no
+    stable dt can be predicted, where a report would print inf."""
+    for what, value in (("omega_max", omega), ("damping ratio", zeta)):
+        if not np.isfinite(value):
+            raise NonFiniteModelError(f"the model's stiffest mode at its initial state has no finite {what} "
+                                      f"({value:g}: it overflows float64): a stiffness or damping too large for the "
+                                      "masses and moments of inertia it acts on; no stable dt can be predicted")
 
 
 def _not_finite(model, inverse_masses, accelerations, product) -> str:
@@ -200,6 +212,25 @@ def _autodiff_derivatives(model, q0, v0):
         return position, velocity
 
     return lambda dq, dv: tuple(np.asarray(j) for j in derivatives(jnp.asarray(dq), jnp.asarray(dv)))
+
+
+def _finite_or_difference(exact, model, q0, v0):
+    """``exact`` (jax.jvp), or central differences where its product is NaN and theirs finite: jvp
+    differentiates a spring's length |x| as x / |x|, NaN at length 0, where the force k (l - L) x / l of a
+    spring of rest length L = 0 (a body resting on its anchor) is k x, smooth. Else the exact product, for
+    :func:`_not_finite` to say why it is not finite."""
+    difference = None
+
+    def derivatives(dq, dv):
+        nonlocal difference
+        product = exact(dq, dv)
+        if not any(np.any(np.isnan(p)) for p in product):
+            return product
+        difference = difference or _difference_derivatives(model, q0, v0)
+        approximate = difference(dq, dv)
+        return approximate if all(np.all(np.isfinite(p)) for p in approximate) else product
+
+    return derivatives
 
 
 def _difference_derivatives(model, q0, v0):

@@ -20,7 +20,7 @@ import numpy as np
 
 from steplab.core.registry import BUILTIN
 
-from . import rigid_body, soft_body, stacks
+from . import constraints, rigid_body, soft_body, stacks
 from .forces import FORCES
 from .model import Model
 from .rules import mass_problem, restitution_problem, short
@@ -101,17 +101,44 @@ SOFT_SHAPE_KEYS = {"box": ("size", "center"), "grid": ("rows", "cols", "spacing"
                    "mesh": ("vertices", "edges")}
 
 
-def _check_energy(root: Table, model: Model, y0: np.ndarray, rigid) -> None:
+def _check_energy(root: Table, tables: list[Table], model: Model, y0: np.ndarray, rigid) -> None:
     """Refuse a start whose energy overflows float64: each number of the scene is finite, but a run
-    would report its energy as inf J and the change as NaN (a mass of 1e300 kg at 1e5 m/s)."""
+    would report its energy as inf J and the change as NaN (a mass of 1e300 kg at 1e5 m/s). The
+    refusal names the body whose own term overflows, at its table (``tables``, one per body), or the
+    force whose potential does; else (a sum of finite terms) only the file."""
     parts = {"kinetic energy, sum of m |v|^2 / 2,": model.kinetic_energy(y0[1]),
              "potential energy of the forces": model.potential_energy(y0[0])}
     if rigid is not None:
         parts["rotational kinetic energy, sum of omega . I omega / 2,"] = rigid.kinetic_energy()
     for what, value in [*parts.items(), ("mechanical energy", sum(parts.values()))]:
         if not np.isfinite(value):
-            root.fail(f"the initial {what} is {value} J, beyond float64: masses, speeds, spins or "
-                      "forces too large (their product overflows)")
+            table, alone, key = _overflowing_term(what, root, tables, model, y0, rigid)
+            table.fail(f"the initial {what} is {value} J, beyond float64{alone}: masses, speeds, spins or forces too "
+                       "large (their product overflows)", key)
+
+
+def _overflowing_term(what: str, root: Table, tables: list[Table], model: Model, y0: np.ndarray, rigid):
+    """Where :func:`_check_energy` refuses the energy ``what``: (table, what to say of the culprit, key). The
+    first body whose own term is not finite, at its table, or the force whose potential is not; else (a sum
+    of finite terms) the file."""
+    q, v = y0
+    if what.startswith("potential"):  # the energy's forces: inextensible springs count 0 (as Model's)
+        potentials = [(f, f.potential(np, q, model.masses)) for f in constraints.without_inextensible(model.forces)]
+        bad = [f for f, u in potentials if u is not None and not np.isfinite(u)]
+        return root, f" (forces.{bad[0].name}'s alone is)" if bad else "", None
+    if what.startswith("kinetic"):
+        key, terms, index = "velocity", 0.5 * np.asarray(model.masses) * np.sum(v * v, axis=1), None
+    elif what.startswith("rotational"):
+        key, index = "angular_velocity", rigid.index
+        terms = rigid_body.rotational_energy(np, rigid.inertia, rigid.body_angular_velocities())
+    else:
+        return root, "", None
+    bad = np.flatnonzero(~np.isfinite(terms))
+    if not len(bad):
+        return root, "", None
+    k = int(bad[0] if index is None else index[bad[0]])
+    # a group's bodies ([[particles]], a soft body, a stack) have no key of their own: the group's table
+    return tables[k], f" (the term of body {model.names[k]!r} alone is)", key if key in tables[k].data else None
 
 
 @dataclasses.dataclass(frozen=True)
@@ -235,7 +262,7 @@ class _SceneBuilder:
                       pinned=np.array(self.pinned), names=self.names)
         y0 = np.stack([np.array(self.positions), np.array(self.velocities)])
         rigid = self.rigid_bodies()
-        _check_energy(root, model, y0, rigid)
+        _check_energy(root, self.tables, model, y0, rigid)
         table = root.table("collisions") if collisions else None
         collisions = self.add_collisions(table, rotation) if table is not None else None
         return Scene(root.name("name", name), model, y0, integrator, dt, t_start, t_end,
@@ -501,9 +528,10 @@ class _SceneBuilder:
             # the broadphase squares distances: beyond MAX_COORDINATE they overflow (it would refuse mid-run,
             # naming no file, or a run would "diverge" at its first step)
             for key, size in (("radius", radius), ("position", float(np.max(np.abs(position))))):
-                if size > MAX_COORDINATE:
+                if size > MAX_COORDINATE:  # the key where the body's table has it (a group's bodies: the group's)
                     self.tables[k].fail(f"body {self.names[k]!r}: a {key} of {size:g} m in a scene with [collisions]; "
-                                        f"at most {MAX_COORDINATE:g} m (squared distances would overflow)", key)
+                                        f"at most {MAX_COORDINATE:g} m (squared distances would overflow)",
+                                        key if key in self.tables[k].data else None)
         shapes = []
         for p in c.tables("planes"):
             p.allow("name", "normal", "offset", "material", "trigger")

@@ -131,3 +131,17 @@ def test_a_damper_near_the_float_range_is_checked_and_warned_in_one_line(tmp_pat
     assert err[0].startswith("steplab run: warning: dt = 0.01 s exceeds the largest stable dt of "
                              "semi-implicit-euler on this scene: there is none") and "its energy by inf" in err[0]
     assert len(err) == 2 and "diverged" in err[1]
+
+
+def test_a_zero_length_spring_of_rest_length_0_is_checked(tmp_path, monkeypatch, capsys):
+    # the mass resting on its anchor, rest length 0: the force k x is smooth there, but jax.jvp of the spring's
+    # length |x| is NaN at 0, and check refused the scene blaming "a rest length > 0" (the input audit's fuzz)
+    from helpers import OSCILLATOR_SCENE
+
+    text = OSCILLATOR_SCENE.read_text()
+    monkeypatch.chdir(tmp_path)
+    (tmp_path / "resting.toml").write_text(text.replace("position = [1.5, 0.0, 0.0]", "position = [0.0, 0.0, 0.0]")
+                                           .replace("rest_length = 1.0", "rest_length = 0.0"))
+    assert main(["check", "resting.toml", "--json"]) == 0
+    report = json.loads(capsys.readouterr().out)
+    np.testing.assert_allclose(report["omega_max"], 2 * np.pi, rtol=1e-8)  # sqrt(k / m), k = 4 pi^2 N/m

@@ -35,6 +35,35 @@ EXTREME_SCENES = {
     # a ball of 1e-154 m: 2/5 m r^2 = 4e-309 kg m^2 has no finite inverse (the contact solver's state went non-finite)
     "subnormal-inertia.toml": (OSCILLATOR_SCENE.parent / "rolling-sphere.toml").read_text()
     .replace("radius = 0.1", "radius = 1e-154"),
+    # the input audit's fuzz (each of these was a traceback, a library's words, inf in the JSON or a silent 0):
+    # a spring of 1.7e308 N/m on the hung box: its stiffness matrix is finite, K + K^T overflowed in check
+    "stiff-hung-box.toml": (OSCILLATOR_SCENE.parent / "hung-box.toml").read_text()
+    .replace("stiffness = 200.0", "stiffness = 1.7e308"),
+    # the same spring on the spring pendulum's cube: LAPACK's "The algorithm failed to compute an eigenvalue ..."
+    "stiff-pendulum.toml": (OSCILLATOR_SCENE.parent / "spring-pendulum.toml").read_text()
+    .replace("stiffness = 1e5", "stiffness = 1.7e308"),
+    # a damper of 1.7e308 N s/m: check printed "damping_ratio": Infinity (hung box), or 0, undamped (cloth)
+    "heavy-damper-hung-box.toml": (OSCILLATOR_SCENE.parent / "hung-box.toml").read_text()
+    .replace("damping = 2.0", "damping = 1.7e308"),
+    "heavy-damper-cloth.toml": (OSCILLATOR_SCENE.parent / "cloth.toml").read_text()
+    .replace("damping = 0.05", "damping = 1.7e308"),
+    # a cloth 1e300 m out: check blamed "a spring with its ends at one point and a rest length > 0"
+    "far-cloth.toml": (OSCILLATOR_SCENE.parent / "cloth.toml").read_text()
+    .replace("origin = [0.0, 0.0, 2.0]", "origin = [1e300, 1e300, 1e300]"),
+    # particles drawn 1e300 m out in a collision scene: the refusal named particles[0].position, no such key
+    "far-particles.toml": (OSCILLATOR_SCENE.parent / "n-balls.toml").read_text()
+    .replace("box_max = [1.0, 1.0, 2.0]", "box_max = [1e300, 1e300, 1e300]"),
+    # a 1e-300 kg body on a spring in vbd: its 3x3 block's determinant underflowed to 0, a ZeroDivisionError
+    "light-mass.toml": OSCILLATOR_SCENE.read_text().replace("mass = 1.0\nradius = 0.05\nposition = [1.5",
+                                                            "mass = 1e-300\nradius = 0.05\nposition = [1.5"),
+    # a damper of 1e300 N s/m between two balls: the implicit methods' linear solve is singular in float64, NumPy's
+    # "Singular matrix" (status 2, naming nothing)
+    "heavy-damper-cradle.toml": (OSCILLATOR_SCENE.parent / "newtons-cradle.toml").read_text()
+    + '\n[[forces.dampers]]\nbodies = ["ball1", "ball2"]\ndamping = 1e300\n',
+    # a rolling ball of inertia 1e-300 kg m^2: implicit-gyroscopic's 3 x 3 solve of a spin that overflowed
+    # was a traceback (Numba's LinAlgError)
+    "tiny-inertia-ball.toml": (OSCILLATOR_SCENE.parent / "rolling-sphere.toml").read_text()
+    .replace('shape = "sphere"', 'shape = "sphere"\ninertia = [1e-300, 1e-300, 1e-300]'),
 }
 
 #: name -> (argv, what the one line of error says); the files are made in the fixture's folder
@@ -85,7 +114,43 @@ REFUSALS = {
     "run-subnormal-inertia": (["run", "subnormal-inertia.toml"], "subnormal-inertia.toml: bodies[0]: the sphere's "
                               "principal moments [4e-309, 4e-309, 4e-309] kg m^2 are not each finite and at least "
                               "5.56e-309 kg m^2 (a smaller one has no finite inverse)"),
-    # 8: a bench record whose ratio is not a finite number
+    # 8: the input audit: a run's end past float64 (it said "smaller than the float64 spacing nan s at t = inf s",
+    # after a warning)
+    "run-steps-end-overflow": (["run", "kepler", "--dt", "1.7e308", "--steps", "3"],
+                               "3 steps of dt = 1.7e+308 s from t = 0 s end beyond the largest float64 time"),
+    "run-steps-end-float32": (["run", "oscillator", "--precision", "float32", "--dt", "1e38", "--steps", "5"],
+                              "t = 5e+38 s is beyond the largest float32 number, 3.40282e+38"),
+    "check-stiff-hung-box": (["check", "stiff-hung-box.toml"], "the model's stiffest mode at its initial state "
+                             "has no finite omega_max (inf: it overflows float64): a stiffness or damping too large"),
+    "check-stiff-pendulum": (["check", "stiff-pendulum.toml"], "the model's stiffness, with its bodies turned, has "
+                             "no eigenvalues LAPACK can compute in float64"),
+    "check-heavy-damper-hung-box": (["check", "heavy-damper-hung-box.toml", "--json"],
+                                    "has no finite damping ratio (inf: it overflows float64)"),
+    "check-heavy-damper-cloth": (["check", "heavy-damper-cloth.toml"], "has no finite damping ratio"),
+    "check-far-cloth": (["check", "far-cloth.toml"], "the initial state is non-finite or too large to integrate in "
+                        "float64: body 'cloth[0]' has position [1e+300, 1e+300, 1e+300]"),
+    "run-far-cloth": (["run", "far-cloth.toml"], "body 'cloth[0]' has position [1e+300, 1e+300, 1e+300]"),
+    "run-far-particles": (["run", "far-particles.toml"], "far-particles.toml: particles[0]: body 'ball[0]': a "
+                          "position of"),
+    # position-based substeps: h = dt / substeps underflowing to 0 (a ZeroDivisionError traceback), alpha / h^2
+    # overflowing (blamed on "its damping 0 N s/m"), a block whose determinant underflows (a ZeroDivisionError)
+    "run-xpbd-substep-underflow": (["run", "oscillator", "--integrator", "xpbd", "--substeps", "2", "--dt", "5e-324",
+                                    "--steps", "3"], "xpbd: dt = 4.94066e-324 s in 2 substeps gives the substep h = "
+                                   "dt / substeps = 0 s (it underflows)"),
+    "run-vbd-substep-underflow": (["run", "oscillator", "--integrator", "vbd", "--substeps", "2", "--dt", "5e-324",
+                                   "--steps", "3"], "vbd: dt = 4.94066e-324 s in 2 substeps gives the substep h"),
+    "run-xpbd-compliance-overflow": (["run", "oscillator", "--integrator", "xpbd", "--dt", "1e-300", "--steps", "3"],
+                                     "xpbd: the spring between bodies 0 and 1: its compliance 0.0253303 m/N gives "
+                                     "alpha / h^2 = inf at the substep h = 1e-300 s"),
+    "run-vbd-light-body": (["run", "light-mass.toml", "--integrator", "vbd", "--steps", "3"],
+                           "vbd: body 1: its inertia term m / h^2 = 1e-296 at the substep h = 0.01 s is below "
+                           "2.81e-103"),
+    "run-vbd-huge-dt": (["run", "oscillator", "--integrator", "vbd", "--dt", "1e300", "--steps", "3"],
+                        "vbd: body 1: its inertia term m / h^2 = 0 at the substep h = 1e+300 s"),
+    # the contact solver's substep h = dt / substeps underflowing to 0: Baumgarte's beta / h, a ZeroDivisionError
+    "run-solver-substep-underflow": (["run", "box-column", "--dt", "5e-324", "--steps", "3"],
+                                     "contact solver: the substep h = dt / substeps is 0 s (it underflows)"),
+    # 9: a bench record whose ratio is not a finite number
     "bench-ratio-string": (["bench", "--from", "x.json"], "x.json: ratios."),
     "bench-ratio-nan": (["bench", "--from", "nan.json"], "nan.json: ratios."),
 }
@@ -135,6 +200,49 @@ def test_bad_input_is_one_line_and_status_2(folder, capsys, monkeypatch, name):
     assert err.startswith(f"steplab {argv[0]}: error: "), err
     assert any(m in err for m in message.split("|")), err
     assert ".tmp" not in err and "nan" not in out.lower()
+
+
+#: name -> (argv, what the one line says) of runs that blow up on legal but extreme input: status 1 (a failed run),
+#: one line naming the step or the body (the input audit's fuzz: each was a traceback, or status 2 with the
+#: broadphase's "centers must be finite", naming neither the run nor its step)
+FAILED_RUNS = {
+    "run-solver-dt-overflow": (["run", "box-column", "--dt", "1e300", "--steps", "3"],
+                               "body 0 moved to [0.0, 0.0, -inf] m in the step, beyond the 1e+150 m the broadphase "
+                               "squares without overflow: the run diverged"),
+    "run-event-dt-overflow": (["run", "billiards", "--dt", "1e300", "--steps", "3"], "the run diverged"),
+    "run-stiff-hung-box": (["run", "stiff-hung-box.toml", "--steps", "3"], "the contact solver's state became "
+                           "non-finite"),
+    "run-stiff-pendulum": (["run", "stiff-pendulum.toml", "--steps", "3"], "diverged with dt = 0.001 s"),
+    "run-implicit-euler-singular": (["run", "heavy-damper-cradle.toml", "--integrator", "implicit-euler",
+                                     "--detector", "none", "--steps", "3"], "integrator 'implicit-euler' diverged"),
+    "run-implicit-damping-singular": (["run", "heavy-damper-cradle.toml", "--integrator", "implicit-damping-euler",
+                                       "--detector", "none", "--steps", "3"],
+                                      "integrator 'implicit-damping-euler' diverged"),
+    "run-tiny-inertia-gyroscopic": (["run", "tiny-inertia-ball.toml", "--steps", "3", "--rotation",
+                                     "implicit-gyroscopic"], "the contact solver's state became non-finite at "
+                                    "body 'ball'"),
+}
+
+
+@pytest.mark.parametrize("name", FAILED_RUNS)
+def test_a_run_that_blows_up_is_one_line_and_status_1(folder, capsys, monkeypatch, name):
+    argv, message = FAILED_RUNS[name]
+    status, out, err = steplab(argv, folder, capsys, monkeypatch)
+    assert status == 1, (status, out[-500:], err[-2000:])
+    assert "Traceback" not in err and err.count("\n") == 1, err
+    assert err.startswith("steplab run: error: ") and message in err, err
+
+
+def test_a_scipy_reference_stops_at_its_step_budget(folder, capsys, monkeypatch):
+    # 3 steps of dt = 1e300 s of the oscillator: solve_ivp, which has no step budget, never ended (diffrax stops at
+    # its max_steps); the budget made small here so that the test takes a moment
+    from steplab.integrators import references
+
+    monkeypatch.setattr(references, "MAX_REFERENCE_STEPS", 1000)
+    status, _, err = steplab(["run", "oscillator", "--integrator", "scipy-dop853", "--dt", "1e300", "--steps", "3"],
+                             folder, capsys, monkeypatch)
+    assert status == 1 and err.count("\n") == 1, err
+    assert "scipy-dop853 failed: it took its budget of 1,000 steps" in err, err
 
 
 def test_the_refusal_of_a_solver_candidate_names_what_is_allowed(folder, capsys, monkeypatch):

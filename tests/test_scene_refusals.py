@@ -45,6 +45,26 @@ def test_a_start_whose_kinetic_energy_overflows_is_refused(capsys, tmp_path):
     assert main(["run", str(path)]) == 0
 
 
+@pytest.mark.parametrize("scene,replace,where", [
+    ("drag-projectile", {"mass = 0.43": "mass = 1e200", "velocity = [19.8, 0.0, 19.8]": "velocity = [0.0, 0.0, 1e200]"},
+     r"bodies\[0\]\.velocity: the initial kinetic energy, .* is inf J, beyond float64 \(the term of body 'ball' alone "
+     r"is\)"),
+    ("dzhanibekov", {"angular_velocity = [0.05, 6.283185307179586, 0.05]": "angular_velocity = [1e200, 0, 0]"},
+     r"bodies\[0\]\.angular_velocity: the initial rotational kinetic energy, .* \(the term of body 'box' alone is\)"),
+    ("drag-projectile", {"position = [0.0, 0.0, 0.0]": "position = [0.0, 0.0, 1.7e308]"},
+     r"s\.toml: the initial potential energy of the forces is inf J, beyond float64 \(forces\.gravity's alone is\)"),
+    ("kepler", {"mu = 39.47841760435743": "mu = 1.7e308"}, r"\(forces\.central_gravity's alone is\)"),
+])
+def test_an_energy_that_overflows_names_its_body_or_force(scene, replace, where):
+    # the input audit: the refusal named the file only ("masses, speeds, spins or forces too large")
+    text = SCENES[scene].read_text()
+    for old, new in replace.items():
+        assert old in text
+        text = text.replace(old, new)
+    with pytest.raises(SceneError, match=where):
+        parse_scene(text, "s.toml")
+
+
 def test_a_spin_whose_energy_overflows_is_refused():
     with pytest.raises(SceneError, match=r"the initial rotational kinetic energy, .* is inf J"):
         parse_scene(dzhanibekov({"angular_velocity = [0.05, 6.283185307179586, 0.05]":

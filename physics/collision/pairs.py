@@ -18,6 +18,8 @@ from typing import NamedTuple
 import numpy as np
 
 from ..broadphase import find_pairs
+from ..broadphase.common import MAX_COORDINATE
+from ..rules import short
 from .chords import swept_bounds
 from .narrow_phase import collide, collide_sphere_sphere
 from .shapes import Shape, Sphere
@@ -122,10 +124,25 @@ class SweptSpheres(NamedTuple):
 
     @classmethod
     def of(cls, q0, q1, radii, inverse_masses, removed=(), margin: float = 0.0) -> SweptSpheres:
+        """The swept spheres of the chords ``q0 -> q1``; FloatingPointError (a run that diverged, status 1)
+        when an active body's swept sphere is not finite or reaches beyond the broadphase's range,
+        ``MAX_COORDINATE``: a collision scene starts inside it (:mod:`..scene`), so a step that left it blew
+        up, where the broadphase would refuse the spheres as bad input (status 2) naming no step."""
         active = np.ones(len(radii), bool)
         if removed:
             active[list(removed)] = False
-        return cls(*swept_bounds(q0, q1, radii, margin), active, inverse_masses)
+        centers, reach = swept_bounds(q0, q1, radii, margin)
+        # the broadphase's test (..broadphase.common.as_spheres) on the active bodies: one reduction each on
+        # the fast path (max propagates NaN), the culprit only on failure
+        if not (np.max(np.abs(centers), where=active[:, None], initial=0.0) <= MAX_COORDINATE
+                and np.max(reach, where=active, initial=0.0) <= MAX_COORDINATE):
+            far = active & ~((np.max(np.abs(centers), axis=1) <= MAX_COORDINATE) & (reach <= MAX_COORDINATE))
+            if np.any(far):
+                k = int(np.argmax(far))
+                raise FloatingPointError(
+                    f"body {k} moved to {short(q1[k].tolist())} m in the step, beyond the {MAX_COORDINATE:g} m "
+                    "the broadphase squares without overflow: the run diverged")
+        return cls(centers, reach, active, inverse_masses)
 
     @property
     def moving(self) -> np.ndarray:

@@ -381,7 +381,11 @@ def _gyroscopic(spin, body, h, kind):
         jacobian[1, 2] += h * (-w[0] * inertia[2] + momentum[0])
         jacobian[2, 0] += h * (-w[1] * inertia[0] + momentum[1])
         jacobian[2, 1] += h * (w[0] * inertia[1] - momentum[0])
-        step = np.linalg.solve(jacobian, np.array([h * g[0], h * g[1], h * g[2]]))
+        rhs = np.array([h * g[0], h * g[1], h * g[2]])
+        if np.all(np.isfinite(jacobian)) and np.all(np.isfinite(rhs)):
+            step = np.linalg.solve(jacobian, rhs)
+        else:  # a spin that overflowed: NaN on, for the step's check to name the body (solve would raise)
+            step = np.full(3, np.nan)
         w1 = (w[0] - step[0], w[1] - step[1], w[2] - step[2])
     else:
         w1 = (w[0] - h * inverse[0] * g[0], w[1] - h * inverse[1] * g[1], w[2] - h * inverse[2] * g[2])

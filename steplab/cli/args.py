@@ -148,6 +148,11 @@ def time_span(scene, args) -> tuple[float | None, float]:
     t_end = scene.t_end if t_end is None else t_end
     if not t_end > scene.t_start:
         raise ValueError(f"--t-end {t_end:g} must be later than the scene's t_start = {scene.t_start:g}")
+    if dt is not None and getattr(args, "steps", None) is not None:  # refused here, before a warning about the run
+        from steplab.integrators.simulate import check_time_advances, steps_end
+
+        check_time_advances(scene.t_start, steps_end(scene.t_start, args.steps, dt), dt,
+                            getattr(args, "precision", "float64"))
     if dt is not None and getattr(args, "steps", None) is None:
         from steplab.integrators.simulate import step_count
 

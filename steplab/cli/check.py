@@ -33,6 +33,7 @@ def add_parser(sub, name: str) -> None:
 
 def command(args) -> int:
     from steplab.integrators import INTEGRATORS, Stepper
+    from steplab.integrators.simulate import check_initial_state
     from steplab.integrators.stable_dt import stable_steps
     from steplab.physics.scene import load_scene
 
@@ -56,6 +57,7 @@ def command(args) -> int:
                              "(it has no step size to limit)")
     else:
         steppers = [m for m in INTEGRATORS.values() if isinstance(m, Stepper)]
+    check_initial_state(scene.model, scene.y0, scene.model.dtype)  # a state no run integrates has no stable dt
     mode, rows = stable_steps(scene.model, scene.y0[0], steppers, scene.rigid_bodies)
     report = {"scene": scene.name, "dt": dt, "omega_max": mode.omega, "damping_ratio": mode.damping_ratio,
               "integrators": [dataclasses.asdict(r) | {"stable": r.stable(dt)} for r in rows]}
