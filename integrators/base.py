@@ -47,6 +47,17 @@ def check_real(method: str, key: str, value, ok: Callable[[float], bool], allowe
         raise ValueError(f"{method}: {key} must be {allowed}, got {value!r}")
 
 
+def solve_or_nan(xp, a, b):
+    """``xp.linalg.solve(a, b)``, NaN where NumPy finds ``a`` singular in float64 (a damper of 1e300 N s/m):
+    a non-finite step, which the run reports as diverged in one line, as JAX's solve returns NaN itself."""
+    import numpy as np
+
+    try:
+        return xp.linalg.solve(a, b)
+    except np.linalg.LinAlgError:
+        return xp.full(b.shape, xp.nan)
+
+
 def check_step_result(integrator, result, shape) -> None:
     """Refuse (one-line TypeError) a step's result that is not ``(y, carry)`` with y of the state's shape.
 

@@ -10,7 +10,7 @@ from typing import NamedTuple
 import numpy as np
 from steplab.physics.model import dense_problem
 
-from .base import Stepper, check_count, check_real
+from .base import Stepper, check_count, check_real, solve_or_nan
 
 #: Newton iterations before a step is declared failed (its state becomes NaN, so the
 #: driver's divergence check reports the step); also the most ``newton_iterations`` may ask for
@@ -158,10 +158,7 @@ class ImplicitEuler(Stepper):
             q1 = q + dt * v1
             residual = v1 - v - dt * model.acceleration(t1, q1, v1)
             dadq, dadv = model.jacobian(t1, q1, v1)
-            try:
-                delta = xp.linalg.solve(eye - (dt * dt) * dadq - dt * dadv, -residual.reshape(n3))
-            except np.linalg.LinAlgError:  # singular in float64 (a damper of 1e300 N s/m): NaN, as Newton's
-                delta = xp.full(n3, xp.nan)  # never converging is (JAX's solve returns it itself)
+            delta = solve_or_nan(xp, eye - (dt * dt) * dadq - dt * dadv, -residual.reshape(n3))
             return v1 + delta.reshape(v.shape), xp.max(xp.abs(delta)) <= rtol * (1 + xp.max(xp.abs(v1)))
 
         v1 = _newton(xp, update, v, self.newton_iterations)

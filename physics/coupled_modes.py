@@ -21,7 +21,7 @@ import numpy as np
 
 from . import attachments
 from . import quaternion as quat
-from .modes import NonFiniteModelError, StiffestMode, check_finite_mode
+from .modes import NonFiniteModelError, StiffestMode, check_finite_mode, symmetric_part
 
 #: central differences' step, relative to the scale of what is moved (positions, 1 rad, speeds)
 STEP = 1e-6
@@ -88,8 +88,8 @@ def coupled_stiffest_mode(model, bodies, q, v=None) -> StiffestMode:
         rotation = quat.to_matrix(np, orientations[body])
         s = 3 * (len(moved) + k)
         mass[s:s + 3, s:s + 3] = rotation @ np.diag(np.asarray(bodies.inertia, float)[rows[int(body)]]) @ rotation.T
-    try:  # halved, then summed: 1e308 + 1e308 would overflow
-        values, vectors = eigh(0.5 * stiffness + 0.5 * stiffness.T, mass)
+    try:
+        values, vectors = eigh(symmetric_part(stiffness), mass)
     except np.linalg.LinAlgError:  # LAPACK's reduction overflowed (a spring of 1e308 N/m on a small inertia)
         raise NonFiniteModelError("the model's stiffness, with its bodies turned, has no eigenvalues LAPACK can "
                                   "compute in float64 (they overflow): no stable dt can be predicted") from None
@@ -97,7 +97,7 @@ def coupled_stiffest_mode(model, bodies, q, v=None) -> StiffestMode:
     if not len(values) or values[-1] <= 0:
         return StiffestMode(None, 0.0, pattern)
     omega, phi = float(np.sqrt(values[-1])), vectors[:, -1]  # phi^T M phi = 1
-    zeta = float(phi @ (0.5 * damping + 0.5 * damping.T) @ phi / (2 * omega))
+    zeta = float(phi @ symmetric_part(damping) @ phi / (2 * omega))
     check_finite_mode(omega, zeta)
     pattern[moved] = phi[:3 * len(moved)].reshape(-1, 3)
     peak = np.max(np.abs(pattern))

@@ -119,7 +119,7 @@ def stiffest_mode(model, q, v=None, derivative: str = "jvp") -> StiffestMode:
 
     if size <= DENSE_SIZE:
         s = np.column_stack([stiffness(e) for e in np.eye(size)])
-        values, vectors = np.linalg.eigh(0.5 * s + 0.5 * s.T)  # symmetric up to round-off; halved, then summed
+        values, vectors = np.linalg.eigh(symmetric_part(s))  # symmetric up to round-off
         omega2, z = float(values[-1]), vectors[:, -1]
     else:
         # a fixed start, so that a scene's prediction is reproducible; S of a model without
@@ -147,6 +147,11 @@ def stiffest_mode(model, q, v=None, derivative: str = "jvp") -> StiffestMode:
     check_finite_mode(omega, zeta)
     scale = np.max(np.abs(pattern))
     return StiffestMode(omega, zeta if zeta > 0 else 0.0, pattern / scale)
+
+
+def symmetric_part(a):
+    """(A + A^T) / 2, each half taken before the sum: 1e308 + 1e308 would overflow where A's entries do not."""
+    return 0.5 * a + 0.5 * a.T
 
 
 def check_finite_mode(omega: float, zeta: float) -> None:
