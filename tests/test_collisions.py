@@ -546,3 +546,22 @@ def test_same_run_same_bytes():
 def test_combinations_the_lecture_miscounts():
     # "5 different types of objects -> 10 (5 choose 2 = 10) different CORs": with self-pairs, 15
     assert len(list(itertools.combinations_with_replacement(range(5), 2))) == 15
+
+
+def test_swept_spheres_refuse_a_blown_up_active_body_only():
+    # MAX_COORDINATE is the broadphase's range: a chord from the origin to 3 x that point has its swept
+    # sphere's centre at 1.5 x the range and its reach as far; a body removed from the run is not looked at
+    from steplab.physics.broadphase.common import MAX_COORDINATE
+    from steplab.physics.collision.pairs import SweptSpheres
+
+    q0 = np.zeros((3, 3))
+    q1 = np.array([[1.0, 0.0, 0.0], [3 * MAX_COORDINATE, 0.0, 0.0], [0.0, 1.0, 0.0]])
+    radii, inverse_masses = np.full(3, 0.5), np.ones(3)
+    swept = SweptSpheres.of(q0, q1, radii, inverse_masses, removed=(1,))
+    np.testing.assert_array_equal(swept.active, [True, False, True])
+    with pytest.raises(FloatingPointError, match="body 1 moved to"):
+        SweptSpheres.of(q0, q1, radii, inverse_masses)
+    q1[1] = [0.0, np.nan, 0.0]
+    with pytest.raises(FloatingPointError, match="body 1 moved to"):
+        SweptSpheres.of(q0, q1, radii, inverse_masses)
+    SweptSpheres.of(q0, q1, radii, inverse_masses, removed=[1])

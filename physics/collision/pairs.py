@@ -133,9 +133,11 @@ class SweptSpheres(NamedTuple):
             active[list(removed)] = False
         centers, reach = swept_bounds(q0, q1, radii, margin)
         # the broadphase's test (..broadphase.common.as_spheres) on the active bodies: one reduction each on
-        # the fast path (max propagates NaN), the culprit only on failure
-        if not (np.max(np.abs(centers), where=active[:, None], initial=0.0) <= MAX_COORDINATE
-                and np.max(reach, where=active, initial=0.0) <= MAX_COORDINATE):
+        # the fast path (max propagates NaN), the culprit only on failure. A masked max (where=) costs six
+        # times a plain one (65 against 11 us on 10^4 bodies), so the mask is applied only when a body is out
+        kept_centers, kept_reach = (centers[active], reach[active]) if removed else (centers, reach)
+        if not (np.abs(kept_centers).max(initial=0.0) <= MAX_COORDINATE
+                and kept_reach.max(initial=0.0) <= MAX_COORDINATE):
             far = active & ~((np.max(np.abs(centers), axis=1) <= MAX_COORDINATE) & (reach <= MAX_COORDINATE))
             if np.any(far):
                 k = int(np.argmax(far))
