@@ -770,7 +770,8 @@ def _limit_to_the_energy_taken(bodies, contacts, given, start, layout):
     floor gave back up to 2.6 % more than they took in a step (seeded piles, eps = 1). Limiting
     E(a) - E1 to max(D, 0) keeps E_end <= E0 + W, what eps <= 1 promises; where the pass stays
     within it (the cradle, a lone contact) a = 1 and nothing changes. Impulses scaled together
-    keep the island's momenta.
+    keep the island's momenta. A step whose forces change within it counts each kick's work into E0
+    instead and passes a = 0 (``rigid_solver_step._kick_work``).
 
     ``given`` = (the pass's impulses, whether each body was given one); ``start`` = (v, omega) before
     the pass. An island none of whose bodies was given an impulse has E(a) = E1 for every a (its

@@ -177,7 +177,8 @@ class SolverStep:
         self.log.largest_residual = max(self.log.largest_residual, solved.residual)
         self._previous = solved
         if not (np.all(np.isfinite(q)) and np.all(np.isfinite(v))):
-            raise FloatingPointError(non_finite(self.model.names, start.t, self.log.largest_residual, q, v))
+            raise FloatingPointError(non_finite(self.model.names, start.t, self.log.largest_residual,
+                                                position=q, velocity=v))
         return np.stack([q, v])
 
     def _impacts(self, start: StepStart, solved) -> tuple[ImpactBlock, np.ndarray]:
@@ -318,11 +319,15 @@ _NO_CONTACTS = Solved(Contacts.empty(),
                        _EMPTY, np.zeros((0, 3)), _EMPTY)
 
 
-def non_finite(names, t: float, residual: float, *rows) -> str:
+def non_finite(names, t: float, residual: float, **rows) -> str:
     """The contact solver's one line for a state that became non-finite in the step from ``t``,
-    naming the first body whose row (position, velocity, angular velocity: ``rows``, each (N, 3))
-    is not finite."""
-    bad = np.flatnonzero(~np.all(np.isfinite(np.concatenate(rows, axis=1)), axis=1))
-    body = f" at body {names[int(bad[0])]!r}" if len(bad) else ""
-    return (f"the contact solver's state became non-finite{body} in the step from t = {t:g} s "
-            f"(largest residual {residual:.3g} m/s)")
+    naming the first body one of whose ``rows`` (each (N, 3), by its quantity: ``position=q``,
+    ``velocity=v``, ``angular_velocity=omega``) is not finite, and which of them are not. A step
+    that checks as it goes passes the quantities it has changed so far, so those named are the
+    ones that went first."""
+    finite = {name: np.all(np.isfinite(row), axis=1) for name, row in rows.items()}
+    body = int(np.argmin(np.all(list(finite.values()), axis=0)))  # the first body not finite
+    quantities = [name.replace("_", " ") for name, ok in finite.items() if not ok[body]]
+    which = ", ".join(quantities[:-1]) + " and " * (len(quantities) > 1) + quantities[-1]
+    return (f"the contact solver's state became non-finite at body {names[body]!r} in the step from t = {t:g} s "
+            f"(its {which}; largest residual {residual:.3g} m/s)")
