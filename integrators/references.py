@@ -20,6 +20,14 @@ MAX_REFERENCE_STEPS = 1_000_000
 #: one a Newton iteration (at most 6) plus its error estimate; scipy counts no steps of its own, so the budget
 #: of MAX_REFERENCE_STEPS steps is kept in evaluations (without it a span of 1e300 s never ended)
 EVALUATIONS_PER_STEP = 12
+#: how often (in vector-field evaluations) a scipy solve compares the time it has reached with its span. The
+#: budget alone let a hopeless solve (a span of 1e300 s) make all its 12 million Python evaluations, minutes of
+#: them, before it said so; the rate of its first 10,000 (a second or less) says so already
+BUDGET_LOOK_EVERY = 10_000
+#: a scipy solve stops early only if, at the rate of its evaluations so far, the span would take more than
+#: this many times its budget. The rate of a legitimate solve varies (a fast transient, then slow motion), and
+#: the margin leaves it room: a solve ended this way would have needed it to fall more than tenfold later on
+BUDGET_PROJECTION_MARGIN = 10
 #: the smallest rtol a reference takes: scipy's solve_ivp raises any rtol below 100 x the float64
 #: machine epsilon to it (with a warning), so a tighter one would not be the tolerance recorded
 MIN_RTOL = 100 * float(np.finfo(float).eps)
@@ -31,7 +39,8 @@ MIN_ATOL = 1e-100
 
 
 class _OutOfBudget(Exception):
-    """A scipy solve past its evaluations (:data:`EVALUATIONS_PER_STEP`): raised from its vector field."""
+    """A scipy solve past its evaluations (:data:`EVALUATIONS_PER_STEP`), or on course to be (the
+    message says how far it got): raised from its vector field, since solve_ivp takes no step budget."""
 
 
 class ReferenceFailedError(RuntimeError):
@@ -94,7 +103,9 @@ def solve_adaptive(vector_field, ts, y0, method: str, rtol, atol, *, at_saved_ti
         ``jacobian(t, y) -> d(dy/dt)/dy`` on the flat state (scipy's implicit methods).
     max_steps : int
         The step budget: diffrax's ``max_steps``; scipy's kept in vector-field evaluations,
-        :data:`EVALUATIONS_PER_STEP` a step (solve_ivp has none, and counts no steps).
+        :data:`EVALUATIONS_PER_STEP` a step (solve_ivp has none, and counts no steps), and
+        ended early where the rate of its evaluations so far needs far more for the span
+        (:func:`_project_budget`).
 
     Notes
     -----
@@ -123,27 +134,46 @@ def solve_adaptive(vector_field, ts, y0, method: str, rtol, atol, *, at_saved_ti
 
     y0 = np.asarray(y0, dtype=float)
     shape = y0.shape
+    budget = max_steps * EVALUATIONS_PER_STEP
+    t0, t1 = float(ts[0]), float(ts[-1])
     evaluations = 0
 
     def fun(t, y):
         nonlocal evaluations
+        if evaluations >= budget:
+            raise _OutOfBudget(f"it took its budget of {budget:,} vector-field evaluations")
+        if evaluations and evaluations % BUDGET_LOOK_EVERY == 0:
+            _project_budget(evaluations, float(t), t0, t1, budget)
         evaluations += 1
-        if evaluations > max_steps * EVALUATIONS_PER_STEP:
-            raise _OutOfBudget
         return np.asarray(vector_field(t, y.reshape(shape))).ravel()
 
     kwargs = {} if jacobian is None else {"jac": jacobian}
     try:
         sol = solve_ivp(fun, (ts[0], ts[-1]), y0.ravel(), method=solver, t_eval=ts if at_saved_times else None,
                         rtol=rtol, atol=atol, **kwargs)
-    except _OutOfBudget:  # as diffrax reports its max_steps: the steps taken, the budget
-        return AdaptiveSolution(np.empty((0,) + shape), max_steps, evaluations - 1, False,
-                                f"{max_steps * EVALUATIONS_PER_STEP:,} evaluations, the step budget's")
+    except _OutOfBudget as stop:  # as diffrax reports its max_steps: the steps taken, the budget
+        return AdaptiveSolution(np.empty((0,) + shape), max_steps, evaluations, False, str(stop))
     if not sol.success and isinstance(sol.y, list):  # stopped before the first saved time: solve_ivp leaves []
         return AdaptiveSolution(np.empty((0,) + shape), None, int(sol.nfev), False, sol.message)
     ys = sol.y.T.reshape((-1,) + shape)
     return AdaptiveSolution(ys if at_saved_times else ys[-1:], None if at_saved_times else int(sol.t.size - 1),
                             int(sol.nfev), bool(sol.success), sol.message)
+
+
+def _project_budget(evaluations: int, t: float, t0: float, t1: float, budget: int):
+    """Raise :class:`_OutOfBudget` if ``evaluations`` that reached ``t`` say the span [t0, t1] needs far more.
+
+    At the rate so far the whole span takes evaluations (t1 - t0) / (t - t0); the time a vector
+    field is called at is a stage's, at or past the last accepted step, so the rate is if anything
+    flattered and the projection low. Past :data:`BUDGET_PROJECTION_MARGIN` times the budget the
+    solve cannot end within it short of a collapse in its rate, and it ends now, not minutes on when
+    the budget is spent. Compared as products, not a quotient: a span of 1e300 s makes the product
+    inf at worst (a float product does not raise), and no time reached (t == t0) says nothing yet.
+    """
+    if t > t0 and evaluations * (t1 - t0) > BUDGET_PROJECTION_MARGIN * budget * (t - t0):
+        raise _OutOfBudget(f"its first {evaluations:,} vector-field evaluations reached t = {t:.4g} s of "
+                           f"{t1:.4g} s: at that rate the span needs over {BUDGET_PROJECTION_MARGIN} x the "
+                           f"{budget:,} of its budget")
 
 
 @dataclasses.dataclass(frozen=True)
@@ -185,10 +215,15 @@ class AdaptiveReference(Solver):
         if not sol.success:
             if sol.steps is not None and int(sol.steps) >= MAX_REFERENCE_STEPS:  # diffrax: "Try increasing
                 # `max_steps`", which no command line can do
-                raise ReferenceFailedError(f"{self.name} failed: it took its budget of {MAX_REFERENCE_STEPS:,} steps "
-                                           "(steplab.integrators.references.MAX_REFERENCE_STEPS) before the end of "
-                                           "the run: a shorter run, or for a stiff scene an implicit reference "
-                                           "(diffrax-kvaerno5, scipy-radau)")
+                budget = f"its budget of {MAX_REFERENCE_STEPS:,} steps (steplab.integrators.references." \
+                         "MAX_REFERENCE_STEPS)"
+                if sol.evaluations is not None and sol.evaluations < MAX_REFERENCE_STEPS * EVALUATIONS_PER_STEP:
+                    # scipy, stopped by the rate of its evaluations (_project_budget) before it spent them
+                    what = f"it would need more than {budget} to reach the end of the run ({sol.message})"
+                else:
+                    what = f"it took {budget} before the end of the run"
+                raise ReferenceFailedError(f"{self.name} failed: {what}: a shorter run, or for a stiff scene an "
+                                           "implicit reference (diffrax-kvaerno5, scipy-radau)")
             raise ReferenceFailedError(f"{self.name} failed: {sol.message}")
         return np.asarray(sol.ys)
 

@@ -153,6 +153,52 @@ def test_a_scipy_solve_that_stops_before_the_first_saved_time_is_reported():
     assert not sol.success and sol.ys.shape == (0, 2, 2, 3) and "step size" in sol.message
 
 
+class _Endless(Exception):
+    """A vector field called past any sensible count: the solve was never going to stop by itself."""
+
+
+def counted_oscillator(limit):
+    """A 1 Hz oscillator's vector field that counts its calls (``calls[0]``) and raises past ``limit``."""
+    calls = [0]
+
+    def vector_field(t, y):
+        calls[0] += 1
+        if calls[0] > limit:
+            raise _Endless
+        return np.stack([y[1], -(2 * np.pi) ** 2 * y[0]])
+
+    return vector_field, calls
+
+
+@pytest.mark.parametrize("method", ["scipy-dop853", "scipy-radau", "scipy-rk45"])
+def test_a_hopeless_scipy_solve_ends_within_its_first_evaluations(method):
+    # a span of 1e300 s takes ~1e302 evaluations: the budget alone let solve_ivp make all 12,000,000 of its
+    # own (minutes of Python calls) before it said so; the rate of the first ones says it already
+    vector_field, calls = counted_oscillator(100_000)
+    y0 = np.zeros((2, 1, 3))
+    y0[0, 0, 0] = 1.0
+    sol = references.solve_adaptive(vector_field, np.array([0.0, 1e300]), y0, method, 1e-10, 1e-10)
+    assert not sol.success and sol.ys.shape == (0, 2, 1, 3) and sol.steps == references.MAX_REFERENCE_STEPS
+    assert sol.evaluations == calls[0] == references.BUDGET_LOOK_EVERY
+    assert "reached t = " in sol.message and "of 1e+300 s" in sol.message, sol.message
+
+
+def test_a_scipy_solve_on_course_stops_at_its_budget_not_before():
+    # 40 s at 1e-12 take about 15,000 evaluations: inside a budget of 2,000 steps (24,000) the first look at the
+    # rate lets the solve go on; a budget of 100 steps (1,200 evaluations) is spent before the first look
+    vector_field, calls = counted_oscillator(100_000)
+    y0 = np.zeros((2, 1, 3))
+    y0[0, 0, 0] = 1.0
+    sol = references.solve_adaptive(vector_field, np.array([0.0, 40.0]), y0, "scipy-dop853", 1e-12, 1e-12,
+                                    max_steps=2000)
+    assert sol.success and calls[0] > references.BUDGET_LOOK_EVERY
+    calls[0] = 0
+    sol = references.solve_adaptive(vector_field, np.array([0.0, 10.0]), y0, "scipy-dop853", 1e-12, 1e-12,
+                                    max_steps=100)
+    assert not sol.success and sol.evaluations == calls[0] == 1200
+    assert sol.message == "it took its budget of 1,200 vector-field evaluations"
+
+
 # --- the contact solver's sweeps ----------------------------------------------------------------
 
 def test_contact_solver_sweeps_per_step_have_an_upper_bound():
