@@ -24,7 +24,12 @@ stages: the coupling is first order and not symplectic, and on a stiff attachmen
 at every dt (semi-implicit Euler with ``dlm`` on spring-pendulum multiplies a perturbation by 1.021
 a step at dt = 1 ms). :mod:`.coupled_stability` measures that growth before a run.
 
-Each stage rebuilds the model at the new lever arms (:func:`.attachments.model_at`). On NumPy
+Each stage takes the model at its lever arms (:func:`model_at`): on NumPy the one model of
+:class:`.attachments.LeverArms`, its arms turned in place (a new Model per stage was some 90 us of
+spring-pendulum's 360 us step with exponential-map, 300 of 1170 us with rk4), on JAX a new one (a
+traced step rewrites nothing in place). A model held across a later stage's turn
+(:func:`held_step`'s start model, over the rotation's stages) is then not read after that turn:
+:class:`_HeldTorque` turns it back should a method ask for the start again. On NumPy
 :class:`AttachedStep` is the step of :func:`.simulate`'s Python loop; on JAX the same stage
 functions, traced, are the step of the one compiled loop (:func:`.loop.compiled_loop`), which
 carries the translation and the rotation packed into one flat state (:class:`_Packed`), so that
@@ -59,6 +64,9 @@ class Coupling(NamedTuple):
     integrator : integrators.base.Stepper
     rotation : integrators.rotation.RotationMethod
     xp, dtype : the run's array namespace and precision
+    lever_arms : physics.attachments.LeverArms, optional
+        On NumPy, the one model whose lever arms :func:`model_at` turns in place (:meth:`turning`);
+        None: a new model at each state (JAX, and a coupling that lets its models out).
     """
 
     model: object
@@ -67,6 +75,18 @@ class Coupling(NamedTuple):
     rotation: object
     xp: object = np
     dtype: object = np.dtype(np.float64)
+    lever_arms: object = None
+
+    def turning(self, q, omega) -> Coupling:
+        """This coupling, on NumPy with one model whose lever arms :func:`model_at` turns in place
+        (:class:`.attachments.LeverArms`, first at ``q`` and ``omega``); on JAX itself."""
+        if self.xp is not np:
+            return self
+        return self._replace(lever_arms=attachments.LeverArms(self.model, *frames(self, q, omega), self.dtype))
+
+    def fresh(self) -> Coupling:
+        """This coupling building a new model at each state (for a model that leaves the step)."""
+        return self._replace(lever_arms=None)
 
     @property
     def composes(self) -> bool:
@@ -96,19 +116,28 @@ def composes(integrator, rotation) -> bool:
     return integrator.name in rotation.composes_with
 
 
-def model_at(c: Coupling, q, omega):
-    """The model with its lever arms at the rotating bodies' ``q`` (R, 4) and body-frame ``omega`` (R, 3)
-    (a point mass's at the identity and zero)."""
+def frames(c: Coupling, q, omega):
+    """All the bodies' orientations (N, 4) and world angular velocities (N, 3) at the rotating bodies'
+    ``q`` (R, 4) and body-frame ``omega`` (R, 3) (a point mass's the identity and zero)."""
     xp, n, index = c.xp, c.model.n_bodies, c.bodies.index
     identity = np.broadcast_to(quat.IDENTITY, (n, 4))
     world = quat.rotate(xp, q, omega)
     if xp is np:
         orientations, angular_velocities = identity.copy(), np.zeros((n, 3))
         orientations[index], angular_velocities[index] = q, world
-    else:
-        orientations = xp.asarray(identity, dtype=q.dtype).at[index].set(q)
-        angular_velocities = xp.zeros((n, 3), dtype=q.dtype).at[index].set(world)
-    return attachments.model_at(c.model, orientations, angular_velocities, xp, c.dtype)
+        return orientations, angular_velocities
+    return (xp.asarray(identity, dtype=q.dtype).at[index].set(q),
+            xp.zeros((n, 3), dtype=q.dtype).at[index].set(world))
+
+
+def model_at(c: Coupling, q, omega):
+    """The model with its lever arms at the rotating bodies' ``q`` (R, 4) and body-frame ``omega`` (R, 3)
+    (a point mass's at the identity and zero). With ``c.lever_arms`` (NumPy) the one model, turned in
+    place: the model an earlier call gave turns too (see the module)."""
+    orientations, angular_velocities = frames(c, q, omega)
+    if c.lever_arms is not None:
+        return c.lever_arms.turn(orientations, angular_velocities)
+    return attachments.model_at(c.model, orientations, angular_velocities, c.xp, c.dtype)
 
 
 def accelerations(c: Coupling, t, x, v, q, omega):
@@ -119,7 +148,10 @@ def accelerations(c: Coupling, t, x, v, q, omega):
 
 
 def held_step(c: Coupling, t, y, q, omega, dt):
-    """One step in which each system steps with the other held at the start of the step: (y, q, omega)."""
+    """One step in which each system steps with the other held at the start of the step: (y, q, omega).
+
+    The translation's step reads the start model before the rotation's stages turn its lever arms
+    (with ``c.lever_arms``); :class:`_HeldTorque` reads it only until then."""
     model = model_at(c, q, omega)
     y1, _ = c.integrator.step(model, t, y, dt, c.integrator.init(model, t, y))
     torque = _HeldTorque(c, y[0], y[1], (q, omega, model))
@@ -139,6 +171,8 @@ def strang_step(c: Coupling, t, y, q, omega, kept, dt):
     v_half = v + 0.5 * dt * a0
     x1 = x + dt * v_half
     q1, omega_free = c.rotation.step(c.rotation_model(), t, q, omega + 0.5 * dt * tau0 / inertia, dt)
+    if xp is not np:  # the rotation methods compute with float64 moments; a compiled float32 run carries
+        q1, omega_free = q1.astype(y.dtype), omega_free.astype(y.dtype)  # the next kick's a1, tau1 in float32
     # the second kick's velocities as each method estimates them: v + h a0 (Verlet), the rotated pi (dlm)
     a1, tau1 = accelerations(c, t + dt, x1, v + dt * a0, q1, omega_free)
     return xp.stack([x1, v_half + 0.5 * dt * a1]), q1, omega_free + 0.5 * dt * tau1 / inertia, (a1, tau1)
@@ -200,17 +234,19 @@ class AttachedStep:
             raise ValueError(f"springs and dampers at body-frame points (offsets) need a fixed-step integrator that "
                              f"evaluates their forces, not {integrator.name!r} (use semi-implicit-euler or "
                              "velocity-verlet)")
-        self.coupling = Coupling(model.cast(np, np.float64), bodies, integrator, rotation, model.xp, model.dtype)
         self.bodies = bodies
         self.q, self.omega = bodies.orientations, bodies.body_angular_velocities()
+        # on NumPy one model whose lever arms each stage turns in place (none leaves the step)
+        self.coupling = Coupling(model.cast(np, np.float64), bodies, integrator, rotation, model.xp,
+                                 model.dtype).turning(self.q, self.omega)
         self.saved = {0: (self.q, self.omega)}  # by step
         self.log = None  # no collisions
         self._kept = None  # the Strang splitting's last acceleration and torque, for the next first kick
 
     def model_at(self, q, omega):
-        """:func:`model_at` of this run: the model with its lever arms at ``q`` (R, 4) and body-frame
-        ``omega`` (R, 3)."""
-        return model_at(self.coupling, q, omega)
+        """:func:`model_at` of this run: a new model with its lever arms at ``q`` (R, 4) and body-frame
+        ``omega`` (R, 3) (not the one the steps turn)."""
+        return model_at(self.coupling.fresh(), q, omega)
 
     def final_model(self):
         """The model with its lever arms at the last step's orientations (for the energy at the end)."""
@@ -294,16 +330,22 @@ class _Packed:
 
 class _HeldTorque:
     """The attached forces' torque at positions ``x`` and velocities ``v`` held over a rotation step;
-    ``start`` is (q, omega, model) at the step's start, which most methods ask for."""
+    ``start`` is (q, omega, model) at the step's start, which most methods ask for (first).
+
+    With ``c.lever_arms`` a stage's :func:`model_at` turns the start's model too: it is dropped
+    then, and a later ask at the start turns the arms back (no method here asks so)."""
 
     def __init__(self, c: Coupling, x, v, start):
         self.coupling, self.x, self.v, self.start = c, x, v, start
 
     def torque(self, xp, t, q, omega_body):
+        c = self.coupling
         q0, omega0, model = self.start
-        if q is not q0 or omega_body is not omega0:  # a stage inside the step (rk4, dlm's second kick)
-            model = model_at(self.coupling, q, omega_body)
-        return attachments.torques(model, self.x, self.v)[self.coupling.bodies.index]
+        if q is not q0 or omega_body is not omega0 or model is None:  # a stage inside the step (rk4, dlm's second kick)
+            model = model_at(c, q, omega_body)
+            if c.lever_arms is not None:  # the start's model, turned
+                self.start = (q0, omega0, None)
+        return attachments.torques(model, self.x, self.v)[c.bodies.index]
 
 
 def scene_stepper(scene, kept: list | None = None, world=None, rotation=None, save_every: int = 1):

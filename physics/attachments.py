@@ -182,23 +182,25 @@ def model_at(model, orientations, angular_velocities, xp=np, dtype=np.float64):
 
 
 class LeverArms:
-    """One float64 NumPy model of ``model`` whose attached forces' lever arms :meth:`turn` rewrites in place.
+    """One NumPy model of ``model`` (in precision ``dtype``, its lever arms float64 as :func:`model_at`
+    leaves them) whose attached forces' lever arms :meth:`turn` rewrites in place.
 
     Building a model (:func:`model_at`: a Model, a copy of each force, each cast again) is some 60
     of the 270 us that ``hung-box``'s forces and torques would cost the contact solver at each
     substep (its points rotated as one block; 390 us before that). A step that takes them at every
-    substep and lets no model out (:class:`.collision.rigid_solver_step.RigidSolverStep`) builds it
-    once here: its attached forces' arms and velocities are views of one :class:`Attachment`
-    (:meth:`AttachedPoints.model`), and :meth:`turn` copies those at the new orientations into it.
-    The forces read them when they are evaluated, so :attr:`model` is the model at the last turn's
-    orientations, bit for bit what :func:`model_at` builds there; a caller that keeps it past the
-    next turn sees it turn too.
+    substep or stage and lets no model out (:class:`.collision.rigid_solver_step.RigidSolverStep`,
+    the NumPy :class:`steplab.integrators.attached.AttachedStep`) builds it once here: its attached
+    forces' arms and velocities are views of one :class:`Attachment` (:meth:`AttachedPoints.model`),
+    and :meth:`turn` copies those at the new orientations into it. The forces read them when they are
+    evaluated, so :attr:`model` is the model at the last turn's orientations, bit for bit what
+    :func:`model_at` builds there; a caller that keeps it past the next turn sees it turn too, so it
+    takes what it needs from it (forces, torques) before that turn.
     """
 
-    def __init__(self, model, orientations, angular_velocities):
+    def __init__(self, model, orientations, angular_velocities, dtype=np.float64):
         self.points = AttachedPoints.of(model)
         self.block = self.points.at(np, orientations, angular_velocities)
-        self.model = self.points.model(model, self.block)
+        self.model = self.points.model(model, self.block, np, dtype)
 
     def turn(self, orientations, angular_velocities):
         """:attr:`model`, its lever arms now at ``orientations`` (N, 4) and world ``angular_velocities`` (N, 3)."""
