@@ -118,16 +118,18 @@ def composes(integrator, rotation) -> bool:
 
 def frames(c: Coupling, q, omega):
     """All the bodies' orientations (N, 4) and world angular velocities (N, 3) at the rotating bodies'
-    ``q`` (R, 4) and body-frame ``omega`` (R, 3) (a point mass's the identity and zero)."""
-    xp, n, index = c.xp, c.model.n_bodies, c.bodies.index
+    ``q`` (R, 4) and body-frame ``omega`` (R, 3) (a point mass's the identity and zero), in the run's
+    precision: a rotation method's inner stages compute in float64 (:func:`in_precision`), and the lever
+    arms, the forces and the torques take the orientations' precision."""
+    xp, n, index, dtype = c.xp, c.model.n_bodies, c.bodies.index, c.dtype
+    q, omega = in_precision(xp, dtype, q, omega)
     identity = np.broadcast_to(quat.IDENTITY, (n, 4))
     world = quat.rotate(xp, q, omega)
     if xp is np:
-        orientations, angular_velocities = identity.copy(), np.zeros((n, 3))
+        orientations, angular_velocities = identity.astype(dtype), np.zeros((n, 3), dtype)
         orientations[index], angular_velocities[index] = q, world
         return orientations, angular_velocities
-    return (xp.asarray(identity, dtype=q.dtype).at[index].set(q),
-            xp.zeros((n, 3), dtype=q.dtype).at[index].set(world))
+    return (xp.asarray(identity, dtype=dtype).at[index].set(q), xp.zeros((n, 3), dtype=dtype).at[index].set(world))
 
 
 def model_at(c: Coupling, q, omega):
@@ -155,8 +157,16 @@ def held_step(c: Coupling, t, y, q, omega, dt):
     model = model_at(c, q, omega)
     y1, _ = c.integrator.step(model, t, y, dt, c.integrator.init(model, t, y))
     torque = _HeldTorque(c, y[0], y[1], (q, omega, model))
-    q1, omega1 = c.rotation.step(c.rotation_model((torque,)), t, q, omega, dt)
+    q1, omega1 = in_precision(c.xp, y.dtype, *c.rotation.step(c.rotation_model((torque,)), t, q, omega, dt))
     return y1, q1, omega1
+
+
+def in_precision(xp, dtype, *arrays):
+    """``arrays`` in the run's precision ``dtype``: the rotation methods compute with float64 moments
+    (:class:`.rigid_body.RotationModel`), and in a float32 run their orientations would carry float64
+    into the lever arms, the forces and the translation (on NumPy the whole run computed in float64
+    after its first step; JAX's compiled loop refused its float64 carry)."""
+    return tuple(xp.asarray(a, dtype=dtype) for a in arrays)
 
 
 def strang_step(c: Coupling, t, y, q, omega, kept, dt):
@@ -171,8 +181,7 @@ def strang_step(c: Coupling, t, y, q, omega, kept, dt):
     v_half = v + 0.5 * dt * a0
     x1 = x + dt * v_half
     q1, omega_free = c.rotation.step(c.rotation_model(), t, q, omega + 0.5 * dt * tau0 / inertia, dt)
-    if xp is not np:  # the rotation methods compute with float64 moments; a compiled float32 run carries
-        q1, omega_free = q1.astype(y.dtype), omega_free.astype(y.dtype)  # the next kick's a1, tau1 in float32
+    q1, omega_free = in_precision(xp, y.dtype, q1, omega_free)
     # the second kick's velocities as each method estimates them: v + h a0 (Verlet), the rotated pi (dlm)
     a1, tau1 = accelerations(c, t + dt, x1, v + dt * a0, q1, omega_free)
     return xp.stack([x1, v_half + 0.5 * dt * a1]), q1, omega_free + 0.5 * dt * tau1 / inertia, (a1, tau1)
@@ -235,7 +244,7 @@ class AttachedStep:
                              f"evaluates their forces, not {integrator.name!r} (use semi-implicit-euler or "
                              "velocity-verlet)")
         self.bodies = bodies
-        self.q, self.omega = bodies.orientations, bodies.body_angular_velocities()
+        self.q, self.omega = in_precision(np, model.dtype, bodies.orientations, bodies.body_angular_velocities())
         # on NumPy one model whose lever arms each stage turns in place (none leaves the step)
         self.coupling = Coupling(model.cast(np, np.float64), bodies, integrator, rotation, model.xp,
                                  model.dtype).turning(self.q, self.omega)

@@ -182,8 +182,9 @@ def model_at(model, orientations, angular_velocities, xp=np, dtype=np.float64):
 
 
 class LeverArms:
-    """One NumPy model of ``model`` (in precision ``dtype``, its lever arms float64 as :func:`model_at`
-    leaves them) whose attached forces' lever arms :meth:`turn` rewrites in place.
+    """One NumPy model of ``model`` in precision ``dtype`` (its lever arms in the first orientations'
+    precision, as :func:`model_at` builds them) whose attached forces' lever arms :meth:`turn` rewrites
+    in place.
 
     Building a model (:func:`model_at`: a Model, a copy of each force, each cast again) is some 60
     of the 270 us that ``hung-box``'s forces and torques would cost the contact solver at each

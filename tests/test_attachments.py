@@ -575,3 +575,37 @@ def test_the_compiled_loop_runs_attached_scenes_in_float32(integrator, rotation)
                  (wide_rotation.orientations, narrow_rotation.orientations),
                  (wide_rotation.angular_velocities, narrow_rotation.angular_velocities)):
         assert_round_off(a, b, 1e-4)
+
+
+@pytest.mark.parametrize("integrator, rotation", [("semi-implicit-euler", "exponential-map"),  # the held step
+                                                  ("semi-implicit-euler", "dlm"),  # a held step not composing
+                                                  ("velocity-verlet", "dlm"),  # the Strang splitting
+                                                  ("rk4", "rk4")])  # the joint tableau
+def test_a_numpy_float32_coupled_run_computes_in_float32(integrator, rotation):
+    """The rotation methods compute with float64 moments; their orientations carried float64 into the lever
+    arms, the forces and the translation, so after its first step a NumPy float32 run computed in float64
+    and only its saved states were float32. Every array a step returns is float32 now, and the run keeps
+    to the compiled float32 loop's within float32's round-off (1e-4 of each array's largest component)."""
+    from steplab.integrators import get_integrator
+
+    scene = random_attached_scene(25)
+    model = scene.model.cast(np, np.float32)
+    step = AttachedStep(model, scene.rigid_bodies, get_integrator(integrator), get_rotation(rotation))
+    y, dt = scene.y0.astype(np.float32), np.float32(scene.dt)
+    for k in range(3):
+        y, _ = step(k * dt, y, dt, None)
+        assert y.dtype == step.q.dtype == step.omega.dtype == np.float32, k
+        assert all(a.dtype == np.float32 for a in step._kept or ()), k
+    steps, save_every = 200, 20
+    runs = {}
+    for backend in ("numpy", "jax"):
+        kept = []
+        trajectory = simulate(scene.model, integrator, scene.y0, 0.0, dt=scene.dt, n_steps=steps, backend=backend,
+                              dtype=np.float32, save_every=save_every,
+                              stepper=attached_stepper(scene.rigid_bodies, get_rotation(rotation), kept))
+        rotation_run = kept[0].rotation_trajectory(trajectory)
+        runs[backend] = (trajectory.positions, trajectory.velocities, rotation_run.orientations,
+                         rotation_run.angular_velocities)
+    for a, b in zip(runs["numpy"], runs["jax"]):
+        assert a.dtype == b.dtype == np.float32
+        assert_round_off(a, b, 1e-4)
