@@ -38,9 +38,10 @@ def coupled_growth(model, bodies, integrator, rotation, y0, dt: float) -> float 
     forces, its rotating ``bodies``) at the start state ``y0`` (2, N, 3), linearised (see the module);
     inf where a step from the start, or from a state a perturbation away, is not finite; None above
     :data:`.coupled_modes.COUPLED_SIZE` coordinates (the eigenproblem is dense)."""
-    c = Coupling(model.cast(np, np.float64), bodies, integrator, rotation)
     y0 = np.asarray(y0, dtype=float)
     q0, omega0 = bodies.orientations, bodies.body_angular_velocities()
+    # one model whose lever arms each stage turns in place (none leaves a step): 2x faster, the same bytes
+    c = Coupling(model.cast(np, np.float64), bodies, integrator, rotation).turning(q0, omega0)
     free = np.flatnonzero(np.asarray(model.inverse_masses, dtype=float) > 0)
     turning = np.flatnonzero(np.isin(bodies.index, free))  # rows of the rotating bodies that are not pinned
     m, r = len(free), len(turning)
