@@ -205,7 +205,11 @@ class AdaptiveReference(Solver):
         if self.backend == "jax":
             import jax.numpy as jnp
 
-            ts, y0 = jnp.asarray(ts, dtype=model.dtype), jnp.asarray(y0, dtype=model.dtype)
+            # in float64 whatever the run's precision, as scipy's solve_ivp solves (it takes y0 as float):
+            # a reference's tolerance (rtol 1e-10 to 1e-12) is below float32's resolution (1.2e-7), so a
+            # float32 solve shrank its step until it had spent its MAX_REFERENCE_STEPS (minutes) and failed.
+            # simulate rounds the solution to the run's precision
+            ts, y0 = jnp.asarray(ts, dtype=jnp.float64), jnp.asarray(y0, dtype=jnp.float64)
         jacobian = None
         if self.implicit and self.backend == "numpy":  # scipy's implicit methods take the Jacobian
             shape = np.shape(y0)

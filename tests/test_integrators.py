@@ -440,6 +440,24 @@ def test_references_are_tight_in_absolute_terms(reference_run):
     assert max_error(run.y, exact) < 1e-6
 
 
+DIFFRAX_REFERENCES = [name for name in REFERENCES if name.startswith("diffrax-")]
+
+
+@pytest.mark.parametrize("name", DIFFRAX_REFERENCES)
+def test_diffrax_reference_in_float32_rounds_its_float64_solve(name):
+    """`steplab run soft-cube --integrator diffrax-dopri8 --backend jax --precision float32 --steps 20`: a
+    float32 solve can never meet rtol 1e-12, so it spent its million steps (seconds to minutes) and failed.
+    It solves in float64, as the scipy references do, and the trajectory is the float64 one in float32."""
+    from steplab.physics.scene import load_scene
+
+    scene = load_scene("soft-cube")
+    ref = simulate(scene.model, name, scene.y0, scene.t_start, dt=scene.dt, n_steps=20)
+    run = simulate(scene.model, name, scene.y0, scene.t_start, dt=scene.dt, n_steps=20, dtype=np.float32)
+    assert run.y.dtype == np.float32 and run.steps == 0 and len(run.t) == len(ref.t) == 21
+    # the model's parameters are rounded to float32 too: a few float32 epsilons of the state's scale
+    assert max_error(run.y, ref.y) < 10 * np.finfo(np.float32).eps * np.abs(ref.y).max()
+
+
 # --- (10) Butcher tableaux and stability functions --------------------------------------------
 
 
