@@ -347,6 +347,15 @@ def test_euler_is_warned_though_it_has_no_stable_dt(capsys):
     assert f"{np.sqrt(1 + omega_dt**2):.4g}" in warning
 
 
+def test_a_growth_factor_near_one_is_printed_as_one_plus_its_excess(capsys):
+    """Explicit Euler on kepler's orbit (omega_max 17.77 rad/s, dt 1 ms) grows by sqrt(1 + (omega dt)^2) =
+    1.000158 a step: four digits printed it as "multiplies its amplitude by 1, its energy by 1"."""
+    status, out, err = run(capsys, "run", "kepler", "--integrator", "euler", "--steps", "5", "--json")
+    [warning] = json.loads(out)["warnings"]
+    assert status == 0 and "grows at every dt" in warning
+    assert "multiplies its amplitude by 1 + 0.000158, its energy by 1 + 0.000316)" in warning, warning
+
+
 def test_check_says_none_where_no_dt_is_stable(capsys):
     status, out, _ = run(capsys, "check", "oscillator")
     [euler] = [line for line in out.splitlines() if line.split()[0] == "euler"]
