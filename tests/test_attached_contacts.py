@@ -402,3 +402,11 @@ def test_a_box_that_overflows_is_the_body_the_one_line_names(capsys, tmp_path):
     line = err.splitlines()[-1]
     assert line.startswith("steplab run: error: the contact solver's state became non-finite at body 'box' in the "
                            "step from t = 0 s (its angular velocity;"), line
+
+
+def test_another_integrator_is_refused_in_one_line_before_any_warning_about_its_run(capsys):
+    """Explicit Euler on hung-box is beyond its stable dt (a warning before a run), but the contact solver
+    steps with semi-implicit Euler only: the refusal alone, one line, not the warning and then the refusal."""
+    err = refused(capsys, ["run", str(SCENE), "--integrator", "euler", "--steps", "20"])
+    assert err == ("steplab run: error: the contact solver integrates with semi-implicit-euler (velocities, contacts, "
+                   "then positions, per substep), not 'euler'; use integrator 'semi-implicit-euler'\n"), err

@@ -62,7 +62,7 @@ from .heap import keep_freed_memory
 from .manifolds import BOX, CAPSULE, SPHERE, check_shapes
 from .pairs import SweptSpheres
 from .rigid_columns import first_impacts, gather, inverse, is_sorted
-from .solver_step import INTEGRATOR, non_finite
+from .solver_step import check_solver_integrator, non_finite
 from .step import ConstantField
 
 #: the rotation method's stages in the solver's substep, by its name: (gyroscopic term, orientation
@@ -187,9 +187,7 @@ class RigidSolverStep:
     record_every: int = 1
 
     def __post_init__(self):
-        if getattr(self.integrator, "name", None) != INTEGRATOR:
-            raise ValueError(f"the contact solver integrates with {INTEGRATOR} (velocities, contacts, then "
-                             f"positions, per substep), not '{self.integrator.name}'; use integrator '{INTEGRATOR}'")
+        check_solver_integrator(self.integrator, self.world)
         world, rigid = self.world, self.world.rigid
         if (any(p is not cancel_triggers for p in world.prologues) or world.epilogues
                 or any(s.trigger for s in world.shapes)):

@@ -75,10 +75,7 @@ class SolverStep:
     log: CollisionLog = dataclasses.field(default_factory=CollisionLog)
 
     def __post_init__(self):
-        if getattr(self.integrator, "name", None) != INTEGRATOR:
-            raise ValueError(f"the contact solver integrates with {INTEGRATOR} (velocities, contacts, then "
-                             f"positions, per substep), not '{self.integrator.name}'; use integrator "
-                             f"'{INTEGRATOR}', or the collision method 'event'")
+        check_solver_integrator(self.integrator, self.world)
         self.settings = self.world.solver
         self.radii = np.asarray(self.model.radii, dtype=float)
         self.inverse_masses = np.ascontiguousarray(self.model.inverse_masses, dtype=float)
@@ -317,6 +314,16 @@ class Solved:
 _EMPTY = np.zeros(0)
 _NO_CONTACTS = Solved(Contacts.empty(),
                        _EMPTY, np.zeros((0, 3)), _EMPTY)
+
+
+def check_solver_integrator(integrator, world) -> None:
+    """The one line (ValueError) for a contact-solver ``world`` stepped by another integrator than
+    :data:`INTEGRATOR`, whose stages the solver's substeps are; the event loop is the alternative for
+    spheres only (``world.rigid``: boxes and capsules have no other method)."""
+    if getattr(integrator, "name", None) != INTEGRATOR:
+        other = "" if world.rigid is not None else ", or the collision method 'event'"
+        raise ValueError(f"the contact solver integrates with {INTEGRATOR} (velocities, contacts, then positions, "
+                         f"per substep), not '{integrator.name}'; use integrator '{INTEGRATOR}'{other}")
 
 
 def non_finite(names, t: float, residual: float, **rows) -> str:
