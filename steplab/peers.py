@@ -279,9 +279,11 @@ def diffrax_adaptive(model, method: str, t_start: float, t_end: float):
 
     ``method`` is a reference name (``"diffrax-tsit5"``); the solve is
     :func:`steplab.integrators.references.solve_adaptive`'s. The tolerance is traced, so
-    one compilation serves a whole tolerance search.
+    one compilation serves a whole tolerance search. A solve that fails (its step budget,
+    ``ADAPTIVE_MAX_STEPS``) returns inf, not the state where it stopped short of t_end.
     """
     import jax
+    import jax.numpy as jnp
 
     from steplab.integrators.references import solve_adaptive
 
@@ -289,7 +291,7 @@ def diffrax_adaptive(model, method: str, t_start: float, t_end: float):
     def run(y0, rtol):
         sol = solve_adaptive(model.vector_field, (t_start, t_end), y0, method, rtol, rtol, at_saved_times=False,
                              max_steps=ADAPTIVE_MAX_STEPS)
-        return sol.ys[-1], sol.steps
+        return jnp.where(sol.success, sol.ys[-1], jnp.inf), sol.steps
 
     return run
 

@@ -71,6 +71,29 @@ def test_diffrax_counterparts_reach_steplabs_state(method):
     np.testing.assert_allclose(np.asarray(theirs), ours, rtol=1e-13, atol=ROUND_OFF)
 
 
+def test_adaptive_peers_count_a_failed_solve_as_missing_the_tolerance(monkeypatch):
+    """A solve that ran out of steps stops short of t_end; the tolerance search must not take the
+    state where it stopped for an answer (it may lie near the truth)."""
+    import jax.numpy as jnp
+    from steplab.integrators.references import AdaptiveSolution
+
+    from steplab.bench import comparisons
+
+    problem = oscillator_problem(0.0, t_end=1.0)
+    truth = np.asarray(problem.y0, float)  # stopped at the start: as near the truth of a whole period as can be
+    failed = AdaptiveSolution(np.asarray([problem.y0]), 1, 6, False, "budget")
+    assert comparisons._solved_error(failed, truth) == np.inf
+    assert comparisons._solved_error(failed._replace(success=True), truth) == 0.0
+
+    model = problem.model.cast(jnp)
+    monkeypatch.setattr(peers, "ADAPTIVE_MAX_STEPS", 3)
+    y, steps = peers.diffrax_adaptive(model, "diffrax-tsit5", 0.0, 10.0)(jnp.asarray(problem.y0), jnp.asarray(1e-12))
+    assert int(steps) == 3 and np.all(np.asarray(y) == np.inf)
+    monkeypatch.undo()
+    y, _ = peers.diffrax_adaptive(model, "diffrax-tsit5", 0.0, 10.0)(jnp.asarray(problem.y0), jnp.asarray(1e-10))
+    assert np.all(np.isfinite(np.asarray(y)))
+
+
 def test_diffrax_rk4_tableau_is_steplabs():
     tableau = peers.diffrax_rk4().tableau
     ours = RK4.tableau
