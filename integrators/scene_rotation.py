@@ -21,7 +21,7 @@ from steplab.physics import quaternion as quat
 from steplab.physics.attachments import attached_forces
 from steplab.physics.rigid_body import RigidBodies, RotationModel, total_angular_momentum
 
-from .rotation import DEFAULT_ROTATION, simulate_rotation
+from .rotation import DEFAULT_ROTATION, RotationMethod, simulate_rotation
 from .rotation_reference import rotation_reference
 
 
@@ -91,10 +91,13 @@ def rotate_scene(scene, trajectory, rotation: str | None = None, backend: str = 
     model = RotationModel(bodies.inertia)
     q, omega = bodies.orientations, bodies.body_angular_velocities()
     t = np.asarray(trajectory.t, float)
-    if trajectory.steps == 0:
+    dtype = np.asarray(trajectory.y).dtype  # the run's precision: its state after every step, the rotation's too
+    if trajectory.steps == 0:  # an adaptive reference solves in float64 and stores in the run's precision
         qs, omegas = rotation_reference(model, q, omega, t, method="scipy-dop853")
         name = "scipy-dop853"
     else:
+        if dtype != np.float64:
+            method = InPrecision(method, dtype)
         steps = np.diff(np.rint((t - t[0]) / trajectory.dt).astype(int))
         qs, omegas = [q[None]], [omega[None]]
         # the saved states every n steps as one run (on JAX one compiled loop), the last
@@ -114,7 +117,23 @@ def rotate_scene(scene, trajectory, rotation: str | None = None, backend: str = 
                 omegas.append(omega[None])
             t0 = t0 + n * count * trajectory.dt
         qs, omegas, name = np.concatenate(qs), np.concatenate(omegas), method.name
+    qs, omegas = np.asarray(qs, dtype), np.asarray(omegas, dtype)
     return RotationTrajectory(t, qs, quat.rotate(np, qs, omegas), name, bodies)
+
+
+class InPrecision(RotationMethod):
+    """``method`` whose state (q, omega) is rounded to ``dtype`` after every step: a float32 run's
+    free bodies, as :func:`.attached.in_precision` keeps a coupled step's. The rotation methods compute
+    with float64 moments (:class:`.rigid_body.RotationModel`) and :func:`.rotation.simulate_rotation`
+    starts from float64, so without it a float32 run would turn its bodies in float64. The rounded
+    state keeps the array type it came in (a compiled loop's carry keeps its dtype)."""
+
+    def __init__(self, method: RotationMethod, dtype):
+        self.method, self.dtype, self.name = method, np.dtype(dtype), method.name
+
+    def step(self, model, t, q, omega, dt):
+        q1, omega1 = self.method.step(model, t, q, omega, dt)
+        return q1.astype(self.dtype).astype(q1.dtype), omega1.astype(self.dtype).astype(omega1.dtype)
 
 
 def run_rotation(scene, trajectory, step=None, rotation: str | None = None,
@@ -192,8 +211,9 @@ def rotation_arrays(rotation: RotationTrajectory, n_bodies: int) -> dict:
     """The NPZ arrays ``orientations`` (K, N, 4) and ``angular_velocities`` (K, N, 3, world frame)
     for all N bodies (identity and zero for a point mass); a scene without rotating bodies adds none."""
     k = len(rotation.t)
-    orientations = np.broadcast_to(quat.IDENTITY, (k, n_bodies, 4)).copy()
-    angular_velocities = np.zeros((k, n_bodies, 3))
+    dtype = np.result_type(rotation.orientations, rotation.angular_velocities)  # the run's precision
+    orientations = np.broadcast_to(quat.IDENTITY, (k, n_bodies, 4)).astype(dtype)
+    angular_velocities = np.zeros((k, n_bodies, 3), dtype)
     orientations[:, rotation.bodies.index] = rotation.orientations
     angular_velocities[:, rotation.bodies.index] = rotation.angular_velocities
     return {"orientations": orientations, "angular_velocities": angular_velocities}

@@ -179,3 +179,33 @@ def test_bad_rotation_input_at_the_command_line_is_one_line_with_status_2(tmp_pa
     assert main(["run", str(path)]) == 2
     err = capsys.readouterr().err
     assert message in err and err.count("\n") == 1 and "Traceback" not in err
+
+
+@pytest.mark.parametrize("backend", ["numpy", "jax"])
+def test_a_float32_run_turns_its_free_bodies_in_float32(backend):
+    """--precision float32: the free bodies' state is rounded to float32 after every step, as the
+    translation's (it was stepped and stored in float64), and the NPZ arrays stay float32."""
+    from steplab.integrators import get_rotation
+    from steplab.integrators.rotation import simulate_rotation
+    from steplab.physics.rigid_body import RotationModel
+
+    s = load_scene("dzhanibekov")
+    traj = simulate(s.model, s.integrator, s.y0, s.t_start, n_steps=12, dt=s.dt, dtype=np.float32, save_every=5)
+    rot = rotate_scene(s, traj, "dlm", backend=backend)
+    assert rot.orientations.dtype == rot.angular_velocities.dtype == np.float32
+    arrays = rotation_arrays(rot, s.model.n_bodies)
+    assert arrays["orientations"].dtype == arrays["angular_velocities"].dtype == np.float32
+    # step by step, rounding the state to float32 after each step
+    bodies, method = s.rigid_bodies, get_rotation("dlm")
+    q, omega = bodies.orientations, bodies.body_angular_velocities()
+    for k in range(12):
+        q, omega = (np.float32(a).astype(float) for a in simulate_rotation(
+            method, RotationModel(bodies.inertia), q, omega, s.dt, 1, t0=k * s.dt)[1:3])
+        q, omega = q[-1], omega[-1]
+    np.testing.assert_allclose(rot.orientations[-1], q.astype(np.float32), rtol=0, atol=2e-7)
+    assert not np.array_equal(rot.orientations[-1].astype(float), _float64_run(s)[-1])
+
+
+def _float64_run(s):
+    traj = simulate(s.model, s.integrator, s.y0, s.t_start, n_steps=12, dt=s.dt, save_every=5)
+    return rotate_scene(s, traj, "dlm").orientations
