@@ -410,3 +410,34 @@ def test_another_integrator_is_refused_in_one_line_before_any_warning_about_its_
     err = refused(capsys, ["run", str(SCENE), "--integrator", "euler", "--steps", "20"])
     assert err == ("steplab run: error: the contact solver integrates with semi-implicit-euler (velocities, contacts, "
                    "then positions, per substep), not 'euler'; use integrator 'semi-implicit-euler'\n"), err
+
+
+def test_a_float32_run_carries_the_solvers_bodies_in_float32_from_step_to_step(capsys, tmp_path, monkeypatch):
+    """The contact solver computes in float64; a float32 run's positions, velocities, orientations and
+    angular velocities are rounded to float32 after every step (they ran in float64 from the second step
+    on and only the saved positions were rounded), and agree with the float64 run to float32's error."""
+    from steplab.physics.collision.rigid_solver_step import RigidSolverStep
+
+    seen = []
+    advance = RigidSolverStep._advance
+
+    def recording(self, t, y, dt, carry):
+        state, carry = advance(self, t, y, dt, carry)
+        seen.append((np.asarray(y).dtype, state.dtype, self.omega.astype(np.float32).astype(float) - self.omega))
+        return state, carry
+
+    monkeypatch.setattr(RigidSolverStep, "_advance", recording)
+    runs = {}
+    for precision in ("float32", "float64"):
+        out = tmp_path / f"{precision}.npz"
+        status, _, err = run_main(capsys, ["run", "hung-box", "--steps", "20", "--precision", precision,
+                                           "--out", str(out)])
+        assert status == 0, err
+        runs[precision] = dict(np.load(out))
+    float32 = seen[:20]
+    assert all(y == np.float32 and state == np.float32 for y, state, _ in float32)
+    assert all(np.all(rounded == 0.0) for *_, rounded in float32)  # the carried spin is float32's
+    for name in ("positions", "velocities", "orientations", "angular_velocities"):
+        assert runs["float32"][name].dtype == np.float32, name
+        wide = runs["float64"][name]
+        np.testing.assert_allclose(runs["float32"][name], wide, rtol=0, atol=1e-4 * np.abs(wide).max(), err_msg=name)

@@ -116,6 +116,20 @@ def test_resting_column_sinks_as_the_soft_contact_spring_predicts():
     np.testing.assert_allclose(q[:, :2], 0.0, atol=1e-15)
 
 
+def test_a_float32_column_is_carried_in_float32_and_settles_as_the_float64_one():
+    """The sphere solver computes in float64; a float32 run's state stays float32 from step to step
+    (it came back float64 from the first step on) and agrees with the float64 run to float32's error."""
+    model, y0 = column(4)
+    world = solver_world([FLOOR], eps=0.5, iterations=10)
+    step = world.stepper(model, SIE)
+    y = y0.astype(np.float32)
+    for k in range(60):
+        y, _ = step(k / 60, y, 1 / 60, None)
+        assert y.dtype == np.float32, k
+    wide = simulate(model, SIE, y0, 0.0, dt=1 / 60, n_steps=60, save_every=60, collisions=world).y[-1]
+    np.testing.assert_allclose(y, wide, rtol=0, atol=1e-5)
+
+
 def test_pile_at_rest_keeps_its_energy():
     # a settled pile, warm-started: its energy stays put (the issue's |dE| < 1e-6 of its potential energy)
     model, y0 = column(6)

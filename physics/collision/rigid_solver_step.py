@@ -222,6 +222,7 @@ class RigidSolverStep:
         self.omega[bodies.index[~turns]] = 0.0
         self.log.largest_residual = 0.0
         self._previous = _NOTHING
+        self.precision = np.dtype(float)  # the run's, from its state (:meth:`_advance`)
         self._steps = 0
         self.history = {0: (self.orientation.copy(), self.omega.copy())}
         # the model whose lever arms every substep turns in place (it never leaves the step)
@@ -241,6 +242,7 @@ class RigidSolverStep:
             numba.set_num_threads(threads)
 
     def _advance(self, t, y, dt, carry):
+        self.precision = np.asarray(y).dtype
         state = np.array(y, dtype=float, order="C")  # (2, N, 3): q and v, stepped in place and returned
         if self.attached:
             return self._advance_attached(t, state, dt, carry)
@@ -308,9 +310,21 @@ class RigidSolverStep:
         return attachments.model_at(self.model, self.orientation, self.omega)
 
     def _end_step(self, t, dt, state, carry, contacts, bodies, residual):
-        """The log, the checks and the rotation's record at the end of a step; returns ``(state, carry)``."""
+        """The log, the checks and the rotation's record at the end of a step; returns ``(state, carry)``.
+
+        The solver computes in float64 (its kernels are compiled for it); a run in another precision
+        (float32) carries its state from step to step in that precision: the positions, velocities,
+        orientations and angular velocities are rounded to it here, as a game engine stores float32
+        bodies whatever its solver's arithmetic, and as the rotation methods' float64 moments are
+        rounded in the other steps (:func:`steplab.integrators.attached.in_precision`). A rounded
+        quaternion is off unit length by up to a few float32 ulps, so it is normalised (in float64)
+        for the next step, whose narrow phase takes only unit quaternions."""
         self._conclude(t, dt, contacts, residual)
         self._check(t, position=state[0], velocity=state[1], angular_velocity=bodies.omega)
+        if self.precision != state.dtype:
+            state = state.astype(self.precision)
+            np.copyto(self.orientation, quat.normalize(np, self.orientation.astype(self.precision).astype(float)))
+            np.copyto(self.omega, self.omega.astype(self.precision))
         self._steps += 1
         if (self._steps - 1) % self.record_every:  # the last step's record was kept only while it was the last
             orientation, omega = self.history.pop(self._steps - 1)  # its arrays (no one's now) take this step's
@@ -412,7 +426,8 @@ class RigidSolverStep:
         if missing:
             raise ValueError(f"the solver recorded its rotation every {self.record_every} steps, not after step "
                              f"{missing[0]}")
-        return (np.array([recorded[int(k)][0] for k in steps]), np.array([recorded[int(k)][1] for k in steps]))
+        return (np.array([recorded[int(k)][0] for k in steps], self.precision),
+                np.array([recorded[int(k)][1] for k in steps], self.precision))
 
 
 def _kick_work(push, before, after, h):

@@ -94,9 +94,11 @@ class SolverStep:
         load_kernels(self.world, self.field is not None, self.integrator)
 
     def __call__(self, t, y, dt, carry):
-        """Advance ``y`` (2, N, 3) from ``t`` by ``dt``; returns ``(y, carry)``."""
+        """Advance ``y`` (2, N, 3) from ``t`` by ``dt``; returns ``(y, carry)``, in ``y``'s precision: the
+        solver computes in float64 (its kernels are compiled for it), and a float32 run carries its
+        state from step to step in float32, as a game engine stores its bodies."""
         start = self.prepare(t, y, dt)
-        return self.conclude(start, *self.solve(start)), carry
+        return self.conclude(start, *self.solve(start)).astype(np.asarray(y).dtype, copy=False), carry
 
     # --- stages --------------------------------------------------------------------------
 

@@ -34,7 +34,8 @@ def add_parser(sub, name: str) -> None:
                    help="numpy: step by step; jax: compiled loop (default: numpy)")
     p.add_argument("--precision", choices=("float64", "float32"), default="float64",
                    help="floating-point precision (default: float64); the adaptive references (scipy-*, diffrax-*) "
-                        "solve in float64 and store in it")
+                        "solve in float64 and store in it, the contact solver steps in float64 and carries the "
+                        "state from step to step in it")
     p.add_argument("--save-every", type=count, default=1, metavar="K",
                    help="keep every K-th state in the trajectory (default: 1)")
     p.add_argument("--max-steps", type=count, default=None, metavar="N",
