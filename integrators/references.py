@@ -8,6 +8,7 @@ scenes; the implicit ones (Kvaerno5, Radau) stiff spring systems.
 from __future__ import annotations
 
 import dataclasses
+import functools
 from typing import NamedTuple
 
 import numpy as np
@@ -36,6 +37,14 @@ MIN_RTOL = 100 * float(np.finfo(float).eps)
 #: solve that never ends; a subnormal atol overflows y / atol to inf the same way. 1e-100 leaves
 #: y / atol finite for any |y| < 1e200
 MIN_ATOL = 1e-100
+#: the largest state (6 x particles numbers) whose Kvaerno5 Newton solves form and LU-factor the dense
+#: Jacobian; larger ones solve matrix-free by GMRES (a Jacobian-vector product an iteration). The dense
+#: Jacobian takes n Jacobian-vector products and an n^3 / 3 factorization a step: at n = 864 (the 12 x 12
+#: cloth) 46 steps took 8 s, GMRES 1.2 s; at n = 216 both 0.1-0.2 s, and the dense path is the robust one
+DENSE_NEWTON_MAX_SIZE = 300
+#: GMRES's tolerances in a Kvaerno5 Newton step (relative to the Newton residual): tight enough that the
+#: step is the dense one's to round-off (2.5e-13 m on the 12 x 12 cloth)
+GMRES_RTOL, GMRES_ATOL = 1e-12, 1e-14
 
 
 class _OutOfBudget(Exception):
@@ -125,7 +134,8 @@ def solve_adaptive(vector_field, ts, y0, method: str, rtol, atol, *, at_saved_ti
         if at_saved_times:
             controller = diffrax.ClipStepSizeController(controller, step_ts=ts)
         sol = diffrax.diffeqsolve(
-            diffrax.ODETerm(lambda t, y, args: vector_field(t, y)), getattr(diffrax, solver)(), t0=ts[0], t1=ts[-1],
+            diffrax.ODETerm(lambda t, y, args: vector_field(t, y)),
+            kvaerno5(np.size(y0)) if solver == "Kvaerno5" else getattr(diffrax, solver)(), t0=ts[0], t1=ts[-1],
             dt0=None, y0=y0, saveat=diffrax.SaveAt(ts=ts) if at_saved_times else diffrax.SaveAt(t1=True),
             stepsize_controller=controller, max_steps=max_steps, throw=False)
         return AdaptiveSolution(sol.ys, sol.stats["num_steps"], None, sol.result == diffrax.RESULTS.successful,
@@ -158,6 +168,77 @@ def solve_adaptive(vector_field, ts, y0, method: str, rtol, atol, *, at_saved_ti
     ys = sol.y.T.reshape((-1,) + shape)
     return AdaptiveSolution(ys if at_saved_times else ys[-1:], None if at_saved_times else int(sol.t.size - 1),
                             int(sol.nfev), bool(sol.success), sol.message)
+
+
+def kvaerno5(size: int):
+    """diffrax's Kvaerno5 for a state of ``size`` numbers, with a Newton solve that works on it.
+
+    Its root finder is diffrax's VeryChord (one Jacobian a step) with the termination of the fixed
+    upstream one (:func:`_very_chord`), and its linear solver the dense LU for states of up to
+    :data:`DENSE_NEWTON_MAX_SIZE` numbers, else matrix-free GMRES (:data:`GMRES_RTOL`, :data:`GMRES_ATOL`).
+    """
+    import diffrax
+    import lineax
+
+    if size <= DENSE_NEWTON_MAX_SIZE:
+        linear_solver = lineax.AutoLinearSolver(well_posed=None)  # diffrax's default: LU
+    else:
+        linear_solver = lineax.GMRES(rtol=GMRES_RTOL, atol=GMRES_ATOL, restart=30, stagnation_iters=30)
+    root_finder = diffrax.with_stepsize_controller_tols(_very_chord())(linear_solver=linear_solver)
+    return diffrax.Kvaerno5(root_finder=root_finder)
+
+
+@functools.cache
+def _very_chord():
+    """diffrax.VeryChord with two fixes (a class made on first use: diffrax is imported lazily).
+
+    - **Termination.** diffrax 0.7.2's VeryChord reports "diverged" after any second iteration that has
+      not converged yet, diverging or not, and Optimistix 0.1 ends the iteration on that result: every
+      stage that needed a third chord iteration failed, and its step was rejected (error inf) and cut
+      fivefold. Kvaerno5 on the 12 x 12 cloth took 1,000+ steps, half of them rejected, for 20 steps of
+      dt (215 s); here 35 and 11 (diffrax PR #754 fixes it upstream). It now reports divergence only when
+      it stops on it (rate > 2 or not finite); an iteration still converging goes on, to the root
+      finder's max steps.
+    - **Iterative linear solvers.** Its step applied ``stop_gradient`` to the whole linear-solver state,
+      which with GMRES holds the linearised operator (not arrays) and failed to trace; only its arrays
+      are stopped now, as its ``init`` does.
+    """
+    import diffrax
+    import equinox as eqx
+    import jax
+    import jax.numpy as jnp
+    import lineax
+    import optimistix as optx
+
+    class VeryChord(diffrax.VeryChord):
+        def step(self, fn, y, args, options, state, tags):
+            jac, linear_state = state.linear_state
+            dynamic, static = eqx.partition(linear_state, eqx.is_array)
+            linear_state = eqx.combine(jax.lax.stop_gradient(dynamic), static)
+            fx, aux = fn(y, args)
+            sol = lineax.linear_solve(jac, fx, self.linear_solver, state=linear_state, throw=False)
+            diff = sol.value
+            new_y = jax.tree_util.tree_map(lambda a, b: a - b, y, diff)
+            with jax.numpy_dtype_promotion("standard"):
+                scale = jax.tree_util.tree_map(lambda a: self.atol + self.rtol * jnp.abs(a), new_y)
+                diffsize = self.norm(jax.tree_util.tree_map(lambda a, b: a / b, diff, scale))
+            return new_y, dataclasses.replace(state, diff=diff, diffsize=diffsize, diffsize_prev=state.diffsize,
+                                              result=optx.RESULTS.promote(sol.result), step=state.step + 1), aux
+
+        def terminate(self, fn, y, args, options, state, tags):
+            at_least_two = state.step >= 2
+            rate = state.diffsize / state.diffsize_prev
+            factor = state.diffsize * rate / (1 - rate)
+            small = state.diffsize < 10 ** (2 - jnp.finfo(state.diffsize.dtype).precision)
+            diverged = ~jnp.isfinite(rate) | (rate > 2)
+            converged = (factor > 0) & (factor < self.kappa)
+            terminate = at_least_two & (small | diverged | converged)
+            result = optx.RESULTS.where(at_least_two & diverged & ~small, optx.RESULTS.nonlinear_divergence,
+                                        optx.RESULTS.successful)
+            linsolve_failed = state.result != optx.RESULTS.successful
+            return linsolve_failed | terminate, optx.RESULTS.where(linsolve_failed, state.result, result)
+
+    return VeryChord
 
 
 def _project_budget(evaluations: int, t: float, t0: float, t1: float, budget: int):
@@ -210,6 +291,8 @@ class AdaptiveReference(Solver):
             # float32 solve shrank its step until it had spent its MAX_REFERENCE_STEPS (minutes) and failed.
             # simulate rounds the solution to the run's precision
             ts, y0 = jnp.asarray(ts, dtype=jnp.float64), jnp.asarray(y0, dtype=jnp.float64)
+            if self.implicit:
+                _check_autodiff_jacobian(self.name, model, ts[0], y0)
         jacobian = None
         if self.implicit and self.backend == "numpy":  # scipy's implicit methods take the Jacobian
             shape = np.shape(y0)
@@ -230,6 +313,28 @@ class AdaptiveReference(Solver):
                                            "implicit reference (diffrax-kvaerno5, scipy-radau)")
             raise ReferenceFailedError(f"{self.name} failed: {sol.message}")
         return np.asarray(sol.ys)
+
+
+def _check_autodiff_jacobian(name, model, t0, y0):
+    """Raise :class:`ReferenceFailedError` if JAX's derivative of the vector field is not finite at ``y0``.
+
+    An implicit diffrax solve linearises the vector field by automatic differentiation; a NaN there made
+    every Newton solve fail and every step be rejected until its million-step budget was spent (minutes):
+    so it was with the quadratic drag's |v| v differentiated through |v| at a body at rest (the tests'
+    mixed problem's pinned anchor), before :func:`steplab.physics._array.speed`, and so it would be with a
+    plugin's force of the same kind. One Jacobian-vector product shows it: a NaN entry spreads to the
+    product whatever the tangent.
+    """
+    import jax
+    import jax.numpy as jnp
+
+    _, tangent = jax.jvp(lambda y: model.vector_field(t0, y), (y0,), (jnp.ones_like(y0),))
+    bad = np.argwhere(~np.isfinite(np.asarray(tangent)))
+    if bad.size:
+        raise ReferenceFailedError(
+            f"{name} failed: the vector field's derivative (JAX autodiff) is not finite at the initial state "
+            f"({'velocity' if bad[0][0] else 'position'} of body {bad[0][1]}; e.g. a force through sqrt or |x| at 0), "
+            "so its Newton solves cannot converge: use scipy-radau (an analytic Jacobian) or diffrax-dopri8")
 
 
 @dataclasses.dataclass(frozen=True)

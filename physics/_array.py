@@ -99,6 +99,18 @@ def norm(xp, x):
     return xp.sqrt(x[..., 0] * x[..., 0] + x[..., 1] * x[..., 1] + x[..., 2] * x[..., 2])
 
 
+def speed(xp, v):
+    """:func:`norm` of velocities (M, 3) whose JAX derivative is finite at rest: sqrt's derivative at 0 is
+    inf, and inf x 0 (the derivative of v . v there) is NaN, so a force like drag's |v| v, whose own
+    derivative at rest is 0, differentiated (an implicit reference's Newton solves) gave NaN at any body
+    at rest. The double ``where`` keeps 0 out of sqrt; the values are :func:`norm`'s to the byte."""
+    if is_numpy(xp):
+        return norm(xp, v)
+    squared = dot(xp, v, v)
+    moving = squared > 0
+    return xp.where(moving, xp.sqrt(xp.where(moving, squared, 1.0)), 0.0)
+
+
 def dot(xp, x, y):
     """Row-wise dot product of two (M, 3) arrays (elementwise on JAX, as :func:`norm`)."""
     if is_numpy(xp):

@@ -7,7 +7,7 @@ from typing import ClassVar
 
 import numpy as np
 
-from ._array import block_diagonal, norm
+from ._array import block_diagonal, norm, speed
 from .force import Force
 from .rules import number_problem, require, skip_checks
 
@@ -71,7 +71,7 @@ class Drag(Force):
         return cls(beta=beta)
 
     def force(self, xp, q, v, m):
-        return -(self.beta * norm(xp, v))[:, None] * v
+        return -(self.beta * speed(xp, v))[:, None] * v
 
     def jacobian(self, xp, q, v, m):
         return None, block_diagonal(xp, self.jacobian_blocks(xp, q, v, m).dv)

@@ -304,6 +304,19 @@ def test_singular_cases_give_finite_zeros(xp):
     assert_array_equal(np.asarray(jacobians[-1]), 0.0)  # drag at rest: d F / d V = 0
 
 
+def test_drags_autodiff_derivative_at_rest_is_its_analytic_zero_and_elsewhere_its_blocks():
+    """JAX differentiating drag's -beta |v| v through |v| at rest gave 0 / 0 = NaN (an implicit diffrax
+    reference then rejected every step): now 0 at rest, and the analytic blocks -beta (|v| I + v v^T / |v|)
+    where the body moves."""
+    drag = Drag(arr([0.3, 0.1])).cast(jnp, np.float64)
+    q, m = jnp.zeros((2, 3)), jnp.ones(2)
+    for v in (jnp.zeros((2, 3)), jnp.asarray([[0.0, 0.0, 0.0], [2.0, -1.0, 0.5]])):
+        auto = jax.jacfwd(lambda v: drag.force(jnp, q, v, m))(v)  # (2, 3, 2, 3)
+        blocks = np.asarray(drag.jacobian_blocks(jnp, q, v, m).dv)
+        assert_allclose(np.asarray(auto[[0, 1], :, [0, 1], :]), blocks, rtol=1e-14, atol=0)
+        assert_array_equal(np.asarray(auto[0, :, 1, :]), 0.0)
+
+
 # --- Jacobians -----------------------------------------------------------------------------
 
 
