@@ -81,13 +81,13 @@ class Drag(Force):
         from .sparse_jacobian import BodyJacobian
 
         # d(-beta |v| v)/dv = -beta (|v| I + v v^T / |v|), which tends to 0 as v -> 0.
-        speed = norm(xp, v)
+        v_norm = norm(xp, v)
         vhat_v = xp.where(
-            (speed > 0)[:, None, None],
-            v[:, :, None] * v[:, None, :] / xp.where(speed > 0, speed, 1)[:, None, None],
+            (v_norm > 0)[:, None, None],
+            v[:, :, None] * v[:, None, :] / xp.where(v_norm > 0, v_norm, 1)[:, None, None],
             0,
         )
-        block = -self.beta[:, None, None] * (speed[:, None, None] * xp.eye(3, dtype=v.dtype) + vhat_v)
+        block = -self.beta[:, None, None] * (v_norm[:, None, None] * xp.eye(3, dtype=v.dtype) + vhat_v)
         return BodyJacobian(None, block)
 
 
