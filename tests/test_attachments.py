@@ -8,6 +8,8 @@ oscillations of the linearised model (scipy.linalg.eigh), which tends to the clo
 
 from __future__ import annotations
 
+import functools
+
 import numpy as np
 import pytest
 import scipy.linalg
@@ -388,6 +390,24 @@ def run_on(scene, backend, integrator, rotation, n_steps, save_every=1):
     return trajectory, kept[0].rotation_trajectory(trajectory)
 
 
+@functools.cache
+def random_chain_run(backend, integrator, rotation, dtype=None):
+    """``run_on(random_attached_scene(25), backend, integrator, rotation, 200, 20)``, in ``dtype`` when given (the
+    simulate default, float64, when not): run once per test process and shared by the tests that compare it (a
+    seeded scene, a deterministic run), its arrays read-only so that no test can change what another gets."""
+    scene = random_attached_scene(25)
+    kept = []
+    options = {} if dtype is None else {"dtype": np.dtype(dtype)}
+    trajectory = simulate(scene.model, integrator, scene.y0, 0.0, dt=scene.dt, n_steps=200, backend=backend,
+                          save_every=20, stepper=attached_stepper(scene.rigid_bodies, get_rotation(rotation), kept),
+                          **options)
+    rotation_run = kept[0].rotation_trajectory(trajectory)
+    for array in (trajectory.t, trajectory.y, rotation_run.t, rotation_run.orientations,
+                  rotation_run.angular_velocities):
+        array.flags.writeable = False
+    return trajectory, rotation_run
+
+
 def assert_round_off(a, b, relative):
     """Equal to ``relative`` times the largest component (XLA fuses and reorders the sums)."""
     scale = max(np.max(np.abs(a)), np.max(np.abs(b)))
@@ -407,10 +427,15 @@ AGREEMENT = {"spring-pendulum": 1e-10, "random": 1e-12}
 @pytest.mark.parametrize("scene", ["spring-pendulum", "random"])
 def test_numpy_and_the_compiled_jax_loop_agree_on_attached_scenes(scene, integrator, rotation):
     relative = AGREEMENT[scene]
-    scene = load_scene("spring-pendulum") if scene == "spring-pendulum" else random_attached_scene(25)
     steps, save_every = 200, 20
-    numpy, numpy_rotation = run_on(scene, "numpy", integrator, rotation, steps, save_every)
-    jax, jax_rotation = run_on(scene, "jax", integrator, rotation, steps, save_every)
+    if scene == "spring-pendulum":
+        scene = load_scene("spring-pendulum")
+        numpy, numpy_rotation = run_on(scene, "numpy", integrator, rotation, steps, save_every)
+        jax, jax_rotation = run_on(scene, "jax", integrator, rotation, steps, save_every)
+    else:  # the random chain's runs, shared with the float32 tests below (the same runs)
+        scene = random_attached_scene(25)
+        numpy, numpy_rotation = random_chain_run("numpy", integrator, rotation)
+        jax, jax_rotation = random_chain_run("jax", integrator, rotation)
     assert jax.backend == "jax" and jax.steps == steps and np.array_equal(jax.t, numpy.t)
     assert jax.y.shape == numpy.y.shape == (steps // save_every + 1, 2, scene.model.n_bodies, 3)
     assert jax_rotation.orientations.shape == numpy_rotation.orientations.shape
@@ -561,14 +586,9 @@ def test_the_compiled_loop_runs_attached_scenes_in_float32(integrator, rotation)
     The run keeps to float64's within float32's round-off grown over 200 steps of the random chain:
     1e-4 of each array's largest component against at most 7e-6 measured, where the state one step
     later differs by 9e-4 (positions) to 0.1 (velocities)."""
-    scene = random_attached_scene(25)
-    steps, save_every = 200, 20
-    wide, wide_rotation = run_on(scene, "jax", integrator, rotation, steps, save_every)
-    kept = []
-    narrow = simulate(scene.model, integrator, scene.y0, 0.0, dt=scene.dt, n_steps=steps, backend="jax",
-                      dtype=np.float32, save_every=save_every,
-                      stepper=attached_stepper(scene.rigid_bodies, get_rotation(rotation), kept))
-    narrow_rotation = kept[0].rotation_trajectory(narrow)
+    # random_attached_scene(25), 200 steps saved every 20th, on the compiled loop in float64 and in float32
+    wide, wide_rotation = random_chain_run("jax", integrator, rotation)
+    narrow, narrow_rotation = random_chain_run("jax", integrator, rotation, "float32")
     assert narrow.y.dtype == np.float32 and narrow_rotation.orientations.dtype == np.float32
     assert not np.array_equal(narrow.y[-1], wide.y[-1].astype(np.float32))  # float32's own round-off
     for a, b in ((wide.positions, narrow.positions), (wide.velocities, narrow.velocities),
@@ -596,14 +616,9 @@ def test_a_numpy_float32_coupled_run_computes_in_float32(integrator, rotation):
         y, _ = step(k * dt, y, dt, None)
         assert y.dtype == step.q.dtype == step.omega.dtype == np.float32, k
         assert all(a.dtype == np.float32 for a in step._kept or ()), k
-    steps, save_every = 200, 20
     runs = {}
-    for backend in ("numpy", "jax"):
-        kept = []
-        trajectory = simulate(scene.model, integrator, scene.y0, 0.0, dt=scene.dt, n_steps=steps, backend=backend,
-                              dtype=np.float32, save_every=save_every,
-                              stepper=attached_stepper(scene.rigid_bodies, get_rotation(rotation), kept))
-        rotation_run = kept[0].rotation_trajectory(trajectory)
+    for backend in ("numpy", "jax"):  # 200 steps saved every 20th, in float32 (the jax run shared with the test above)
+        trajectory, rotation_run = random_chain_run(backend, integrator, rotation, "float32")
         runs[backend] = (trajectory.positions, trajectory.velocities, rotation_run.orientations,
                          rotation_run.angular_velocities)
     for a, b in zip(runs["numpy"], runs["jax"]):
@@ -636,6 +651,23 @@ def test_implicit_midpoint_held_beside_semi_implicit_euler_steps_and_grows_as_th
     assert 1.02 < growth["implicit-midpoint"] == pytest.approx(growth["dlm"], rel=1e-3)
 
 
+@functools.cache
+def _held_spring_pendulum_run(backend: str, dtype: str) -> tuple:
+    """The spring pendulum held by implicit-midpoint, 200 steps of its dt saved every 20th, on ``backend`` in
+    ``dtype``: (positions, velocities, orientations, angular velocities), read-only. Run once per test run and
+    process: both precisions' tests compare against the float64 runs (each deterministic)."""
+    scene = load_scene("spring-pendulum")
+    kept = []
+    trajectory = simulate(scene.model, "semi-implicit-euler", scene.y0, 0.0, dt=scene.dt, n_steps=200,
+                          backend=backend, dtype=np.dtype(dtype), save_every=20,
+                          stepper=attached_stepper(scene.rigid_bodies, get_rotation("implicit-midpoint"), kept))
+    rotation = kept[0].rotation_trajectory(trajectory)
+    arrays = (trajectory.positions, trajectory.velocities, rotation.orientations, rotation.angular_velocities)
+    for array in arrays:
+        array.flags.writeable = False
+    return arrays
+
+
 @pytest.mark.parametrize("precision", ["float64", "float32"])
 def test_implicit_midpoint_held_on_the_spring_pendulum_agrees_on_numpy_and_jax(precision):
     """The held pair's Newton iteration with the torque's finite-difference derivative, on NumPy and as the
@@ -644,19 +676,8 @@ def test_implicit_midpoint_held_on_the_spring_pendulum_agrees_on_numpy_and_jax(p
     round-off: the difference step and the tolerance take float32's eps (with float64's the first step did
     not converge); both backends keep to the float64 run within float32's round-off, which the stiff spring
     turns into 6e-4 of the swing's velocities (measured), under 2e-3."""
-    scene = load_scene("spring-pendulum")
-    steps, save_every = 200, 20
-    runs = {}
-    for backend in ("numpy", "jax"):
-        for dtype in {np.dtype(np.float64), np.dtype(precision)}:
-            kept = []
-            trajectory = simulate(scene.model, "semi-implicit-euler", scene.y0, 0.0, dt=scene.dt, n_steps=steps,
-                                  backend=backend, dtype=dtype, save_every=save_every,
-                                  stepper=attached_stepper(scene.rigid_bodies, get_rotation("implicit-midpoint"),
-                                                           kept))
-            rotation = kept[0].rotation_trajectory(trajectory)
-            runs[backend, dtype] = (trajectory.positions, trajectory.velocities, rotation.orientations,
-                                    rotation.angular_velocities)
+    runs = {(backend, np.dtype(dtype)): _held_spring_pendulum_run(backend, dtype)
+            for backend in ("numpy", "jax") for dtype in {"float64", precision}}
     wide, narrow = np.dtype(np.float64), np.dtype(precision)
     for a, b in zip(runs["numpy", narrow], runs["jax", narrow]):
         assert a.dtype == b.dtype == narrow
