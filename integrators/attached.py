@@ -221,6 +221,15 @@ def coupled_step(c: Coupling, t, y, q, omega, kept, dt):
     return *(joint_step if c.joint else held_step)(c, t, y, q, omega, dt), kept
 
 
+def check_attached_integrator(integrator) -> None:
+    """Refuse, in one line, an ``integrator`` that cannot step springs and dampers at body-frame points: one
+    that is no fixed-step Stepper (a position-based or adaptive method evaluates no force at the lever arms)."""
+    if not isinstance(integrator, Stepper):
+        raise ValueError(f"springs and dampers at body-frame points (offsets) need a fixed-step integrator that "
+                         f"evaluates their forces, not {integrator.name!r} (use semi-implicit-euler or "
+                         "velocity-verlet)")
+
+
 class AttachedStep:
     """``step(t, y, dt, carry) -> (y, carry)`` of a model with attached forces, its rotating
     ``bodies`` stepped by ``rotation`` beside ``integrator``; the rotation at the saved steps is kept.
@@ -239,10 +248,7 @@ class AttachedStep:
     """
 
     def __init__(self, model, bodies: RigidBodies, integrator, rotation):
-        if not isinstance(integrator, Stepper):
-            raise ValueError(f"springs and dampers at body-frame points (offsets) need a fixed-step integrator that "
-                             f"evaluates their forces, not {integrator.name!r} (use semi-implicit-euler or "
-                             "velocity-verlet)")
+        check_attached_integrator(integrator)
         self.bodies = bodies
         self.q, self.omega = in_precision(np, model.dtype, bodies.orientations, bodies.body_angular_velocities())
         # on NumPy one model whose lever arms each stage turns in place (none leaves the step)

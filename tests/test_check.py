@@ -145,3 +145,19 @@ def test_a_zero_length_spring_of_rest_length_0_is_checked(tmp_path, monkeypatch,
     assert main(["check", "resting.toml", "--json"]) == 0
     report = json.loads(capsys.readouterr().out)
     np.testing.assert_allclose(report["omega_max"], 2 * np.pi, rtol=1e-8)  # sqrt(k / m), k = 4 pi^2 N/m
+
+
+def test_check_of_a_position_based_method_prints_json_and_refuses_what_run_refuses(capsys):
+    # `check SCENE --integrator xpbd --json` printed its sentence, not JSON; and on springs at body-frame
+    # points, where `run --integrator xpbd` is refused, it said xpbd was stable at every dt on springs
+    assert main(["check", "cloth", "--integrator", "xpbd", "--json"]) == 0
+    report = json.loads(capsys.readouterr().out)
+    (row,) = report["integrators"]
+    assert report["scene"] == "cloth" and row["integrator"] == "xpbd"
+    assert row["dt_max"] is None and row["stable"] and "position-based" in row["note"]
+    assert main(["check", "cloth", "--integrator", "xpbd"]) == 0
+    assert "xpbd is position-based" in capsys.readouterr().out
+    for argv in (["--json"], ["--rotation", "dlm"]):
+        assert main(["check", "spring-pendulum", "--integrator", "xpbd", *argv]) == 2
+        err = capsys.readouterr().err.strip()
+        assert "\n" not in err and "need a fixed-step integrator that evaluates their forces, not 'xpbd'" in err

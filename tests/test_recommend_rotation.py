@@ -47,3 +47,14 @@ def test_recommend_with_collisions_reports_the_rotation_asked_for(tmp_path, caps
     assert record["rotation"]["method"] == rotation
     # spun near its intermediate axis, explicit Euler gains energy at every dt; dlm is stable at this dt
     assert record["rotation"]["stable"] == (rotation == "dlm")
+
+
+def test_recommend_on_the_contact_solver_refuses_a_rotation_run_refuses(capsys):
+    # the contact solver turned the boxes with the scene's rotation whatever --rotation said, and recommend
+    # reported dlm 'stable at this dt' on box-column, where `steplab run --rotation dlm` is refused
+    argv = ["recommend", "box-column", "--t-end", "0.05", "--tol", "0.05", "--integrators", "semi-implicit-euler"]
+    assert main([*argv, "--rotation", "dlm"]) == 2
+    err = capsys.readouterr().err.strip()
+    assert "\n" not in err and "rotation method 'dlm' does not compose with it" in err
+    assert main([*argv, "--rotation", "momentum-rescaled", "--json"]) == 0
+    assert json.loads(capsys.readouterr().out)["rotation"]["method"] == "momentum-rescaled"

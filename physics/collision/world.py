@@ -145,6 +145,12 @@ class CollisionWorld:
     def with_detector(self, detector: str) -> CollisionWorld:
         return dataclasses.replace(self, detector=detector)
 
+    def with_rotation(self, rotation: str) -> CollisionWorld:
+        """The world whose rigid bodies turn by the rotation method ``rotation`` (itself without rigid bodies)."""
+        if self.rigid is None:
+            return self
+        return dataclasses.replace(self, rigid=dataclasses.replace(self.rigid, rotation=rotation))
+
     def check_attachments(self, model) -> None:
         """Springs or dampers at body-frame points (``offsets``) run with collisions in the contact solver
         on rigid bodies only (method "solver" with ``rigid``), which turns their lever arms at every

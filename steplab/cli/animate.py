@@ -38,7 +38,6 @@ def add_parser(sub, name: str) -> None:
 
 
 def command(args) -> int:
-    import dataclasses
 
     from steplab.animate import animate, check_format, check_fps
     from steplab.integrators import DEFAULT_ROTATION, get_rotation
@@ -71,8 +70,7 @@ def command(args) -> int:
     methods = [scene_method(scene, name) for name, _ in panels]
     rotation = get_rotation(scene.rotation or DEFAULT_ROTATION)  # run's, without --rotation
     worlds = [collision_world(scene, detector, "numpy") for _, detector in panels]
-    worlds = [dataclasses.replace(world, rigid=dataclasses.replace(world.rigid, rotation=rotation.name))
-              if world is not None and world.rigid is not None else world  # the contact solver turns them so
+    worlds = [world if world is None else world.with_rotation(rotation.name)  # the contact solver turns them so
               for world in worlds]
     attached = [_attached(scene, world) for world in worlds]
     for method, world, coupled in zip(methods, worlds, attached):  # a method the panel's step refuses

@@ -47,10 +47,20 @@ def command(args) -> int:
     steps = run_steps(scene, dt, t_end)
     if args.integrator is not None:
         steppers = [integrator_named(args.integrator)]
+        if _coupled(scene):  # run's refusal: only a fixed-step Stepper evaluates forces at the lever arms
+            from steplab.integrators.attached import check_attached_integrator
+
+            check_attached_integrator(steppers[0])
         if getattr(steppers[0], "kind", None) == "position-based":  # nothing to predict: no dt limit
-            print(f"{scene.name}: {steppers[0].name} is position-based: its constraint projection is implicit, "
-                  "stable at every dt on springs (stiffness then depends on dt and iterations: see the "
-                  "integrators' documentation)")
+            note = (f"{steppers[0].name} is position-based: its constraint projection is implicit, stable at "
+                    "every dt on springs (stiffness then depends on dt and iterations: see the integrators' "
+                    "documentation)")
+            if args.json:  # the report's rows, each limit None (no limit); no mode is computed
+                row = {"integrator": steppers[0].name, "omega_dt_max": None, "dt_max": None,
+                       "omega_dt_max_damped": None, "dt_max_damped": None, "stable": True, "note": note}
+                print(json.dumps({"scene": scene.name, "dt": dt, "integrators": [row]}, indent=2))
+            else:
+                print(f"{scene.name}: {note}")
             return 0
         if not isinstance(steppers[0], Stepper):
             raise ValueError(f"--integrator {args.integrator}: {steppers[0].name} is not a fixed-step integrator "

@@ -69,8 +69,8 @@ def command(args) -> int:
     dt, t_end = time_span(scene, args)
     world = collision_world(scene, args.detector, args.backend)
     integrator, world = with_sweeps(integrator, world, args)
-    if world is not None and world.rigid is not None:  # the solver turns the bodies with the run's rotation method
-        world = dataclasses.replace(world, rigid=dataclasses.replace(world.rigid, rotation=rotation_method.name))
+    if world is not None:  # the solver turns the bodies with the run's rotation method
+        world = world.with_rotation(rotation_method.name)
     if world is not None and world.method == "solver":  # its refusal alone, not after a warning about the run
         from steplab.physics.collision.solver_step import check_solver_integrator
 
