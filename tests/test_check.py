@@ -161,3 +161,17 @@ def test_check_of_a_position_based_method_prints_json_and_refuses_what_run_refus
         assert main(["check", "spring-pendulum", "--integrator", "xpbd", *argv]) == 2
         err = capsys.readouterr().err.strip()
         assert "\n" not in err and "need a fixed-step integrator that evaluates their forces, not 'xpbd'" in err
+
+
+@pytest.mark.parametrize("argv, message", [
+    (["--rotation", "dlm"], "rotation method 'dlm' does not compose with it; use one of exponential-map"),
+    (["--integrator", "rk4"], "the contact solver integrates with semi-implicit-euler (velocities, contacts, then "
+                              "positions, per substep), not 'rk4'"),
+])
+def test_check_on_the_contact_solver_refuses_what_run_refuses(capsys, argv, message):
+    # check hung-box --rotation dlm (or --integrator rk4) reported a stability `run` never reaches: run refuses
+    # both in one line, the solver's substeps being semi-implicit Euler's
+    for command in (["check", "hung-box"], ["run", "hung-box", "--steps", "1"]):
+        assert main([*command, *argv]) == 2
+        err = capsys.readouterr().err.strip()
+        assert "\n" not in err and message in err, (command, err)

@@ -42,11 +42,21 @@ def command(args) -> int:
     scene = load_scene(args.scene)
     scene_method(scene)  # the scene's [simulation.<integrator>] table, refused as run refuses it
     rotation = rotation_named(scene, args)
+    world = scene.collisions
+    solver = world is not None and world.method == "solver"
+    if solver and world.rigid is not None:  # run's refusal: the solver's substeps turn the bodies by --rotation
+        from steplab.physics.collision.rigid_solver_step import rotation_codes
+
+        rotation_codes(rotation.name)
     # the dts run refuses: longer than the run, too small to advance time, more steps than a float counts
     dt, t_end = time_span(scene, args)
     steps = run_steps(scene, dt, t_end)
     if args.integrator is not None:
         steppers = [integrator_named(args.integrator)]
+        if solver:  # run's refusal: the contact solver's substeps are semi-implicit Euler's
+            from steplab.physics.collision.solver_step import check_solver_integrator
+
+            check_solver_integrator(steppers[0], world)
         if _coupled(scene):  # run's refusal: only a fixed-step Stepper evaluates forces at the lever arms
             from steplab.integrators.attached import check_attached_integrator
 
