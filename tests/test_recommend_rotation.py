@@ -58,3 +58,15 @@ def test_recommend_on_the_contact_solver_refuses_a_rotation_run_refuses(capsys):
     assert "\n" not in err and "rotation method 'dlm' does not compose with it" in err
     assert main([*argv, "--rotation", "momentum-rescaled", "--json"]) == 0
     assert json.loads(capsys.readouterr().out)["rotation"]["method"] == "momentum-rescaled"
+
+
+def test_recommend_says_a_rotation_stable_at_no_dt_has_none_as_check_does(capsys):
+    # exponential-map on the tumbling boxes grows at every omega dt of check's grid: recommend printed
+    # "its dt_max: 0 s", check "none (grows ...)"
+    argv = ["--rotation", "exponential-map"]
+    assert main(["check", "tumbling-boxes", *argv]) == 0
+    assert "none (grows at every omega dt" in capsys.readouterr().out
+    assert main(["recommend", "tumbling-boxes", *argv, "--t-end", "0.05", "--tol", "0.05",
+                 "--integrators", "semi-implicit-euler"]) == 0
+    out = capsys.readouterr().out
+    assert "rotation exponential-map: UNSTABLE at this dt (its dt_max: none (grows));" in out, out

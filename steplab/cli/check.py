@@ -109,7 +109,7 @@ def command(args) -> int:
     damped = f", damping ratio {mode.damping_ratio:.3g}" if mode.damping_ratio else ", undamped"
     print(f"{scene.name}: stiffest mode omega_max = {mode.omega:.6g} rad/s{damped}; dt = {dt:g} s "
           f"(omega_max dt = {mode.omega * dt:.4g})")
-    rows = [(r["integrator"], _limit(r["omega_dt_max"]), _limit(r["dt_max"]), _limit(r["dt_max_damped"]),
+    rows = [(r["integrator"], limit_text(r["omega_dt_max"]), limit_text(r["dt_max"]), limit_text(r["dt_max_damped"]),
              _verdict(dt, r["dt_max_damped"], r.get("coupled"))) for r in report["integrators"]]
     header = ("integrator", "limit omega dt", "dt_max (s)", "damped dt_max (s)", "at this dt")
     if "coupled" in report["integrators"][0]:
@@ -144,7 +144,7 @@ def rotation_limit(method, bodies, dt: float) -> dict:
     return {"method": method.name, "dt_max": dt_max, "stable": dt_max is None or bool(dt <= dt_max)}
 
 
-def _limit(value) -> str:
+def limit_text(value) -> str:
     """A stability limit: "no limit" (stable at every dt), "none (grows)" (stable at none), or the number."""
     return "no limit" if value is None else "none (grows)" if value == 0 else f"{value:.4g}"
 

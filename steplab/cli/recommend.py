@@ -93,11 +93,13 @@ def _with_rotation(result: dict, scene, rotation) -> dict:
 
 
 def _print_rotation(result: dict) -> None:
+    from .check import limit_text
+
     if "rotation" in result:
         r = result["rotation"]
+        unit = " s" if r["dt_max"] else ""  # "no limit" and "none (grows)" (stable at no dt) take none
         print(f"  rotation {r['method']}: {'stable' if r['stable'] else 'UNSTABLE'} at this dt (its dt_max: "
-              f"{'no limit' if r['dt_max'] is None else format(r['dt_max'], '.4g') + ' s'}); the tolerance "
-              "bounds the translation only")
+              f"{limit_text(r['dt_max'])}{unit}); the tolerance bounds the translation only")
 
 
 def _with_collisions(args, scene, t_end, world, integrators, rotation) -> int:
