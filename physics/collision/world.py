@@ -151,6 +151,23 @@ class CollisionWorld:
             return self
         return dataclasses.replace(self, rigid=dataclasses.replace(self.rigid, rotation=rotation))
 
+    def check_solver(self, integrator=None) -> None:
+        """What the contact solver refuses before any step, each in its one line (ValueError): its rigid
+        bodies' rotation method where it does not compose with the substeps
+        (:func:`.rigid_solver_step.rotation_codes`), and ``integrator``, when given, other than the one its
+        substeps are (:func:`.solver_step.check_solver_integrator`); nothing for the event loop. ``run``,
+        ``check`` and ``recommend`` call it, so that they refuse alike."""
+        if self.method != "solver":
+            return
+        if self.rigid is not None:
+            from .rigid_solver_step import rotation_codes
+
+            rotation_codes(self.rigid.rotation)
+        if integrator is not None:
+            from .solver_step import check_solver_integrator
+
+            check_solver_integrator(integrator, self)
+
     def check_attachments(self, model) -> None:
         """Springs or dampers at body-frame points (``offsets``) run with collisions in the contact solver
         on rigid bodies only (method "solver" with ``rigid``), which turns their lever arms at every

@@ -34,7 +34,7 @@ def add_parser(sub, name: str) -> None:
 def command(args) -> int:
     from steplab.integrators import INTEGRATORS, Stepper
     from steplab.integrators.simulate import check_initial_state
-    from steplab.integrators.stable_dt import stable_steps
+    from steplab.integrators.stable_dt import StableStep, stable_steps
     from steplab.physics.scene import load_scene
 
     from .run import integrator_named, scene_method
@@ -43,20 +43,16 @@ def command(args) -> int:
     scene_method(scene)  # the scene's [simulation.<integrator>] table, refused as run refuses it
     rotation = rotation_named(scene, args)
     world = scene.collisions
-    solver = world is not None and world.method == "solver"
-    if solver and world.rigid is not None:  # run's refusal: the solver's substeps turn the bodies by --rotation
-        from steplab.physics.collision.rigid_solver_step import rotation_codes
-
-        rotation_codes(rotation.name)
+    if world is not None:  # run's refusal of a rotation method the contact solver's substeps cannot take
+        world = world.with_rotation(rotation.name)
+        world.check_solver()
     # the dts run refuses: longer than the run, too small to advance time, more steps than a float counts
     dt, t_end = time_span(scene, args)
     steps = run_steps(scene, dt, t_end)
     if args.integrator is not None:
         steppers = [integrator_named(args.integrator)]
-        if solver:  # run's refusal: the contact solver's substeps are semi-implicit Euler's
-            from steplab.physics.collision.solver_step import check_solver_integrator
-
-            check_solver_integrator(steppers[0], world)
+        if world is not None:  # run's refusal: the contact solver's substeps are semi-implicit Euler's
+            world.check_solver(steppers[0])
         if _coupled(scene):  # run's refusal: only a fixed-step Stepper evaluates forces at the lever arms
             from steplab.integrators.attached import check_attached_integrator
 
@@ -65,9 +61,9 @@ def command(args) -> int:
             note = (f"{steppers[0].name} is position-based: its constraint projection is implicit, stable at "
                     "every dt on springs (stiffness then depends on dt and iterations: see the integrators' "
                     "documentation)")
-            if args.json:  # the report's rows, each limit None (no limit); no mode is computed
-                row = {"integrator": steppers[0].name, "omega_dt_max": None, "dt_max": None,
-                       "omega_dt_max_damped": None, "dt_max_damped": None, "stable": True, "note": note}
+            if args.json:  # the report's row, each limit None (no limit); no mode is computed
+                row = dataclasses.asdict(StableStep(steppers[0].name, None, None, None, None))
+                row |= {"stable": True, "note": note}
                 print(json.dumps({"scene": scene.name, "dt": dt, "integrators": [row]}, indent=2))
             else:
                 print(f"{scene.name}: {note}")

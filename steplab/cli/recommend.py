@@ -53,12 +53,9 @@ def command(args) -> int:
 
         integrators = check_integrators(args.integrators)  # a list of names, none empty (comma_list)
     world = collision_world(scene, args.detector, "numpy")
-    if world is not None and world.rigid is not None:  # the solver turns the bodies with --rotation, as in run
+    if world is not None:  # the solver turns the bodies with --rotation, as in run, and refuses what run refuses
         world = world.with_rotation(rotation.name)
-        if world.method == "solver":  # run's refusal of a method that does not compose with its substeps
-            from steplab.physics.collision.rigid_solver_step import rotation_codes
-
-            rotation_codes(rotation.name)
+        world.check_solver()
     if attached_forces(scene.model):  # the rotation steps with the translation: measured together
         if world is not None:  # run steps them in the contact solver: not measured so
             raise ValueError("recommend measures springs and dampers at body-frame points (offsets) without "

@@ -71,10 +71,7 @@ def command(args) -> int:
     integrator, world = with_sweeps(integrator, world, args)
     if world is not None:  # the solver turns the bodies with the run's rotation method
         world = world.with_rotation(rotation_method.name)
-    if world is not None and world.method == "solver":  # its refusal alone, not after a warning about the run
-        from steplab.physics.collision.solver_step import check_solver_integrator
-
-        check_solver_integrator(integrator, world)
+        world.check_solver(integrator)  # its refusals alone, not after a warning about the run
     warning = dt_warning(scene.model, scene.y0[0], integrator, dt, scene.rigid_bodies)  # before the run: it may be long
     if warning is not None:
         print(f"steplab run: warning: {warning}", file=sys.stderr)
